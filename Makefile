@@ -1,0 +1,40 @@
+# Two entry points for a fresh machine (see README): `make demo` and `make test`.
+# Both build .venv first: the pinned wheels from requirements.txt, then this package installed by colcon
+# with .venv as a merged ament prefix (lib/veg_area_ros/<node>, share/ament_index/...), as on ROS 2.
+SHELL := /bin/bash
+VENV := .venv
+PY := $(VENV)/bin/python
+SOURCES := $(shell find veg_area_ros config resource -type f -not -name '*.pyc') setup.py setup.cfg package.xml
+
+.PHONY: demo test install lint bench clean
+
+demo: install
+	$(VENV)/bin/veg-area demo
+
+test: install
+	$(PY) -m ruff check .
+	$(PY) -m pytest
+
+install: $(VENV)/.deps-installed $(VENV)/.package-installed
+
+$(VENV)/.deps-installed: requirements.txt
+	test -x $(PY) || python3 -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r requirements.txt
+	touch $@
+
+$(VENV)/.package-installed: $(VENV)/.deps-installed $(SOURCES)
+	$(VENV)/bin/colcon --log-base build/log build --base-paths . --build-base build \
+	    --install-base $(VENV) --merge-install >build/colcon.out 2>&1 \
+	    || { cat build/colcon.out; exit 1; }
+	ln -sf ../lib/veg_area_ros/veg-area $(VENV)/bin/veg-area
+	touch $@
+
+lint: install
+	$(PY) -m ruff check .
+
+bench: install
+	$(PY) bench/calibration_speed.py
+
+clean:
+	rm -rf $(VENV) build .pytest_cache

@@ -1,0 +1,211 @@
+"""Calibration boards: specification, detection with sub-pixel refinement, and a printable texture.
+
+No ROS here. A board spec is a string a user types:
+
+    chessboard:COLSxROWS:SQUARE_M            inner corners, square side in metres
+    charuco:SXxSY:SQUARE_M:MARKER_M:DICT     squares, square and marker side, ArUco dictionary
+    circles:COLSxROWS:SPACING_M              asymmetric circle grid; circle (i, j) sits at
+                                             ((2j + i mod 2)·s, i·s), OpenCV's convention
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+KINDS = ("chessboard", "charuco", "circles")
+
+
+class BoardSpecError(ValueError):
+    """A board specification that cannot be understood."""
+
+
+@dataclass(frozen=True)
+class Detection:
+    """Board points found in one image: pixels (N, 2) and board coordinates in metres (N, 3)."""
+
+    image_points: np.ndarray
+    object_points: np.ndarray
+    ids: np.ndarray  # index of each point in the full board, so partial views stay comparable
+    inverted: bool = False  # found only after inverting the image (white-on-black boards)
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    kind: str
+    cols: int
+    rows: int
+    square: float  # square side (chessboard, charuco) or grid spacing (circles), metres
+    marker: float = 0.0
+    dictionary: str = ""
+
+    @classmethod
+    def parse(cls, text: str) -> BoardSpec:
+        parts = text.strip().split(":")
+        kind = parts[0].lower()
+        usage = {
+            "chessboard": "chessboard:COLSxROWS:SQUARE_M",
+            "charuco": "charuco:SXxSY:SQUARE_M:MARKER_M:DICT",
+            "circles": "circles:COLSxROWS:SPACING_M",
+        }
+        if kind not in usage:
+            raise BoardSpecError(f"unknown board kind {parts[0]!r} in {text!r}; use one of {', '.join(KINDS)}")
+        expected = usage[kind].count(":") + 1
+        if len(parts) != expected:
+            raise BoardSpecError(f"board spec {text!r} should look like {usage[kind]}")
+        try:
+            cols, rows = (int(n) for n in parts[1].lower().split("x"))
+            square = float(parts[2])
+            marker = float(parts[3]) if kind == "charuco" else 0.0
+        except ValueError as exc:
+            raise BoardSpecError(f"board spec {text!r} should look like {usage[kind]}") from exc
+        if not (np.isfinite(square) and square > 0) or not np.isfinite(marker):
+            raise BoardSpecError(f"square size must be a positive number of metres in {text!r}")
+        if cols < 2 or rows < 2:
+            raise BoardSpecError(f"a board needs at least 2x2 points, got {cols}x{rows} in {text!r}")
+        dictionary = ""
+        if kind == "charuco":
+            dictionary = parts[4].upper()
+            if not hasattr(cv2.aruco, dictionary) or not dictionary.startswith("DICT_"):
+                raise BoardSpecError(f"unknown ArUco dictionary {parts[4]!r} in {text!r}")
+            if not 0 < marker < square:
+                raise BoardSpecError(f"the marker must be smaller than the square in {text!r}")
+        return cls(kind, cols, rows, square, marker, dictionary)
+
+    def __str__(self) -> str:
+        if self.kind == "charuco":
+            return f"charuco:{self.cols}x{self.rows}:{self.square:g}:{self.marker:g}:{self.dictionary}"
+        return f"{self.kind}:{self.cols}x{self.rows}:{self.square:g}"
+
+    # --- geometry -----------------------------------------------------------------------------------
+    def object_points(self) -> np.ndarray:
+        """All board points (N, 3) in metres, z = 0, in detection order."""
+        if self.kind == "charuco":
+            return np.asarray(self._charuco_board().getChessboardCorners(), dtype=np.float64).reshape(-1, 3)
+        i, j = np.meshgrid(np.arange(self.rows), np.arange(self.cols), indexing="ij")
+        if self.kind == "chessboard":
+            xy = np.column_stack([j.ravel(), i.ravel()]) * self.square
+        else:
+            xy = np.column_stack([(2 * j + i % 2).ravel(), i.ravel()]) * self.square
+        return np.column_stack([xy, np.zeros(len(xy))]).astype(np.float64)
+
+    def extent(self) -> tuple[float, float, float, float]:
+        """Printed area (x0, y0, x1, y1) in board metres, quiet margin included."""
+        s = self.square
+        if self.kind == "chessboard":
+            return (-1.5 * s, -1.5 * s, (self.cols + 0.5) * s, (self.rows + 0.5) * s)
+        if self.kind == "charuco":
+            return (-0.5 * s, -0.5 * s, (self.cols + 0.5) * s, (self.rows + 0.5) * s)
+        return (-1.5 * s, -1.5 * s, (2 * self.cols + 0.5) * s, (self.rows + 0.5) * s)
+
+    def _charuco_board(self) -> cv2.aruco.CharucoBoard:
+        dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+        return cv2.aruco.CharucoBoard((self.cols, self.rows), self.square, self.marker, dictionary)
+
+    def texture(self, pixels_per_metre: float) -> np.ndarray:
+        """The printed board as a grey image covering extent(); pixel (0, 0) is at (x0, y0)."""
+        x0, y0, x1, y1 = self.extent()
+        width = int(round((x1 - x0) * pixels_per_metre))
+        height = int(round((y1 - y0) * pixels_per_metre))
+        s = self.square * pixels_per_metre
+        if self.kind == "charuco":
+            board = self._charuco_board().generateImage(
+                (int(round(self.cols * s)), int(round(self.rows * s))), marginSize=0, borderBits=1)
+            margin = int(round(0.5 * s))
+            return cv2.copyMakeBorder(board, margin, margin, margin, margin, cv2.BORDER_CONSTANT, value=255)
+        image = np.full((height, width), 255, np.uint8)
+        ox, oy = -x0 * pixels_per_metre, -y0 * pixels_per_metre
+        if self.kind == "chessboard":
+            for r in range(self.rows + 1):
+                for c in range(self.cols + 1):
+                    if (r + c) % 2 == 0:
+                        top, left = oy + (r - 1) * s, ox + (c - 1) * s
+                        cv2.rectangle(image, (int(round(left)), int(round(top))),
+                                      (int(round(left + s)) - 1, int(round(top + s)) - 1), 0, thickness=-1)
+        else:
+            shift = 4  # sub-pixel circle centres
+            for x, y, _ in self.object_points():
+                # pixel centres sit half a texel inside the printed edge (see synthetic.render_plane)
+                centre = (int(round((ox + x * pixels_per_metre - 0.5) * 2**shift)),
+                          int(round((oy + y * pixels_per_metre - 0.5) * 2**shift)))
+                cv2.circle(image, centre, int(round(0.35 * s * 2**shift)), 0, -1, cv2.LINE_AA, shift)
+        return image
+
+    # --- detection ----------------------------------------------------------------------------------
+    def detect(self, image: np.ndarray) -> Detection | None:
+        """Find the board in a grey or BGR image; None where it is not found."""
+        grey = to_grey(image)
+        if self.kind == "chessboard":
+            return self._detect_chessboard(grey)
+        if self.kind == "circles":
+            return self._detect_circles(grey)
+        found = self._detect_charuco(grey)
+        if found is None:  # white-on-black prints are only found inverted
+            found = self._detect_charuco(255 - grey)
+            if found is not None:
+                found = Detection(found.image_points, found.object_points, found.ids, inverted=True)
+        return found
+
+    def _detection(self, corners: np.ndarray, ids: np.ndarray) -> Detection:
+        corners = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+        ids = np.asarray(ids, dtype=np.int64).ravel()
+        return Detection(corners, self.object_points()[ids], ids)
+
+    def _detect_chessboard(self, grey: np.ndarray) -> Detection | None:
+        size = (self.cols, self.rows)
+        flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+        found, corners = cv2.findChessboardCorners(grey, size, flags=flags)
+        if not found:
+            # the sector-based detector copes better with blur and strong distortion, and is sub-pixel itself
+            found, corners = cv2.findChessboardCornersSB(grey, size, flags=cv2.CALIB_CB_ACCURACY)
+            if not found:
+                return None
+            return self._detection(corners, np.arange(self.cols * self.rows))
+        corners = refine_corners(grey, corners.reshape(-1, 2), nearest_spacing(corners.reshape(-1, 2)))
+        return self._detection(corners, np.arange(self.cols * self.rows))
+
+    def _detect_circles(self, grey: np.ndarray) -> Detection | None:
+        found, centres = cv2.findCirclesGrid(grey, (self.cols, self.rows), flags=cv2.CALIB_CB_ASYMMETRIC_GRID)
+        if not found:
+            return None
+        return self._detection(centres, np.arange(self.cols * self.rows))
+
+    def _detect_charuco(self, grey: np.ndarray) -> Detection | None:
+        detector = cv2.aruco.CharucoDetector(self._charuco_board())
+        corners, ids, _, _ = detector.detectBoard(grey)
+        if ids is None or len(ids) < 6:  # fewer points cannot constrain a pose and the intrinsics
+            return None
+        # CharucoDetector refines corners itself; a second cornerSubPix would reach into the markers
+        return self._detection(corners, ids)
+
+
+def to_grey(image: np.ndarray) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim == 3 and image.shape[2] == 3:
+        return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    if image.ndim == 3 and image.shape[2] == 1:
+        return image[:, :, 0]
+    if image.ndim != 2:
+        raise ValueError(f"expected a grey or BGR image, got shape {image.shape}")
+    return image
+
+
+def nearest_spacing(points: np.ndarray) -> float:
+    """Smallest distance between two detected points, pixels."""
+    diff = points[:, None, :] - points[None, :, :]
+    dist = np.hypot(diff[..., 0], diff[..., 1])
+    np.fill_diagonal(dist, np.inf)
+    return float(dist.min())
+
+
+def refine_corners(grey: np.ndarray, corners: np.ndarray, spacing: float) -> np.ndarray:
+    """Sub-pixel saddle refinement with a window that stays inside one square."""
+    half = int(np.clip(0.4 * spacing, 2, 11))  # 11 is OpenCV's usual choice at 640x480
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+    refined = cv2.cornerSubPix(grey, corners.astype(np.float32).reshape(-1, 1, 2), (half, half), (-1, -1), criteria)
+    return refined.reshape(-1, 2).astype(np.float64)

@@ -1,0 +1,331 @@
+"""Self-calibrating bundle adjustment of the Brown model from board views.
+
+No ROS here. OpenCV's calibrateCamera gives the starting point; then all views are refined jointly with
+scipy's least_squares on the analytic Jacobian (cv2.projectPoints) in a sparse block pattern: the nine
+camera parameters touch every residual, each view's six pose parameters only its own. Optional robust
+loss and outlier rejection. The result carries what a photogrammetrist reads to judge a calibration:
+residuals overall and per view, parameter standard deviations and correlations from the covariance, and
+warnings about weak geometry.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy import sparse
+from scipy.optimize import least_squares
+
+from .board import Detection
+from .camera_model import BrownCamera
+
+PARAM_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
+N_INTRINSIC = len(PARAM_NAMES)
+MIN_VIEWS = 3  # below this the nine camera parameters cannot be separated from the poses at all
+RECOMMENDED_VIEWS = 12
+CORRELATION_WARNING = 0.95
+ROTATION_WARNING_DEG = 45.0
+RADIAL = {"k1", "k2", "k3"}
+
+
+class CalibrationError(RuntimeError):
+    """A calibration that cannot be computed from the given views."""
+
+
+@dataclass(frozen=True)
+class View:
+    """One image's detections, named for reports."""
+
+    name: str
+    detection: Detection
+
+
+@dataclass
+class ViewReport:
+    name: str
+    points: int
+    rms_px: float
+    mean_px: float
+    max_px: float
+    rejected_points: int
+    roll_deg: float  # in-image direction of the board's x axis
+
+
+@dataclass
+class CalibrationResult:
+    camera: BrownCamera
+    std: dict[str, float]  # one standard deviation per parameter, same keys as PARAM_NAMES
+    correlation: np.ndarray  # (9, 9) between PARAM_NAMES
+    rms_px: float
+    mean_px: float
+    max_residual_px: float
+    views: list[ViewReport]
+    rejected_views: dict[str, str]  # name -> reason
+    warnings: list[str]
+    opencv_rms_px: float
+    sigma0_px: float  # a posteriori standard deviation of one image coordinate
+    iterations: int
+    seconds: float
+    coverage: float  # fraction of an 8x6 grid over the image that holds detected points
+    image_points: list[np.ndarray] = field(repr=False, default_factory=list)
+    residuals: list[np.ndarray] = field(repr=False, default_factory=list)  # detected - projected, px
+    inliers: list[np.ndarray] = field(repr=False, default_factory=list)
+
+    @property
+    def views_used(self) -> int:
+        return len(self.views)
+
+    def summary(self) -> dict:
+        """Plain numbers for JSON: the CLI's --json output and the calibration file's metadata."""
+        cam = self.camera
+        return {
+            "rms_px": self.rms_px,
+            "mean_px": self.mean_px,
+            "max_residual_px": self.max_residual_px,
+            "sigma0_px": self.sigma0_px,
+            "opencv_rms_px": self.opencv_rms_px,
+            "views_used": self.views_used,
+            "views_rejected": len(self.rejected_views),
+            "rejected": dict(self.rejected_views),
+            "points_rejected": int(sum(v.rejected_points for v in self.views)),
+            "image_width": cam.width,
+            "image_height": cam.height,
+            "fx": cam.fx, "fy": cam.fy, "cx": cam.xp, "cy": cam.yp,
+            "dist": cam.dist.tolist(),
+            "std": dict(self.std),
+            "correlations": {f"{PARAM_NAMES[i]}-{PARAM_NAMES[j]}": float(self.correlation[i, j])
+                             for i in range(N_INTRINSIC) for j in range(i + 1, N_INTRINSIC)},
+            "coverage": self.coverage,
+            "per_view": [vars(v) for v in self.views],
+            "warnings": list(self.warnings),
+            "iterations": self.iterations,
+            "seconds": self.seconds,
+        }
+
+
+def _project_with_jacobian(
+    intrinsics: np.ndarray, pose: np.ndarray, object_points: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    fx, fy, cx, cy = intrinsics[:4]
+    K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+    uv, jac = cv2.projectPoints(object_points.reshape(-1, 1, 3), pose[:3], pose[3:], K, intrinsics[4:])
+    # jac columns: rvec(3) tvec(3) fx fy cx cy k1 k2 p1 p2 k3 (the same order as PARAM_NAMES)
+    return uv.reshape(-1), jac
+
+
+class _Problem:
+    """Residuals and the sparse Jacobian over [9 camera parameters, 6 per view]."""
+
+    def __init__(self, object_points: list[np.ndarray], image_points: list[np.ndarray]):
+        self.object_points = object_points
+        self.observed = np.concatenate([p.reshape(-1) for p in image_points])
+        self.counts = [len(p) for p in object_points]
+        self.row_starts = np.concatenate([[0], np.cumsum(self.counts) * 2])
+        rows, cols = [], []
+        for v, n in enumerate(self.counts):
+            r = np.arange(self.row_starts[v], self.row_starts[v] + 2 * n)
+            c = np.concatenate([np.arange(N_INTRINSIC), N_INTRINSIC + 6 * v + np.arange(6)])
+            rows.append(np.repeat(r, len(c)))
+            cols.append(np.tile(c, len(r)))
+        self.rows = np.concatenate(rows)
+        self.cols = np.concatenate(cols)
+        self.shape = (len(self.observed), N_INTRINSIC + 6 * len(self.counts))
+
+    def _all(self, x: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        intrinsics = x[:N_INTRINSIC]
+        projected, jacobians = [], []
+        for v, points in enumerate(self.object_points):
+            uv, jac = _project_with_jacobian(intrinsics, x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6], points)
+            projected.append(uv)
+            jacobians.append(jac)
+        return np.concatenate(projected), jacobians
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        projected, _ = self._all(x)
+        return projected - self.observed
+
+    def jacobian(self, x: np.ndarray) -> sparse.csr_matrix:
+        _, jacobians = self._all(x)
+        # per view, reorder columns to [9 intrinsics, 6 pose] to match the sparsity pattern
+        values = np.concatenate([np.hstack([j[:, 6:6 + N_INTRINSIC], j[:, :6]]).ravel() for j in jacobians])
+        return sparse.csr_matrix((values, (self.rows, self.cols)), shape=self.shape)
+
+
+def _view_roll_deg(camera: BrownCamera, detection: Detection, rvec: np.ndarray, tvec: np.ndarray) -> float:
+    """Direction in the image of the board's x axis, degrees; 90 apart means rotated by 90."""
+    span = np.ptp(detection.object_points[:, 0]) or 1.0
+    ends = camera.project(np.array([[0.0, 0, 0], [span, 0, 0]]), rvec, tvec)
+    du, dv = ends[1] - ends[0]
+    return float(np.degrees(np.arctan2(dv, du)))
+
+
+def _coverage(image_points: Sequence[np.ndarray], width: int, height: int, nx: int, ny: int) -> np.ndarray:
+    grid = np.zeros((ny, nx), bool)
+    for points in image_points:
+        ix = np.clip((points[:, 0] / width * nx).astype(int), 0, nx - 1)
+        iy = np.clip((points[:, 1] / height * ny).astype(int), 0, ny - 1)
+        grid[iy, ix] = True
+    return grid
+
+
+def _weak_geometry_warnings(
+    views: list[ViewReport], image_points: list[np.ndarray], correlation: np.ndarray, width: int, height: int,
+) -> list[str]:
+    warnings = []
+    if len(views) < RECOMMENDED_VIEWS:
+        warnings.append(f"only {len(views)} views used; take {RECOMMENDED_VIEWS} or more for a reliable calibration")
+    rolls = np.array([v.roll_deg for v in views]) % 180.0
+    # largest angular separation between any two views, on the circle of directions mod 180
+    separation = np.abs(rolls[:, None] - rolls[None, :])
+    separation = np.minimum(separation, 180.0 - separation).max() if len(rolls) > 1 else 0.0
+    if separation < ROTATION_WARNING_DEG:
+        warnings.append(
+            f"no view is rotated by about 90 degrees (largest rotation between views {separation:.0f} deg): "
+            "the principal point is poorly determined; add views with the camera or board turned by 90 deg")
+    cells = _coverage(image_points, width, height, 3, 3)
+    missing = [name for name, (r, c) in
+               {"top-left": (0, 0), "top-right": (0, 2), "bottom-left": (2, 0), "bottom-right": (2, 2)}.items()
+               if not cells[r, c]]
+    if missing:
+        warnings.append(f"image corners not covered by any board point: {', '.join(missing)}; "
+                        "distortion there is extrapolated")
+    for i in range(N_INTRINSIC):
+        for j in range(i + 1, N_INTRINSIC):
+            pair = {PARAM_NAMES[i], PARAM_NAMES[j]}
+            # fx-fy and the radial terms among themselves are correlated by nature, not by weak views
+            if abs(correlation[i, j]) > CORRELATION_WARNING and pair != {"fx", "fy"} and not pair <= RADIAL:
+                warnings.append(f"parameters {PARAM_NAMES[i]} and {PARAM_NAMES[j]} are strongly correlated "
+                                f"({correlation[i, j]:+.3f}); the views do not separate them")
+    return warnings
+
+
+def calibrate(
+    views: Sequence[View],
+    image_size: tuple[int, int],
+    robust_loss: str = "linear",
+    outlier_sigma: float | None = 4.0,
+    progress: Callable[[str], None] | None = None,
+) -> CalibrationResult:
+    """Fit the Brown model to the views. `robust_loss` is a scipy loss ('linear', 'huber', 'soft_l1', ...);
+    points whose residual exceeds `outlier_sigma` robust standard deviations are rejected and the fit
+    repeated (None disables rejection)."""
+    started = time.perf_counter()
+    say = progress or (lambda _msg: None)
+    width, height = image_size
+    views = [v for v in views if len(v.detection) >= 4]
+    if len(views) < MIN_VIEWS:
+        raise CalibrationError(f"{len(views)} usable views; at least {MIN_VIEWS} are needed "
+                               f"({RECOMMENDED_VIEWS}+ recommended)")
+    object_points = [v.detection.object_points.astype(np.float32) for v in views]
+    image_points = [v.detection.image_points.astype(np.float32) for v in views]
+    say(f"initial estimate (OpenCV) from {len(views)} views")
+    try:
+        opencv_rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+            object_points, image_points, (width, height), None, None)
+    except cv2.error as exc:
+        raise CalibrationError(f"OpenCV could not initialise the calibration: {exc.err}") from exc
+    if not np.isfinite(opencv_rms):
+        raise CalibrationError("OpenCV's initial calibration did not converge")
+    dist = np.asarray(dist, float).ravel()[:5]
+    x = np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], dist]
+                       + [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs)])
+
+    keep = [np.ones(len(p), bool) for p in object_points]
+    rejected_views: dict[str, str] = {}
+    active = list(range(len(views)))
+    iterations = 0
+    for round_ in range(4):
+        obj = [object_points[v][keep[v]].astype(np.float64) for v in active]
+        img = [image_points[v][keep[v]].astype(np.float64) for v in active]
+        problem = _Problem(obj, img)
+        x_active = np.concatenate([x[:N_INTRINSIC]] + [x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6]
+                                                       for v in active])
+        say(f"bundle adjustment round {round_ + 1}: {len(active)} views, {sum(map(len, obj))} points")
+        fit = least_squares(problem.residuals, x_active, jac=problem.jacobian, method="trf", x_scale="jac",
+                            loss=robust_loss, f_scale=1.0, tr_solver="lsmr", ftol=1e-12, xtol=1e-12,
+                            gtol=1e-12, max_nfev=200)
+        iterations += fit.nfev
+        x[:N_INTRINSIC] = fit.x[:N_INTRINSIC]
+        for k, v in enumerate(active):
+            x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6] = fit.x[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6]
+        if outlier_sigma is None:
+            break
+        # robust scale of the point residuals, then reject what lies beyond outlier_sigma of it
+        changed = False
+        all_err = np.hypot(*fit.fun.reshape(-1, 2).T)
+        robust_sigma = 1.4826 * np.median(all_err) / np.sqrt(np.log(4))  # Rayleigh median -> per-axis sigma
+        limit = max(outlier_sigma * robust_sigma * np.sqrt(2), 0.05)
+        offset = 0
+        for v in list(active):
+            n = int(keep[v].sum())
+            err = all_err[offset: offset + n]
+            offset += n
+            bad = err > limit
+            if bad.any():
+                idx = np.flatnonzero(keep[v])
+                keep[v][idx[bad]] = False
+                changed = True
+            if keep[v].sum() < max(6, 0.5 * len(keep[v])):
+                active.remove(v)
+                rejected_views[views[v].name] = (f"more than half of its points are outliers "
+                                                 f"(residual > {limit:.2f} px)")
+                changed = True
+        if len(active) < MIN_VIEWS:
+            raise CalibrationError(f"only {len(active)} views left after rejecting outliers")
+        if not changed:
+            break
+
+    # final solution over the kept points; covariance from the Jacobian there
+    obj = [object_points[v][keep[v]].astype(np.float64) for v in active]
+    img = [image_points[v][keep[v]].astype(np.float64) for v in active]
+    problem = _Problem(obj, img)
+    x_final = np.concatenate([x[:N_INTRINSIC]] + [x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6] for v in active])
+    residuals = problem.residuals(x_final)
+    J = problem.jacobian(x_final).toarray()
+    dof = len(residuals) - len(x_final)
+    if dof <= 0:
+        raise CalibrationError("more unknowns than observations; add views or board points")
+    sigma0 = float(np.sqrt(residuals @ residuals / dof))
+    normal = J.T @ J
+    try:
+        covariance = np.linalg.inv(normal) * sigma0**2
+    except np.linalg.LinAlgError as exc:
+        raise CalibrationError("the normal equations are singular: the views do not determine the camera") from exc
+    cov_i = covariance[:N_INTRINSIC, :N_INTRINSIC]
+    std_values = np.sqrt(np.clip(np.diag(cov_i), 0, None))
+    correlation = cov_i / np.outer(std_values, std_values)
+    camera = BrownCamera.from_opencv(
+        np.array([[x_final[0], 0, x_final[2]], [0, x_final[1], x_final[3]], [0, 0, 1]]), x_final[4:9],
+        (width, height))
+
+    reports, per_view_residuals, per_view_points, per_view_inliers = [], [], [], []
+    offset = 0
+    for k, v in enumerate(active):
+        n = len(obj[k])
+        r = residuals[offset: offset + 2 * n].reshape(-1, 2)
+        offset += 2 * n
+        pose = x_final[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6]
+        # residuals of all the view's points, rejected ones included, for the report
+        all_r = views[v].detection.image_points - camera.project(views[v].detection.object_points, pose[:3], pose[3:])
+        per_view_residuals.append(all_r)
+        per_view_points.append(views[v].detection.image_points)
+        per_view_inliers.append(keep[v].copy())
+        err = np.hypot(r[:, 0], r[:, 1])
+        reports.append(ViewReport(
+            name=views[v].name, points=n, rms_px=float(np.sqrt(np.mean(err**2))), mean_px=float(err.mean()),
+            max_px=float(err.max()), rejected_points=int((~keep[v]).sum()),
+            roll_deg=_view_roll_deg(camera, views[v].detection, pose[:3], pose[3:])))
+    err = np.hypot(*residuals.reshape(-1, 2).T)
+    used_points = [views[v].detection.image_points[keep[v]] for v in active]
+    warnings = _weak_geometry_warnings(reports, used_points, correlation, width, height)
+    coverage = float(_coverage(used_points, width, height, 8, 6).mean())
+    say(f"done: RMS {np.sqrt(np.mean(err**2)):.4f} px over {len(active)} views")
+    return CalibrationResult(
+        camera=camera, std=dict(zip(PARAM_NAMES, map(float, std_values))), correlation=correlation,
+        rms_px=float(np.sqrt(np.mean(err**2))), mean_px=float(err.mean()), max_residual_px=float(err.max()),
+        views=reports, rejected_views=rejected_views, warnings=warnings, opencv_rms_px=float(opencv_rms),
+        sigma0_px=sigma0, iterations=iterations, seconds=time.perf_counter() - started, coverage=coverage,
+        image_points=per_view_points, residuals=per_view_residuals, inliers=per_view_inliers)

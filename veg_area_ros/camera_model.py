@@ -1,0 +1,266 @@
+"""Brown camera model (principal distance, principal point, K1 K2 K3, P1 P2, pixel aspect).
+
+No ROS here. Conventions: pixel coordinates (u, v) with the origin at the centre of the top-left pixel,
+u right, v down (as OpenCV and ROS). The model maps an ideal pinhole ray (x, y) = (X/Z, Y/Z) to a
+distorted pixel:
+
+    r² = x² + y²
+    x_d = x (1 + K1 r² + K2 r⁴ + K3 r⁶) + 2 P1 x y + P2 (r² + 2 x²)
+    y_d = y (1 + K1 r² + K2 r⁴ + K3 r⁶) + P1 (r² + 2 y²) + 2 P2 x y
+    u = xp + c · x_d,     v = yp + c · aspect · y_d
+
+which is OpenCV's pinhole + ``plumb_bob`` with fx = c, fy = c · aspect, (cx, cy) = (xp, yp), and the
+same five coefficients, so the conversion both ways is exact. Under water the refraction at a flat port
+is absorbed into K1..P2, as in the self-calibration method this package follows.
+
+Calibrations made elsewhere use other conventions: PhotoModeler-style parameters are metric (mm) and
+correct *measured* (distorted) coordinates towards ideal ones, the opposite direction; they are refitted
+here by least squares and the refit residual is reported in pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")  # plumb_bob order
+
+
+@dataclass(frozen=True)
+class BrownCamera:
+    """A calibrated camera. Pixel units for c, xp, yp; K and P act on ideal normalized coordinates."""
+
+    width: int
+    height: int
+    c: float  # principal distance, pixels (horizontal)
+    xp: float  # principal point, pixels
+    yp: float
+    aspect: float = 1.0  # fy / fx; 1 for square pixels
+    k1: float = 0.0
+    k2: float = 0.0
+    k3: float = 0.0
+    p1: float = 0.0
+    p2: float = 0.0
+
+    def __post_init__(self) -> None:
+        values = np.array([self.c, self.xp, self.yp, self.aspect, *self.dist], dtype=float)
+        if not np.all(np.isfinite(values)):
+            raise ValueError(f"camera parameters must be finite, got {self}")
+        if self.c <= 0 or self.aspect <= 0:
+            raise ValueError(f"principal distance and aspect must be positive (c={self.c}, aspect={self.aspect})")
+        if self.width <= 0 or self.height <= 0:
+            raise ValueError(f"image size must be positive, got {self.width}x{self.height}")
+
+    # --- OpenCV / ROS camera_info -------------------------------------------------------------------
+    @property
+    def fx(self) -> float:
+        return self.c
+
+    @property
+    def fy(self) -> float:
+        return self.c * self.aspect
+
+    @property
+    def dist(self) -> np.ndarray:
+        """Distortion coefficients in plumb_bob order (k1, k2, p1, p2, k3)."""
+        return np.array([self.k1, self.k2, self.p1, self.p2, self.k3], dtype=float)
+
+    @property
+    def camera_matrix(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.xp], [0.0, self.fy, self.yp], [0.0, 0.0, 1.0]])
+
+    @property
+    def image_size(self) -> tuple[int, int]:
+        """(width, height), the order OpenCV functions take."""
+        return (self.width, self.height)
+
+    @classmethod
+    def from_opencv(cls, camera_matrix: np.ndarray, dist: np.ndarray, image_size: tuple[int, int]) -> BrownCamera:
+        """Exact conversion from OpenCV's K and plumb_bob coefficients. Skew must be zero."""
+        K = np.asarray(camera_matrix, dtype=float).reshape(3, 3)
+        d = np.zeros(5)
+        given = np.asarray(dist, dtype=float).ravel()
+        if given.size not in (4, 5, 8, 12, 14) or (given.size > 5 and np.any(given[5:] != 0)):
+            raise ValueError(f"only plumb_bob (k1, k2, p1, p2[, k3]) is supported, got {given.size} coefficients")
+        d[: min(5, given.size)] = given[:5]
+        if abs(K[0, 1]) > 1e-9 * abs(K[0, 0]):
+            raise ValueError("camera matrix has skew; the Brown model here has none")
+        width, height = image_size
+        return cls(
+            width=int(width), height=int(height), c=K[0, 0], xp=K[0, 2], yp=K[1, 2], aspect=K[1, 1] / K[0, 0],
+            k1=d[0], k2=d[1], p1=d[2], p2=d[3], k3=d[4],
+        )
+
+    def to_opencv(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.camera_matrix, self.dist
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+    # --- projection ---------------------------------------------------------------------------------
+    def distort_normalized(self, xy: np.ndarray) -> np.ndarray:
+        """Ideal normalized coordinates (N, 2) -> distorted normalized coordinates (N, 2)."""
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        x, y = xy[:, 0], xy[:, 1]
+        r2 = x * x + y * y
+        radial = 1 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
+        xd = x * radial + 2 * self.p1 * x * y + self.p2 * (r2 + 2 * x * x)
+        yd = y * radial + self.p1 * (r2 + 2 * y * y) + 2 * self.p2 * x * y
+        return np.column_stack([xd, yd])
+
+    def normalized_to_pixels(self, xy: np.ndarray) -> np.ndarray:
+        """Ideal normalized coordinates -> distorted pixels."""
+        d = self.distort_normalized(xy)
+        return np.column_stack([self.xp + self.fx * d[:, 0], self.yp + self.fy * d[:, 1]])
+
+    def pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
+        """Distorted pixels -> ideal normalized coordinates: OpenCV's fixed-point start, then Newton steps so
+        the round trip is exact to ~1e-10 px even with strong barrel distortion."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        target = np.column_stack([(uv[:, 0] - self.xp) / self.fx, (uv[:, 1] - self.yp) / self.fy])
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
+        xy = cv2.undistortPoints(
+            uv.reshape(-1, 1, 2), self.camera_matrix, self.dist, criteria=criteria)
+        xy = xy.reshape(-1, 2).copy()
+        for _ in range(8):
+            error = self.distort_normalized(xy) - target
+            if np.max(np.abs(error)) < 1e-14:
+                break
+            a, b, c, d = self._distortion_jacobian(xy)
+            det = a * d - b * c
+            xy[:, 0] -= (d * error[:, 0] - b * error[:, 1]) / det
+            xy[:, 1] -= (a * error[:, 1] - c * error[:, 0]) / det
+        return xy
+
+    def _distortion_jacobian(self, xy: np.ndarray) -> tuple[np.ndarray, ...]:
+        """d(x_d, y_d)/d(x, y) as the four entries (dxd/dx, dxd/dy, dyd/dx, dyd/dy)."""
+        x, y = xy[:, 0], xy[:, 1]
+        r2 = x * x + y * y
+        radial = 1 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
+        dradial_dr2 = self.k1 + r2 * (2 * self.k2 + 3 * r2 * self.k3)
+        dxd_dx = radial + 2 * x * x * dradial_dr2 + 2 * self.p1 * y + 6 * self.p2 * x
+        dxd_dy = 2 * x * y * dradial_dr2 + 2 * self.p1 * x + 2 * self.p2 * y
+        dyd_dx = 2 * x * y * dradial_dr2 + 2 * self.p1 * x + 2 * self.p2 * y
+        dyd_dy = radial + 2 * y * y * dradial_dr2 + 6 * self.p1 * y + 2 * self.p2 * x
+        return dxd_dx, dxd_dy, dyd_dx, dyd_dy
+
+    def project(self, points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
+        """3-D points in a board frame seen from a pose -> distorted pixels (N, 2)."""
+        uv, _ = cv2.projectPoints(np.asarray(points, float).reshape(-1, 1, 3), rvec, tvec, *self.to_opencv())
+        return uv.reshape(-1, 2)
+
+
+@dataclass(frozen=True)
+class ImportResult:
+    """A camera converted from another convention, with how well the conversion fits."""
+
+    camera: BrownCamera
+    refit_rms_px: float  # 0 where the conversion is exact
+    refit_max_px: float
+    notes: list[str] = field(default_factory=list)
+
+
+def _grid(width: int, height: int, n: int = 41) -> np.ndarray:
+    u, v = np.meshgrid(np.linspace(0, width - 1, n), np.linspace(0, height - 1, n))
+    return np.column_stack([u.ravel(), v.ravel()])
+
+
+def fit_forward_distortion(
+    distorted_px: np.ndarray, ideal_px: np.ndarray, c: float, aspect: float, xp: float, yp: float,
+    width: int, height: int,
+) -> ImportResult:
+    """Least-squares plumb_bob coefficients mapping ideal pixels to distorted ones, with the residual in px."""
+    ideal = np.column_stack([(ideal_px[:, 0] - xp) / c, (ideal_px[:, 1] - yp) / (c * aspect)])
+
+    def residual(d: np.ndarray) -> np.ndarray:
+        cam = BrownCamera(width, height, c, xp, yp, aspect, k1=d[0], k2=d[1], p1=d[2], p2=d[3], k3=d[4])
+        return (cam.normalized_to_pixels(ideal) - distorted_px).ravel()
+
+    fit = least_squares(residual, np.zeros(5), method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    d = fit.x
+    camera = BrownCamera(width, height, c, xp, yp, aspect, k1=d[0], k2=d[1], p1=d[2], p2=d[3], k3=d[4])
+    err = np.hypot(*residual(d).reshape(-1, 2).T)
+    return ImportResult(camera, float(np.sqrt(np.mean(err**2))), float(err.max()))
+
+
+def from_photomodeler(
+    focal_length_mm: float,
+    format_width_mm: float,
+    principal_point_mm: tuple[float, float],
+    image_size: tuple[int, int],
+    K1: float = 0.0,
+    K2: float = 0.0,
+    K3: float = 0.0,
+    P1: float = 0.0,
+    P2: float = 0.0,
+    format_height_mm: float | None = None,
+) -> ImportResult:
+    """Import PhotoModeler-style parameters (metric, correcting measured coordinates).
+
+    Measured image coordinates in mm relative to the principal point, (x, y) with x right and y down,
+    are corrected to ideal ones by
+        x_i = x + x (K1 r² + K2 r⁴ + K3 r⁶) + P1 (r² + 2x²) + 2 P2 x y
+        y_i = y + y (K1 r² + K2 r⁴ + K3 r⁶) + P2 (r² + 2y²) + 2 P1 x y
+    The principal point is given in mm from the top-left corner of the format. Because the correction
+    runs from distorted to ideal, the plumb_bob coefficients are refitted over the whole image.
+    """
+    width, height = image_size
+    if min(focal_length_mm, format_width_mm) <= 0:
+        raise ValueError("focal length and format width must be positive")
+    pixel_w = format_width_mm / width
+    pixel_h = (format_height_mm / height) if format_height_mm else pixel_w
+    c = focal_length_mm / pixel_w
+    aspect = pixel_w / pixel_h
+    # pixel centres are at (u + 0.5) * pixel size from the format's top-left corner
+    xp = principal_point_mm[0] / pixel_w - 0.5
+    yp = principal_point_mm[1] / pixel_h - 0.5
+    measured = _grid(width, height)
+    x = (measured[:, 0] - xp) * pixel_w
+    y = (measured[:, 1] - yp) * pixel_h
+    r2 = x * x + y * y
+    radial = K1 * r2 + K2 * r2**2 + K3 * r2**3
+    xi = x + x * radial + P1 * (r2 + 2 * x * x) + 2 * P2 * x * y
+    yi = y + y * radial + P2 * (r2 + 2 * y * y) + 2 * P1 * x * y
+    ideal_px = np.column_stack([xi / pixel_w + xp, yi / pixel_h + yp])
+    result = fit_forward_distortion(measured, ideal_px, c, aspect, xp, yp, width, height)
+    note = "PhotoModeler corrections run distorted->ideal; plumb_bob coefficients refitted over the image"
+    return ImportResult(result.camera, result.refit_rms_px, result.refit_max_px, [note])
+
+
+def from_matlab(
+    intrinsic_matrix: np.ndarray,
+    radial_distortion: np.ndarray,
+    tangential_distortion: np.ndarray,
+    image_size: tuple[int, int],
+    skew: float = 0.0,
+) -> ImportResult:
+    """Import MATLAB ``cameraParameters`` values.
+
+    MATLAB's IntrinsicMatrix is K transposed, with 1-based pixel coordinates; ImageSize is [rows, cols];
+    RadialDistortion has 2 or 3 terms; the model is the same as OpenCV's, so the conversion is exact
+    unless there is skew, which is refitted away and reported.
+    """
+    M = np.asarray(intrinsic_matrix, dtype=float).reshape(3, 3)
+    K = M.T if abs(M[0, 2]) < 1e-12 and abs(M[2, 0]) > 0 else M  # accept K or K'
+    radial = np.asarray(radial_distortion, dtype=float).ravel()
+    if radial.size not in (2, 3):
+        raise ValueError(f"RadialDistortion needs 2 or 3 terms, got {radial.size}")
+    k3 = radial[2] if radial.size == 3 else 0.0
+    p1, p2 = np.asarray(tangential_distortion, dtype=float).ravel()[:2]
+    rows, cols = image_size
+    skew = skew or K[0, 1]
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2] - 1.0, K[1, 2] - 1.0
+    camera = BrownCamera(int(cols), int(rows), fx, cx, cy, fy / fx, radial[0], radial[1], k3, p1, p2)
+    if skew == 0:
+        return ImportResult(camera, 0.0, 0.0, ["exact: same model as OpenCV, principal point made 0-based"])
+    # with skew, u = fx x_d + s y_d + cx: fit a skew-free camera to the skewed one's pixels
+    ideal_norm = camera.pixels_to_normalized(_grid(camera.width, camera.height))
+    distorted = camera.distort_normalized(ideal_norm)
+    measured = np.column_stack([fx * distorted[:, 0] + skew * distorted[:, 1] + cx, fy * distorted[:, 1] + cy])
+    ideal_px = np.column_stack([cx + fx * ideal_norm[:, 0], cy + fy * ideal_norm[:, 1]])
+    result = fit_forward_distortion(measured, ideal_px, fx, fy / fx, cx, cy, camera.width, camera.height)
+    return ImportResult(result.camera, result.refit_rms_px, result.refit_max_px,
+                        [f"skew {skew:g} is not in the Brown model here; distortion refitted to absorb it"])

@@ -1,0 +1,199 @@
+"""Synthetic renders with a known camera: a textured plane seen through a lens and, optionally, a flat port
+into water (refraction traced exactly with Snell's law). Ground truth for tests and the demo.
+
+No ROS here. Each output pixel is traced backwards: pixel -> ideal ray (inverse Brown model) -> refraction
+at the port -> intersection with the plane -> texture lookup, supersampled for anti-aliasing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import cv2
+import numpy as np
+
+from .board import BoardSpec
+from .camera_model import BrownCamera
+
+WATER_INDEX = 1.333
+
+
+@dataclass(frozen=True)
+class FlatPort:
+    """A flat window perpendicular to the optical axis, `distance` metres in front of the lens, with water
+    (refractive index `water_index`) behind it. Glass of parallel faces only shifts rays by a fraction of a
+    millimetre and is left out."""
+
+    distance: float = 0.02
+    water_index: float = WATER_INDEX
+
+
+# a typical cheap 640x480 underwater endoscope: short focal length and strong barrel distortion
+ENDOSCOPE = BrownCamera(640, 480, c=520.0, xp=326.0, yp=236.5, aspect=1.004,
+                        k1=-0.32, k2=0.12, k3=-0.02, p1=0.0012, p2=-0.0008)
+
+
+@lru_cache(maxsize=4)
+def _pixel_rays(camera: BrownCamera, supersample: int) -> np.ndarray:
+    """Unit rays (H*s, W*s, 3) in camera coordinates for every sub-pixel sample, cached per camera."""
+    s = supersample
+    offsets = (np.arange(s) + 0.5) / s - 0.5
+    u = (np.arange(camera.width)[:, None] + offsets[None, :]).ravel()
+    v = (np.arange(camera.height)[:, None] + offsets[None, :]).ravel()
+    uu, vv = np.meshgrid(u, v)
+    xy = camera.pixels_to_normalized(np.column_stack([uu.ravel(), vv.ravel()]))
+    rays = np.column_stack([xy, np.ones(len(xy))])
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    rays = rays.reshape(len(v), len(u), 3)
+    rays.setflags(write=False)
+    return rays
+
+
+def refract_at_port(rays: np.ndarray, port: FlatPort) -> tuple[np.ndarray, np.ndarray]:
+    """Rays from the lens centre -> (origins on the port, directions in water), both (..., 3)."""
+    origins = rays * (port.distance / rays[..., 2:3])
+    eta = 1.0 / port.water_index
+    sin2 = eta**2 * (1.0 - rays[..., 2] ** 2)
+    directions = np.empty_like(rays)
+    directions[..., :2] = eta * rays[..., :2]
+    directions[..., 2] = np.sqrt(1.0 - sin2)
+    return origins, directions
+
+
+def ideal_rays_to(points: np.ndarray, port: FlatPort | None = None) -> np.ndarray:
+    """Camera-frame 3-D points (N, 3) -> ideal normalized (x, y) of the air ray that reaches each point,
+    refraction at the port included (solved per point by bisection on the air-ray angle)."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    if port is None:
+        return points[:, :2] / points[:, 2:3]
+    rho = np.hypot(points[:, 0], points[:, 1])
+    depth = points[:, 2]
+    lo, hi = np.zeros_like(rho), np.full_like(rho, np.pi / 2 - 1e-9)
+    for _ in range(60):  # lateral offset grows monotonically with the air angle
+        mid = (lo + hi) / 2
+        sin_w = np.sin(mid) / port.water_index
+        reach = port.distance * np.tan(mid) + (depth - port.distance) * sin_w / np.sqrt(1 - sin_w**2)
+        lo, hi = np.where(reach < rho, mid, lo), np.where(reach < rho, hi, mid)
+    tan_air = np.tan((lo + hi) / 2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        direction = np.where(rho[:, None] > 0, points[:, :2] / rho[:, None], 0.0)
+    return direction * tan_air[:, None]
+
+
+def plane_coordinates(
+    camera: BrownCamera, rvec: np.ndarray, tvec: np.ndarray, port: FlatPort | None = None, supersample: int = 1,
+) -> np.ndarray:
+    """For every (sub-)pixel, the (x, y) in metres where its ray meets the plane z = 0 of the pose; NaN
+    where it misses (behind the camera or parallel)."""
+    rays = _pixel_rays(camera, supersample)
+    if port is None:
+        origins, directions = np.zeros_like(rays), rays
+    else:
+        origins, directions = refract_at_port(rays, port)
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=float))
+    t = np.asarray(tvec, dtype=float).ravel()
+    normal = R[:, 2]
+    denom = directions @ normal
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = ((t - origins) @ normal) / denom
+    hit = origins + directions * depth[..., None]
+    local = (hit - t) @ R  # R^T (hit - t), row-wise
+    xy = local[..., :2]
+    xy[~(depth > 0)] = np.nan
+    return xy
+
+
+def render_plane(
+    camera: BrownCamera,
+    texture: np.ndarray,
+    extent: tuple[float, float, float, float],
+    rvec: np.ndarray,
+    tvec: np.ndarray,
+    port: FlatPort | None = None,
+    background: int | tuple[int, int, int] = 90,
+    supersample: int = 3,
+) -> np.ndarray:
+    """Render a textured plane whose texture covers `extent` = (x0, y0, x1, y1) metres of the plane z = 0."""
+    x0, y0, x1, y1 = extent
+    scale_x = texture.shape[1] / (x1 - x0)
+    scale_y = texture.shape[0] / (y1 - y0)
+    xy = plane_coordinates(camera, rvec, tvec, port, supersample)
+    # texel i covers [x0 + i/scale, x0 + (i+1)/scale]: its centre is at texture coordinate i
+    map_x = ((xy[..., 0] - x0) * scale_x - 0.5).astype(np.float32)
+    map_y = ((xy[..., 1] - y0) * scale_y - 0.5).astype(np.float32)
+    map_x[np.isnan(map_x)] = -1e6
+    map_y[np.isnan(map_y)] = -1e6
+    border = background if np.ndim(background) == 0 or texture.ndim == 3 else int(np.mean(background))
+    fine = cv2.remap(texture, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=border)
+    return cv2.resize(fine, camera.image_size, interpolation=cv2.INTER_AREA)
+
+
+def look_at_pose(
+    distance: float, tilt_x_deg: float = 0.0, tilt_y_deg: float = 0.0, roll_deg: float = 0.0,
+    centre: tuple[float, float] = (0.0, 0.0), plane_point: tuple[float, float] = (0.0, 0.0),
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pose (rvec, tvec) of a plane whose point `plane_point` lies at (centre_x, centre_y, distance) in camera
+    coordinates, rolled about the optical axis and tilted about its own x and y axes."""
+    def rot(axis: int, deg: float) -> np.ndarray:
+        r = np.zeros(3)
+        r[axis] = np.radians(deg)
+        return cv2.Rodrigues(r)[0]
+
+    R = rot(2, roll_deg) @ rot(0, tilt_x_deg) @ rot(1, tilt_y_deg)
+    anchor = np.array([centre[0], centre[1], distance])
+    t = anchor - R @ np.array([plane_point[0], plane_point[1], 0.0])
+    return cv2.Rodrigues(R)[0].ravel(), t
+
+
+SPREAD = [(-1, -1), (1, 1), (1, -1), (-1, 1), (0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)]
+
+
+def board_views(
+    camera: BrownCamera, board: BoardSpec, count: int, distance: float, rng: np.random.Generator,
+    max_tilt_deg: float = 35.0, port: FlatPort | None = None,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Poses that a careful calibrator would take: tilted, spread over the image (corners included), every
+    third one rolled by 90 degrees so the principal point is well determined, board fully in view."""
+    x0, y0, x1, y1 = board.extent()
+    board_centre = ((x0 + x1) / 2, (y0 + y1) / 2)
+    corners = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]], float)
+    # with a flat port the field of view shrinks by about the refractive index
+    fov_scale = 1.0 / (port.water_index if port else 1.0)
+    half_w = distance * (camera.width / 2) / camera.fx * fov_scale
+    half_h = distance * (camera.height / 2) / camera.fy * fov_scale
+    poses: list[tuple[np.ndarray, np.ndarray]] = []
+    attempts = 0
+    while len(poses) < count:
+        attempts += 1
+        if attempts > 2000 * count:
+            raise RuntimeError("could not place the board in view; move it further away or use a smaller board")
+        roll = (90.0 if len(poses) % 3 == 2 else 0.0) + rng.uniform(-10, 10)
+        tilt_x, tilt_y = rng.uniform(-max_tilt_deg, max_tilt_deg, size=2)
+        # visit the image corners, edges and centre in turn, as a careful calibrator does
+        gx, gy = SPREAD[len(poses) % len(SPREAD)]
+        reach = rng.uniform(0.3, 0.8)
+        centre = (gx * reach * half_w, gy * reach * half_h)
+        rvec, tvec = look_at_pose(distance * rng.uniform(0.9, 1.1), tilt_x, tilt_y, roll, centre, board_centre)
+        cam_points = (cv2.Rodrigues(rvec)[0] @ corners.T).T + tvec
+        u, v = camera.normalized_to_pixels(ideal_rays_to(cam_points, port)).T
+        margin = 0.03 * camera.width
+        if u.min() > margin and v.min() > margin and u.max() < camera.width - margin and v.max() < camera.height - margin:
+            poses.append((rvec, tvec))
+    return poses
+
+
+def render_board_views(
+    camera: BrownCamera, board: BoardSpec, poses: list[tuple[np.ndarray, np.ndarray]],
+    port: FlatPort | None = None, noise_sigma: float = 1.0, rng: np.random.Generator | None = None,
+) -> list[np.ndarray]:
+    """Grey images of the board at each pose, with mild sensor noise."""
+    rng = rng or np.random.default_rng(0)
+    pixels_per_metre = 40.0 / board.square  # 40 texels per square: finer than any camera pixel here
+    texture = board.texture(pixels_per_metre)
+    images = []
+    for rvec, tvec in poses:
+        image = render_plane(camera, texture, board.extent(), rvec, tvec, port, background=110).astype(np.float32)
+        image += rng.normal(0.0, noise_sigma, image.shape).astype(np.float32)
+        images.append(np.clip(np.rint(image), 0, 255).astype(np.uint8))
+    return images
