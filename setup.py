@@ -16,6 +16,7 @@ setup(
     install_requires=["setuptools"],
     zip_safe=True,
     entry_points={
-        "console_scripts": [f"{n}={PACKAGE}.cli:main" for n in NODES] + ["veg-area=veg_area_ros.cli:main"],
+        "console_scripts": [f"{node}={PACKAGE}.nodes:{node.split('_')[0]}_main" for node in NODES]
+        + [f"veg-area={PACKAGE}.cli:main"],
     },
 )

@@ -97,6 +97,11 @@ class BrownCamera:
     def to_opencv(self) -> tuple[np.ndarray, np.ndarray]:
         return self.camera_matrix, self.dist
 
+    def ideal(self) -> BrownCamera:
+        """The idealized camera: no distortion, square pixels (scale of the horizontal axis), principal point
+        at the image centre. Frames remapped to it can be measured with a single scale."""
+        return BrownCamera(self.width, self.height, self.c, (self.width - 1) / 2, (self.height - 1) / 2)
+
     def to_dict(self) -> dict[str, float]:
         return asdict(self)
 

@@ -1,0 +1,160 @@
+"""Calibration files in the camera_info YAML of ROS's camera_calibration / camera_info_manager.
+
+No ROS here. The standard keys (image_width, image_height, camera_name, camera_matrix, distortion_model,
+distortion_coefficients, rectification_matrix, projection_matrix) are what ROS tools read; what a
+researcher needs later (medium, calibration distance, residuals, uncertainties, date, board) goes under
+the extra key ``veg_area_ros``, which ROS's parsers ignore. The projection matrix is the idealized camera
+(no distortion, square pixels, principal point at the image centre), so ROS's own rectification produces
+the idealized image this package measures.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from .camera_model import BrownCamera
+
+METADATA_KEY = "veg_area_ros"
+
+
+class CalibrationFileError(ValueError):
+    """A calibration file that cannot be read; the message names the file and the problem."""
+
+
+@dataclass
+class CalibrationFile:
+    camera: BrownCamera
+    camera_name: str = "camera"
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+
+def _matrix(rows: int, cols: int, values: np.ndarray) -> dict[str, Any]:
+    return {"rows": rows, "cols": cols, "data": [float(v) for v in np.asarray(values, float).ravel()]}
+
+
+def to_camera_info_dict(camera: BrownCamera, camera_name: str = "camera",
+                        metadata: dict[str, Any] | None = None) -> dict[str, Any]:
+    ideal = camera.ideal()
+    projection = np.hstack([ideal.camera_matrix, np.zeros((3, 1))])
+    content: dict[str, Any] = {
+        "image_width": camera.width,
+        "image_height": camera.height,
+        "camera_name": camera_name,
+        "camera_matrix": _matrix(3, 3, camera.camera_matrix),
+        "distortion_model": "plumb_bob",
+        "distortion_coefficients": _matrix(1, 5, camera.dist),
+        "rectification_matrix": _matrix(3, 3, np.eye(3)),
+        "projection_matrix": _matrix(3, 4, projection),
+    }
+    if metadata:
+        content[METADATA_KEY] = _plain(metadata)
+    return content
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars and arrays -> plain Python, so the YAML stays readable by any parser."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def write_atomic(path: str | os.PathLike, text: str) -> None:
+    """Write via a temporary file in the same folder and rename, so readers never see half a file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as handle:
+            handle.write(text)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_calibration(path: str | os.PathLike, camera: BrownCamera, camera_name: str = "camera",
+                      metadata: dict[str, Any] | None = None) -> None:
+    text = yaml.safe_dump(to_camera_info_dict(camera, camera_name, metadata), sort_keys=False,
+                          default_flow_style=None, width=120)
+    write_atomic(path, text)
+
+
+def _numbers(path: Path, content: dict, key: str, rows: int, cols: int | None) -> np.ndarray:
+    entry = content.get(key)
+    if not isinstance(entry, dict) or "data" not in entry:
+        raise CalibrationFileError(f"{path}: '{key}' is missing or has no 'data' list")
+    try:
+        data = np.array(entry["data"], dtype=float).ravel()
+    except (TypeError, ValueError) as exc:
+        raise CalibrationFileError(f"{path}: '{key}' data is not a list of numbers") from exc
+    expected = rows * cols if cols else None
+    if expected is not None and data.size != expected:
+        raise CalibrationFileError(f"{path}: '{key}' should hold {expected} numbers, found {data.size}")
+    if not np.all(np.isfinite(data)):
+        raise CalibrationFileError(f"{path}: '{key}' holds NaN or infinite values")
+    return data
+
+
+def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
+    if not isinstance(content, dict):
+        raise CalibrationFileError(f"{path}: not a camera_info calibration (expected a YAML mapping)")
+    for key in ("image_width", "image_height"):
+        value = content.get(key)
+        if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
+            raise CalibrationFileError(f"{path}: '{key}' must be a positive integer, found {value!r}")
+    model = content.get("distortion_model", "plumb_bob")
+    K = _numbers(path, content, "camera_matrix", 3, 3).reshape(3, 3)
+    dist = _numbers(path, content, "distortion_coefficients", 1, None)
+    if model not in ("plumb_bob", "rational_polynomial"):
+        raise CalibrationFileError(f"{path}: distortion model {model!r} is not supported (use plumb_bob)")
+    if dist.size not in (0, 4, 5, 8) or (dist.size == 8 and np.any(dist[5:] != 0)):
+        raise CalibrationFileError(f"{path}: {dist.size} distortion coefficients do not fit plumb_bob's five")
+    dist = np.pad(dist[:5], (0, 5 - min(5, dist.size)))
+    try:
+        camera = BrownCamera.from_opencv(K, dist, (content["image_width"], content["image_height"]))
+    except ValueError as exc:
+        raise CalibrationFileError(f"{path}: {exc}") from exc
+    metadata = content.get(METADATA_KEY) or {}
+    if not isinstance(metadata, dict):
+        raise CalibrationFileError(f"{path}: '{METADATA_KEY}' must be a mapping")
+    return CalibrationFile(camera, str(content.get("camera_name", "camera")), metadata)
+
+
+def read_calibration(path: str | os.PathLike) -> CalibrationFile:
+    """Read a camera_info YAML; any problem raises CalibrationFileError naming the file and the problem."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError as exc:
+        raise CalibrationFileError(f"{path}: no such calibration file") from exc
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CalibrationFileError(f"{path}: cannot be read ({exc})") from exc
+    try:
+        content = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        where = getattr(exc, "problem_mark", None)
+        line = f" at line {where.line + 1}" if where else ""
+        raise CalibrationFileError(f"{path}: not valid YAML{line}") from exc
+    return from_camera_info_dict(content, path)
+
+
+def quality_rms(calibration: CalibrationFile) -> float:
+    """The RMS residual recorded with a calibration, or infinity where none is recorded."""
+    value = calibration.metadata.get("rms_px")
+    return float(value) if isinstance(value, int | float) and math.isfinite(value) else math.inf

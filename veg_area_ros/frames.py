@@ -1,0 +1,109 @@
+"""Reading frames from images, folders of images and videos, with a clear reason for everything skipped.
+
+No ROS here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp"}
+VIDEO_SUFFIXES = {".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv"}
+
+
+class InputError(ValueError):
+    """An input that cannot be used at all (missing path, empty folder, unknown file type)."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    name: str  # file name, or "video.mp4#123" for frame 123 of a video
+    image: np.ndarray | None  # None where the frame could not be read
+    problem: str = ""  # why image is None
+
+
+def read_image(path: Path) -> tuple[np.ndarray | None, str]:
+    """Decode an image file; a truncated JPEG is refused rather than measured half-grey."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        return None, f"cannot be read ({exc.strerror or exc})"
+    if not data:
+        return None, "is empty"
+    if path.suffix.lower() in {".jpg", ".jpeg"} and not data.rstrip(b"\0\r\n ").endswith(b"\xff\xd9"):
+        return None, "is a truncated JPEG (no end-of-image marker)"
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+    if image is None:
+        return None, "is not an image OpenCV can decode"
+    return image, ""
+
+
+def expand_inputs(paths: Sequence[str | Path]) -> list[Path]:
+    """Files named directly, and the image and video files inside named folders, in name order."""
+    files: list[Path] = []
+    for raw in paths:
+        path = Path(raw)
+        if path.is_dir():
+            inside = sorted(p for p in path.iterdir()
+                            if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES)
+            if not inside:
+                raise InputError(f"{path}: folder holds no image or video files")
+            files.extend(inside)
+        elif path.is_file():
+            files.append(path)
+        else:
+            raise InputError(f"{path}: no such file or folder")
+    return files
+
+
+def video_frame_count(path: Path) -> int:
+    capture = cv2.VideoCapture(str(path))
+    try:
+        return int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if capture.isOpened() else 0
+    finally:
+        capture.release()
+
+
+def iter_video(path: Path, step: int = 1) -> Iterator[Frame]:
+    capture = cv2.VideoCapture(str(path))
+    if not capture.isOpened():
+        yield Frame(path.name, None, "is not a video OpenCV can open")
+        return
+    try:
+        index = 0
+        while True:
+            if index % step == 0:
+                ok, image = capture.read()
+                if not ok:
+                    break
+                yield Frame(f"{path.name}#{index}", image)
+            elif not capture.grab():
+                break
+            index += 1
+    finally:
+        capture.release()
+
+
+def iter_frames(paths: Sequence[str | Path], video_step: int = 1) -> Iterator[Frame]:
+    """Every frame of the inputs; unreadable ones come with image None and the reason."""
+    for path in expand_inputs(paths):
+        suffix = path.suffix.lower()
+        if suffix in VIDEO_SUFFIXES:
+            yield from iter_video(path, video_step)
+        elif suffix in IMAGE_SUFFIXES:
+            image, problem = read_image(path)
+            yield Frame(path.name, image, problem)
+        else:
+            # unknown extension: try as an image, then as a video, before giving up
+            image, problem = read_image(path)
+            if image is not None:
+                yield Frame(path.name, image)
+            elif video_frame_count(path) > 0:
+                yield from iter_video(path, video_step)
+            else:
+                yield Frame(path.name, None, "is neither an image nor a video")

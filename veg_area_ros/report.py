@@ -1,0 +1,82 @@
+"""Calibration report figures: residual vectors, per-view residuals and image coverage (PNG, matplotlib).
+
+No ROS here.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .calibration import CalibrationResult
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")  # files only, no display
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def write_calibration_report(result: CalibrationResult, folder: str | Path) -> list[Path]:
+    """Write residuals.png, per_view.png, coverage.png and calibration.json into `folder`."""
+    plt = _pyplot()
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    width, height = result.camera.image_size
+    points = np.concatenate(result.image_points)
+    residuals = np.concatenate(result.residuals)
+    inliers = np.concatenate(result.inliers)
+    written = []
+
+    norms = np.hypot(residuals[:, 0], residuals[:, 1])
+    scale = 0.05 * width / max(np.percentile(norms, 95), 1e-9)  # the longest usual arrow ~5 % of the width
+    fig, ax = plt.subplots(figsize=(8, 6.5))
+    ax.quiver(points[inliers, 0], points[inliers, 1], residuals[inliers, 0] * scale, residuals[inliers, 1] * scale,
+              norms[inliers], angles="xy", scale_units="xy", scale=1, cmap="viridis", width=0.002)
+    if (~inliers).any():
+        ax.scatter(points[~inliers, 0], points[~inliers, 1], marker="x", color="red", label="rejected outliers")
+        ax.legend(loc="upper right")
+    ax.set_xlim(0, width)
+    ax.set_ylim(height, 0)
+    ax.set_aspect("equal")
+    ax.set_title(f"Residual vectors x{scale:.0f} (RMS {result.rms_px:.3f} px, max {result.max_residual_px:.3f} px)")
+    ax.set_xlabel("u [px]")
+    ax.set_ylabel("v [px]")
+    written.append(folder / "residuals.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(max(6, 0.35 * len(result.views)), 4))
+    names = [v.name for v in result.views]
+    ax.bar(range(len(names)), [v.rms_px for v in result.views], label="RMS")
+    ax.plot(range(len(names)), [v.max_px for v in result.views], "r_", markersize=12, label="max")
+    ax.set_xticks(range(len(names)), names, rotation=70, fontsize=7)
+    ax.set_ylabel("residual [px]")
+    ax.set_title("Residuals per view")
+    ax.legend()
+    written.append(folder / "per_view.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(8, 6.5))
+    for pts in result.image_points:
+        ax.plot(pts[:, 0], pts[:, 1], ".", markersize=3)
+    for k in (1, 2):
+        ax.axvline(k * width / 3, color="grey", lw=0.5)
+        ax.axhline(k * height / 3, color="grey", lw=0.5)
+    ax.set_xlim(0, width)
+    ax.set_ylim(height, 0)
+    ax.set_aspect("equal")
+    ax.set_title(f"Board points of all views (coverage {100 * result.coverage:.0f} % of an 8x6 grid)")
+    written.append(folder / "coverage.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    written.append(folder / "calibration.json")
+    written[-1].write_text(json.dumps(result.summary(), indent=2))
+    return written
