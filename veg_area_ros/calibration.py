@@ -237,7 +237,7 @@ def calibrate(
     rejected_views: dict[str, str] = {}
     active = list(range(len(views)))
     iterations = 0
-    for round_ in range(4):
+    for round_ in range(6):
         obj = [object_points[v][keep[v]].astype(np.float64) for v in active]
         img = [image_points[v][keep[v]].astype(np.float64) for v in active]
         problem = _Problem(obj, img)
@@ -253,20 +253,19 @@ def calibrate(
             x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6] = fit.x[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6]
         if outlier_sigma is None:
             break
-        # robust scale of the point residuals, then reject what lies beyond outlier_sigma of it
-        changed = False
-        all_err = np.hypot(*fit.fun.reshape(-1, 2).T)
-        robust_sigma = 1.4826 * np.median(all_err) / np.sqrt(np.log(4))  # Rayleigh median -> per-axis sigma
+        # robust scale of the inlier residuals; then every point of every active view is judged afresh
+        # against the new fit, so points condemned by an earlier, bent fit come back
+        inlier_err = np.hypot(*fit.fun.reshape(-1, 2).T)
+        robust_sigma = 1.4826 * np.median(inlier_err) / np.sqrt(np.log(4))  # Rayleigh median -> per-axis sigma
         limit = max(outlier_sigma * robust_sigma * np.sqrt(2), 0.05)
-        offset = 0
+        changed = False
         for v in list(active):
-            n = int(keep[v].sum())
-            err = all_err[offset: offset + n]
-            offset += n
-            bad = err > limit
-            if bad.any():
-                idx = np.flatnonzero(keep[v])
-                keep[v][idx[bad]] = False
+            pose = x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6]
+            uv, _ = _project_with_jacobian(x[:N_INTRINSIC], pose, object_points[v].astype(np.float64))
+            err = np.hypot(*(uv.reshape(-1, 2) - image_points[v]).T)
+            new_keep = err <= limit
+            if not np.array_equal(new_keep, keep[v]):
+                keep[v] = new_keep
                 changed = True
             if keep[v].sum() < max(6, 0.5 * len(keep[v])):
                 active.remove(v)

@@ -1,0 +1,17 @@
+"""Shared fixtures: synthetic board views rendered once per session."""
+
+from __future__ import annotations
+
+import pytest
+from helpers import render_views
+
+from veg_area_ros.calibration import View
+
+
+@pytest.fixture(scope="session")
+def air_views():
+    """15 rendered chessboard views in air and their detections (seed 0)."""
+    board, poses, images = render_views(seed=0)
+    views = [View(f"v{i}", board.detect(image)) for i, image in enumerate(images)]
+    assert all(v.detection is not None for v in views)
+    return board, poses, images, views

@@ -1,0 +1,47 @@
+"""Helpers shared by the tests: data paths, running the CLI, rendering board views."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from veg_area_ros.board import BoardSpec
+from veg_area_ros.synthetic import ENDOSCOPE, FlatPort, board_views, render_board_views
+
+REPO = Path(__file__).resolve().parents[1]
+TEST_DATA = REPO / "test" / "data"
+SHARED_DATA = REPO.parent / "shared" / "data"
+OPENCV_LEFT = TEST_DATA / "opencv-left"
+CHESSBOARD = "chessboard:9x6:0.03"
+
+
+def shared(relative: str) -> Path:
+    """A file under ../shared/data, or skip with the reason (a user's fresh clone has no ../shared)."""
+    path = SHARED_DATA / relative
+    if not path.exists():
+        pytest.skip(f"{path} not present: ../shared/data holds this real data on the development machines")
+    return path
+
+
+def run_cli(*args: str, cwd: Path | None = None):
+    """Run `veg-area` from the working tree as a user would run it; returns the CompletedProcess."""
+    import subprocess
+
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    return subprocess.run([sys.executable, "-m", "veg_area_ros.cli", *args], capture_output=True, text=True,
+                          env=env, cwd=cwd, timeout=600)
+
+
+def render_views(seed: int, count: int = 15, port: FlatPort | None = None, spec: str = CHESSBOARD,
+                 distance: float = 0.6):
+    board = BoardSpec.parse(spec)
+    rng = np.random.default_rng(seed)
+    poses = board_views(ENDOSCOPE, board, count, distance, rng, port=port)
+    images = render_board_views(ENDOSCOPE, board, poses, port=port, rng=rng)
+    return board, poses, images
+
+

@@ -1,0 +1,75 @@
+import numpy as np
+import pytest
+
+from veg_area_ros.board import BoardSpec, BoardSpecError
+from veg_area_ros.synthetic import ENDOSCOPE, look_at_pose, render_board_views
+
+from helpers import render_views
+
+
+def test_spec_round_trip_and_points():
+    board = BoardSpec.parse("chessboard:9x6:0.025")
+    assert (board.kind, board.cols, board.rows, board.square) == ("chessboard", 9, 6, 0.025)
+    assert str(board) == "chessboard:9x6:0.025"
+    points = board.object_points()
+    assert points.shape == (54, 3) and points[1, 0] == pytest.approx(0.025) and points[9, 1] == pytest.approx(0.025)
+    charuco = BoardSpec.parse("charuco:5x7:0.04:0.03:DICT_4X4_50")
+    assert charuco.object_points().shape == (24, 3)
+    circles = BoardSpec.parse("circles:4x11:0.02")
+    assert circles.object_points()[4, :2] == pytest.approx([0.02, 0.02])  # second row is offset by one spacing
+
+
+@pytest.mark.parametrize("text", ["square:9x6:0.02", "chessboard:9x6", "chessboard:9by6:0.02",
+                                  "chessboard:9x6:-1", "chessboard:1x6:0.02", "chessboard:9x6:nan",
+                                  "charuco:5x7:0.04:0.05:DICT_4X4_50", "charuco:5x7:0.04:0.03:DICT_NOPE"])
+def test_bad_specs_say_what_is_wrong(text):
+    with pytest.raises(BoardSpecError) as info:
+        BoardSpec.parse(text)
+    assert text.split(":")[0] in str(info.value) or "board" in str(info.value)
+
+
+@pytest.mark.parametrize("spec,tolerance", [
+    ("chessboard:9x6:0.03", 0.1),
+    ("charuco:7x5:0.04:0.03:DICT_4X4_50", 0.15),
+    ("circles:4x11:0.02", 0.1),
+])
+def test_detection_is_subpixel_accurate_on_renders(spec, tolerance):
+    board, poses, images = render_views(seed=5, count=4, spec=spec)
+    errors = []
+    for (rvec, tvec), image in zip(poses, images):
+        detection = board.detect(image)
+        assert detection is not None, f"{spec} not found"
+        truth = ENDOSCOPE.project(detection.object_points, rvec, tvec)
+        errors.append(np.hypot(*(detection.image_points - truth).T))
+    errors = np.concatenate(errors)
+    assert np.sqrt(np.mean(errors**2)) < tolerance
+    assert errors.max() < 4 * tolerance
+
+
+def test_charuco_partial_view_keeps_the_right_ids():
+    board = BoardSpec.parse("charuco:7x5:0.04:0.03:DICT_4X4_50")
+    # board centred on the right image edge: about half of it is out of view
+    rvec, tvec = look_at_pose(0.5, centre=(0.28, 0.0), plane_point=(0.14, 0.1))
+    image = render_board_views(ENDOSCOPE, board, [(rvec, tvec)])[0]
+    detection = board.detect(image)
+    assert detection is not None
+    assert 6 <= len(detection) < len(board.object_points())
+    truth = ENDOSCOPE.project(detection.object_points, rvec, tvec)
+    assert np.abs(detection.image_points - truth).max() < 0.5  # wrong ids would be off by whole squares
+
+
+def test_white_on_black_charuco_is_found_inverted():
+    board, poses, images = render_views(seed=2, count=1, spec="charuco:7x5:0.04:0.03:DICT_4X4_50")
+    detection = board.detect(255 - images[0])
+    assert detection is not None and detection.inverted
+    truth = ENDOSCOPE.project(detection.object_points, *poses[0])
+    assert np.abs(detection.image_points - truth).max() < 0.5
+
+
+@pytest.mark.parametrize("spec", ["chessboard:9x6:0.03", "charuco:7x5:0.04:0.03:DICT_4X4_50",
+                                  "circles:4x11:0.02"])
+def test_no_board_gives_none(spec):
+    rng = np.random.default_rng(0)
+    noise = rng.integers(0, 255, (480, 640), dtype=np.uint8)
+    assert BoardSpec.parse(spec).detect(noise) is None
+    assert BoardSpec.parse(spec).detect(np.full((480, 640, 3), 128, np.uint8)) is None

@@ -1,0 +1,103 @@
+import cv2
+import numpy as np
+import pytest
+from helpers import OPENCV_LEFT, render_views
+
+from veg_area_ros.board import BoardSpec, Detection
+from veg_area_ros.calibration import PARAM_NAMES, CalibrationError, View, calibrate
+from veg_area_ros.synthetic import ENDOSCOPE, FlatPort
+
+OPENCV_REFERENCE_RMS = 0.4087  # OpenCV 5.0 on the same 13 images, measured in ../shared/README.md
+
+
+def truth_vector(camera):
+    return np.array([camera.fx, camera.fy, camera.xp, camera.yp, *camera.dist])
+
+
+def fitted_vector(result):
+    return truth_vector(result.camera)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_synthetic_calibration_recovers_the_true_camera(seed, air_views):
+    if seed == 0:
+        views = air_views[3]
+    else:
+        board, _, images = render_views(seed=seed)
+        views = [View(f"v{i}", board.detect(im)) for i, im in enumerate(images)]
+    result = calibrate(views, ENDOSCOPE.image_size)
+    fitted, truth = fitted_vector(result), truth_vector(ENDOSCOPE)
+    assert abs(result.camera.fx / ENDOSCOPE.fx - 1) < 0.002
+    assert abs(result.camera.fy / ENDOSCOPE.fy - 1) < 0.002
+    assert abs(result.camera.xp - ENDOSCOPE.xp) < 1.0 and abs(result.camera.yp - ENDOSCOPE.yp) < 1.0
+    std = np.array([result.std[name] for name in PARAM_NAMES])
+    assert np.all(std > 0) and np.all(np.isfinite(std))
+    z = (fitted - truth) / std
+    assert np.all(np.abs(z) < 3), dict(zip(PARAM_NAMES, z.round(2)))
+    assert result.rms_px < 0.1 and result.views_used == 15 and not result.warnings
+
+
+def test_real_images_match_or_beat_opencv():
+    board = BoardSpec.parse("chessboard:9x6:1")
+    views = []
+    for path in sorted(OPENCV_LEFT.glob("*.jpg")):
+        detection = board.detect(cv2.imread(str(path)))
+        assert detection is not None, path.name
+        views.append(View(path.name, detection))
+    assert len(views) == 13
+    result = calibrate(views, (640, 480), outlier_sigma=None)  # every point, as OpenCV uses
+    assert result.rms_px <= OPENCV_REFERENCE_RMS * 1.01
+    assert result.rms_px <= result.opencv_rms_px * 1.01  # OpenCV on the very same detections
+    assert all(0 < result.std[name] < np.inf for name in PARAM_NAMES)
+    assert result.std["fx"] < 2.0 and result.std["cx"] < 2.0
+    # same camera as OpenCV's reference to within a few of our standard deviations
+    assert abs(result.camera.fx - 536.07) < 5 * result.std["fx"] + 1
+    assert abs(result.camera.xp - 342.37) < 5 * result.std["cx"] + 1
+    assert len(result.views) == 13 and all(v.max_px >= v.rms_px >= 0 for v in result.views)
+
+
+def test_underwater_calibration_absorbs_refraction():
+    board, _, images = render_views(seed=4, port=FlatPort(), distance=0.7, spec="chessboard:9x6:0.04")
+    views = [View(f"v{i}", d) for i, im in enumerate(images) if (d := board.detect(im)) is not None]
+    assert len(views) == 15
+    result = calibrate(views, ENDOSCOPE.image_size)
+    assert result.rms_px < 0.1
+    assert result.camera.c / ENDOSCOPE.c == pytest.approx(1.333, rel=0.01)
+
+
+def test_outliers_are_rejected_and_do_not_bend_the_fit(air_views):
+    views = air_views[3]
+    clean = calibrate(views, ENDOSCOPE.image_size)
+    spoiled = []
+    for k, view in enumerate(views):
+        points = view.detection.image_points.copy()
+        if k % 3 == 0:
+            points[[5, 17]] += [6.0, -4.0]  # two badly located corners in every third view
+        spoiled.append(View(view.name, Detection(points, view.detection.object_points, view.detection.ids)))
+    robust = calibrate(spoiled, ENDOSCOPE.image_size)
+    assert sum(v.rejected_points for v in robust.views) == 10
+    assert abs(robust.camera.fx - clean.camera.fx) < 0.5 * clean.std["fx"]
+    naive = calibrate(spoiled, ENDOSCOPE.image_size, outlier_sigma=None)
+    assert naive.rms_px > 5 * robust.rms_px
+
+
+def test_robust_loss_runs_and_reports(air_views):
+    result = calibrate(air_views[3], ENDOSCOPE.image_size, robust_loss="huber")
+    assert result.rms_px < 0.1
+
+
+def test_weak_geometry_is_warned_about(air_views):
+    board, poses, images, views = air_views
+    few = calibrate(views[:5], ENDOSCOPE.image_size)
+    assert any("only 5 views" in w for w in few.warnings)
+    unrotated = [v for k, v in enumerate(views) if k % 3 != 2]  # every third view is the rotated one
+    result = calibrate(unrotated, ENDOSCOPE.image_size)
+    assert any("rotated by about 90" in w for w in result.warnings)
+    centre_only = [v for k, v in enumerate(views) if k % 9 == 4]
+    centred = calibrate(centre_only + [v for k, v in enumerate(views) if k % 9 in (5, 7)], ENDOSCOPE.image_size)
+    assert any("corners not covered" in w for w in centred.warnings)
+
+
+def test_too_few_views_is_an_error(air_views):
+    with pytest.raises(CalibrationError, match="at least 3"):
+        calibrate(air_views[3][:2], ENDOSCOPE.image_size)
