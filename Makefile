@@ -13,7 +13,7 @@ demo: install
 
 test: install
 	$(PY) -m ruff check .
-	$(PY) -m pytest
+	VEG_AREA_REQUIRE_INSTALL=1 $(PY) -m pytest
 
 install: $(VENV)/.deps-installed $(VENV)/.package-installed
 

@@ -1,10 +1,9 @@
 import numpy as np
 import pytest
+from helpers import render_views
 
 from veg_area_ros.board import BoardSpec, BoardSpecError
 from veg_area_ros.synthetic import ENDOSCOPE, look_at_pose, render_board_views
-
-from helpers import render_views
 
 
 def test_spec_round_trip_and_points():
@@ -36,7 +35,7 @@ def test_bad_specs_say_what_is_wrong(text):
 def test_detection_is_subpixel_accurate_on_renders(spec, tolerance):
     board, poses, images = render_views(seed=5, count=4, spec=spec)
     errors = []
-    for (rvec, tvec), image in zip(poses, images):
+    for (rvec, tvec), image in zip(poses, images, strict=True):
         detection = board.detect(image)
         assert detection is not None, f"{spec} not found"
         truth = ENDOSCOPE.project(detection.object_points, rvec, tvec)

@@ -1,7 +1,6 @@
+import cv2
 import numpy as np
 import pytest
-
-import cv2
 
 from veg_area_ros.synthetic import (
     ENDOSCOPE,

@@ -110,13 +110,13 @@ class BoardSpec:
     def texture(self, pixels_per_metre: float) -> np.ndarray:
         """The printed board as a grey image covering extent(); pixel (0, 0) is at (x0, y0)."""
         x0, y0, x1, y1 = self.extent()
-        width = int(round((x1 - x0) * pixels_per_metre))
-        height = int(round((y1 - y0) * pixels_per_metre))
+        width = round((x1 - x0) * pixels_per_metre)
+        height = round((y1 - y0) * pixels_per_metre)
         s = self.square * pixels_per_metre
         if self.kind == "charuco":
             board = self._charuco_board().generateImage(
-                (int(round(self.cols * s)), int(round(self.rows * s))), marginSize=0, borderBits=1)
-            margin = int(round(0.5 * s))
+                (round(self.cols * s), round(self.rows * s)), marginSize=0, borderBits=1)
+            margin = round(0.5 * s)
             return cv2.copyMakeBorder(board, margin, margin, margin, margin, cv2.BORDER_CONSTANT, value=255)
         image = np.full((height, width), 255, np.uint8)
         ox, oy = -x0 * pixels_per_metre, -y0 * pixels_per_metre
@@ -125,15 +125,15 @@ class BoardSpec:
                 for c in range(self.cols + 1):
                     if (r + c) % 2 == 0:
                         top, left = oy + (r - 1) * s, ox + (c - 1) * s
-                        cv2.rectangle(image, (int(round(left)), int(round(top))),
-                                      (int(round(left + s)) - 1, int(round(top + s)) - 1), 0, thickness=-1)
+                        cv2.rectangle(image, (round(left), round(top)),
+                                      (round(left + s) - 1, round(top + s) - 1), 0, thickness=-1)
         else:
             shift = 4  # sub-pixel circle centres
             for x, y, _ in self.object_points():
                 # pixel centres sit half a texel inside the printed edge (see synthetic.render_plane)
-                centre = (int(round((ox + x * pixels_per_metre - 0.5) * 2**shift)),
-                          int(round((oy + y * pixels_per_metre - 0.5) * 2**shift)))
-                cv2.circle(image, centre, int(round(0.35 * s * 2**shift)), 0, -1, cv2.LINE_AA, shift)
+                centre = (round((ox + x * pixels_per_metre - 0.5) * 2**shift),
+                          round((oy + y * pixels_per_metre - 0.5) * 2**shift))
+                cv2.circle(image, centre, round(0.35 * s * 2**shift), 0, -1, cv2.LINE_AA, shift)
         return image
 
     # --- detection ----------------------------------------------------------------------------------

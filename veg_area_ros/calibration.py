@@ -20,9 +20,8 @@ from scipy import sparse
 from scipy.optimize import least_squares
 
 from .board import Detection
-from .camera_model import BrownCamera
+from .camera_model import PARAM_NAMES, BrownCamera
 
-PARAM_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")
 N_INTRINSIC = len(PARAM_NAMES)
 MIN_VIEWS = 3  # below this the nine camera parameters cannot be separated from the poses at all
 RECOMMENDED_VIEWS = 12
@@ -93,7 +92,7 @@ class CalibrationResult:
             "points_rejected": int(sum(v.rejected_points for v in self.views)),
             "image_width": cam.width,
             "image_height": cam.height,
-            "fx": cam.fx, "fy": cam.fy, "cx": cam.xp, "cy": cam.yp,
+            **{k: v for k, v in cam.parameters().items() if k in ("fx", "fy", "cx", "cy")},
             "dist": cam.dist.tolist(),
             "std": dict(self.std),
             "correlations": {f"{PARAM_NAMES[i]}-{PARAM_NAMES[j]}": float(self.correlation[i, j])
@@ -231,7 +230,7 @@ def calibrate(
         raise CalibrationError("OpenCV's initial calibration did not converge")
     dist = np.asarray(dist, float).ravel()[:5]
     x = np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], dist]
-                       + [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs)])
+                       + [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs, strict=True)])
 
     keep = [np.ones(len(p), bool) for p in object_points]
     rejected_views: dict[str, str] = {}
@@ -323,7 +322,7 @@ def calibrate(
     coverage = float(_coverage(used_points, width, height, 8, 6).mean())
     say(f"done: RMS {np.sqrt(np.mean(err**2)):.4f} px over {len(active)} views")
     return CalibrationResult(
-        camera=camera, std=dict(zip(PARAM_NAMES, map(float, std_values))), correlation=correlation,
+        camera=camera, std=dict(zip(PARAM_NAMES, map(float, std_values), strict=True)), correlation=correlation,
         rms_px=float(np.sqrt(np.mean(err**2))), mean_px=float(err.mean()), max_residual_px=float(err.max()),
         views=reports, rejected_views=rejected_views, warnings=warnings, opencv_rms_px=float(opencv_rms),
         sigma0_px=sigma0, iterations=iterations, seconds=time.perf_counter() - started, coverage=coverage,

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")  # plumb_bob order
+PARAM_NAMES = ("fx", "fy", "cx", "cy", *DIST_NAMES)  # OpenCV's names, the order calibration fits them
 
 
 @dataclass(frozen=True)
@@ -96,6 +97,11 @@ class BrownCamera:
 
     def to_opencv(self) -> tuple[np.ndarray, np.ndarray]:
         return self.camera_matrix, self.dist
+
+    def parameters(self) -> dict[str, float]:
+        """The nine parameters by OpenCV's names (PARAM_NAMES), as the calibration reports them."""
+        values = [self.fx, self.fy, self.xp, self.yp, *self.dist]
+        return {name: float(v) for name, v in zip(PARAM_NAMES, values, strict=True)}
 
     def ideal(self) -> BrownCamera:
         """The idealized camera: no distortion, square pixels (scale of the horizontal axis), principal point

@@ -23,7 +23,7 @@ EXIT_FAILED = 1
 EXIT_REFUSED = 3
 
 
-class CliFailure(Exception):
+class CliError(Exception):
     """A failure reported as one line, without a traceback."""
 
     def __init__(self, message: str, code: int = EXIT_FAILED):
@@ -49,25 +49,25 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from .board import BoardSpec, BoardSpecError
     from .calib_io import CalibrationFileError, quality_rms, read_calibration, write_calibration
     from .calibration import CalibrationError, View, calibrate
-    from .frames import InputError, iter_frames, video_frame_count, VIDEO_SUFFIXES, expand_inputs
+    from .frames import VIDEO_SUFFIXES, InputError, expand_inputs, iter_frames, video_frame_count
 
     say = _progress(args.quiet)
     try:
         board = BoardSpec.parse(args.board)
     except BoardSpecError as exc:
-        raise CliFailure(str(exc), 2) from exc
+        raise CliError(str(exc), 2) from exc
     output = Path(args.output)
     try:
         files = expand_inputs(args.inputs)
     except InputError as exc:
-        raise CliFailure(str(exc)) from exc
+        raise CliError(str(exc)) from exc
 
     previous = None
     if output.exists() and not args.force:
         try:
             previous = read_calibration(output)
         except CalibrationFileError as exc:
-            raise CliFailure(f"{output} exists and is not a readable calibration ({exc}); "
+            raise CliError(f"{output} exists and is not a readable calibration ({exc}); "
                              "use --force to replace it", EXIT_REFUSED) from exc
 
     step = args.video_step
@@ -104,13 +104,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     if not views:
         if image_size is None:
-            raise CliFailure(f"no readable image among the inputs ({len(unreadable)} unreadable)")
-        raise CliFailure(f"no {board} board found in any of {seen} images")
+            raise CliError(f"no readable image among the inputs ({len(unreadable)} unreadable)")
+        raise CliError(f"no {board} board found in any of {seen} images")
     try:
         result = calibrate(views, image_size, robust_loss=args.loss,
                            outlier_sigma=None if args.no_outlier_rejection else args.outlier_sigma, progress=say)
     except CalibrationError as exc:
-        raise CliFailure(str(exc)) from exc
+        raise CliError(str(exc)) from exc
 
     summary = result.summary()
     summary.update(unreadable=unreadable, no_board=no_board, wrong_size=wrong_size, output=str(output))
@@ -118,7 +118,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         "medium": args.medium,
         "calibration_distance_m": args.distance,
         "board": str(board),
-        "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         "software": f"veg_area_ros {__version__}",
         **{k: summary[k] for k in ("rms_px", "mean_px", "max_residual_px", "sigma0_px", "views_used",
                                    "views_rejected", "std", "coverage", "warnings")},
@@ -126,7 +126,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     if previous is not None and previous.camera.image_size == result.camera.image_size \
             and quality_rms(previous) < result.rms_px:
-        raise CliFailure(
+        raise CliError(
             f"{output} holds a better calibration (RMS {quality_rms(previous):.4f} px) than this one "
             f"({result.rms_px:.4f} px); kept it. Use --force to replace it, or write elsewhere with -o",
             EXIT_REFUSED)
@@ -151,9 +151,7 @@ def _format_calibration(result, output: Path) -> str:
              f"views used {result.views_used}, rejected {len(result.rejected_views)}; "
              f"RMS {result.rms_px:.4f} px, mean {result.mean_px:.4f} px, max {result.max_residual_px:.4f} px",
              f"{'param':>6} {'value':>14} {'std':>12}"]
-    values = {"fx": cam.fx, "fy": cam.fy, "cx": cam.xp, "cy": cam.yp, "k1": cam.k1, "k2": cam.k2,
-              "p1": cam.p1, "p2": cam.p2, "k3": cam.k3}
-    lines += [f"{name:>6} {value:14.6g} {std[name]:12.3g}" for name, value in values.items()]
+    lines += [f"{name:>6} {value:14.6g} {std[name]:12.3g}" for name, value in cam.parameters().items()]
     lines += [f"warning: {w}" for w in result.warnings]
     return "\n".join(lines)
 
@@ -202,7 +200,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except CliFailure as exc:
+    except CliError as exc:
         print(f"veg-area {args.command}: {exc}", file=sys.stderr)
         return exc.code
     except KeyboardInterrupt:

@@ -12,8 +12,8 @@ import numpy as np
 
 from .board import BoardSpec
 from .calib_io import write_calibration
-from .camera_model import BrownCamera
 from .calibration import PARAM_NAMES, CalibrationResult, View, calibrate
+from .camera_model import BrownCamera
 from .synthetic import ENDOSCOPE, FlatPort, board_views, render_board_views
 
 BOARD = "chessboard:9x6:0.04"
@@ -51,22 +51,22 @@ def run_demo(output: Path, quiet: bool = False) -> int:
     print(f"veg_area_ros demo: synthetic {ENDOSCOPE.width}x{ENDOSCOPE.height} endoscope, board {BOARD}, "
           f"{VIEWS} views at {DISTANCE_M} m")
     say("calibrating in air ...")
-    air, air_holdout = _calibrate_synthetic(board, None, seed=1, say=say)
+    air, _ = _calibrate_synthetic(board, None, seed=1, say=say)
     say("calibrating under water (flat port, refraction traced with Snell's law) ...")
     water, water_holdout = _calibrate_synthetic(board, FlatPort(), seed=2, say=say)
 
-    truth = dict(zip(PARAM_NAMES, [ENDOSCOPE.fx, ENDOSCOPE.fy, ENDOSCOPE.xp, ENDOSCOPE.yp, *ENDOSCOPE.dist]))
+    truth = ENDOSCOPE.parameters()
     print("\nIn air, the fit against the camera that rendered the images:")
     print(f"{'param':>6} {'true':>12} {'fitted':>12} {'std':>10} {'error/std':>10}")
-    fitted_air = dict(zip(PARAM_NAMES, [air.camera.fx, air.camera.fy, air.camera.xp, air.camera.yp,
-                                        *air.camera.dist]))
+    fitted_air = air.camera.parameters()
     for name in PARAM_NAMES:
         z = (fitted_air[name] - truth[name]) / air.std[name]
         print(f"{name:>6} {truth[name]:12.5g} {fitted_air[name]:12.5g} {air.std[name]:10.2g} {z:10.2f}")
     print(f"RMS {air.rms_px:.4f} px, max {air.max_residual_px:.4f} px over {air.views_used} views")
 
     print("\nUnder water the Brown terms absorb refraction (principal distance grows by about n = 1.333):")
-    print(f"  c water / c air = {water.camera.c / air.camera.c:.4f};  k1 {air.camera.k1:+.4f} -> {water.camera.k1:+.4f}")
+    print(f"  c water / c air = {water.camera.c / air.camera.c:.4f};  "
+          f"k1 {air.camera.k1:+.4f} -> {water.camera.k1:+.4f}")
     print(f"  RMS {water.rms_px:.4f} px, max {water.max_residual_px:.4f} px over {water.views_used} views")
     print("  reprojection RMS on a held-out underwater view: "
           f"{_holdout_rms(water.camera, board, water_holdout):.3f} px with the water calibration, "

@@ -178,7 +178,8 @@ def board_views(
         cam_points = (cv2.Rodrigues(rvec)[0] @ corners.T).T + tvec
         u, v = camera.normalized_to_pixels(ideal_rays_to(cam_points, port)).T
         margin = 0.03 * camera.width
-        if u.min() > margin and v.min() > margin and u.max() < camera.width - margin and v.max() < camera.height - margin:
+        inside_u = margin < u.min() and u.max() < camera.width - margin
+        if inside_u and margin < v.min() and v.max() < camera.height - margin:
             poses.append((rvec, tvec))
     return poses
 

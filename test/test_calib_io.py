@@ -1,0 +1,115 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from veg_area_ros import calib_io
+from veg_area_ros.calib_io import CalibrationFileError, read_calibration, write_calibration
+from veg_area_ros.synthetic import ENDOSCOPE
+
+STANDARD_KEYS = ["image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
+                 "distortion_coefficients", "rectification_matrix", "projection_matrix"]
+
+
+def test_round_trip_is_exact_and_in_ros_layout(tmp_path):
+    path = tmp_path / "calib.yaml"
+    write_calibration(path, ENDOSCOPE, "endoscope", {"medium": "water", "rms_px": np.float64(0.05),
+                                                     "std": {"fx": np.float32(0.2)}})
+    content = yaml.safe_load(path.read_text())
+    assert list(content)[: len(STANDARD_KEYS)] == STANDARD_KEYS
+    assert content["camera_matrix"]["rows"] == 3 and len(content["camera_matrix"]["data"]) == 9
+    assert content["distortion_model"] == "plumb_bob" and len(content["distortion_coefficients"]["data"]) == 5
+    P = np.array(content["projection_matrix"]["data"]).reshape(3, 4)
+    assert P[0, 2] == 319.5 and P[1, 2] == 239.5 and P[0, 0] == P[1, 1] == ENDOSCOPE.c  # the idealized camera
+    loaded = read_calibration(path)
+    assert loaded.camera == ENDOSCOPE
+    assert loaded.camera_name == "endoscope"
+    assert loaded.metadata["medium"] == "water" and loaded.metadata["rms_px"] == 0.05
+    assert calib_io.quality_rms(loaded) == 0.05
+
+
+def test_reads_a_file_as_camera_calibration_writes_it(tmp_path):
+    # the layout ROS's camera_calibration writes (ost.yaml), from a real 640x480 camera
+    text = """image_width: 640
+image_height: 480
+camera_name: narrow_stereo
+camera_matrix:
+  rows: 3
+  cols: 3
+  data: [536.07, 0.0, 342.37, 0.0, 536.02, 235.54, 0.0, 0.0, 1.0]
+distortion_model: plumb_bob
+distortion_coefficients:
+  rows: 1
+  cols: 5
+  data: [-0.2651, -0.0467, 0.0018, -0.0003, 0.2523]
+rectification_matrix:
+  rows: 3
+  cols: 3
+  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]
+projection_matrix:
+  rows: 3
+  cols: 4
+  data: [536.07, 0, 342.37, 0, 0, 536.02, 235.54, 0, 0, 0, 1, 0]
+"""
+    path = tmp_path / "ost.yaml"
+    path.write_text(text)
+    camera = read_calibration(path).camera
+    assert (camera.fx, camera.fy, camera.xp, camera.yp) == pytest.approx((536.07, 536.02, 342.37, 235.54))
+    assert camera.k3 == 0.2523
+
+
+@pytest.mark.parametrize("text,problem", [
+    ("image_width: [640\n", "not valid YAML at line"),
+    ("just a string\n", "expected a YAML mapping"),
+    ("image_width: 640\nimage_height: 480\n", "'camera_matrix' is missing"),
+    ("image_width: -5\nimage_height: 480\n", "'image_width' must be a positive integer"),
+])
+def test_corrupt_files_name_the_file_and_the_problem(tmp_path, text, problem):
+    path = tmp_path / "bad.yaml"
+    path.write_text(text)
+    with pytest.raises(CalibrationFileError) as info:
+        read_calibration(path)
+    assert str(path) in str(info.value) and problem in str(info.value)
+
+
+def _valid(tmp_path) -> dict:
+    write_calibration(tmp_path / "ok.yaml", ENDOSCOPE)
+    return yaml.safe_load((tmp_path / "ok.yaml").read_text())
+
+
+@pytest.mark.parametrize("edit,problem", [
+    (lambda c: c["camera_matrix"].update(data=[1.0] * 8), "should hold 9 numbers"),
+    (lambda c: c["camera_matrix"]["data"].__setitem__(0, float("nan")), "NaN"),
+    (lambda c: c["distortion_coefficients"].update(data=["a", "b"]), "not a list of numbers"),
+    (lambda c: c.update(distortion_model="equidistant"), "not supported"),
+    (lambda c: c["camera_matrix"]["data"].__setitem__(0, -100.0), "positive"),
+])
+def test_invalid_values_are_refused(tmp_path, edit, problem):
+    content = _valid(tmp_path)
+    edit(content)
+    path = tmp_path / "edited.yaml"
+    path.write_text(yaml.safe_dump(content))
+    with pytest.raises(CalibrationFileError, match=problem):
+        read_calibration(path)
+
+
+def test_missing_file_is_a_clear_error(tmp_path):
+    with pytest.raises(CalibrationFileError, match="no such calibration file"):
+        read_calibration(tmp_path / "nope.yaml")
+
+
+def test_failed_write_keeps_the_old_file_and_leaves_no_temporary(tmp_path, monkeypatch):
+    path = tmp_path / "calib.yaml"
+    write_calibration(path, ENDOSCOPE)
+    before = path.read_bytes()
+
+    def broken_replace(src, dst):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", broken_replace)
+    with pytest.raises(OSError, match="disk full"):
+        write_calibration(path, ENDOSCOPE.ideal())
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in Path(tmp_path).iterdir()) == ["calib.yaml"]

@@ -1,0 +1,144 @@
+"""`veg-area calibrate` as a user runs it: real files, exit codes, messages without tracebacks."""
+
+import json
+import shutil
+
+import cv2
+import pytest
+import yaml
+from helpers import OPENCV_LEFT, run_cli, shared
+
+BOARD = "chessboard:9x6:0.03"
+
+
+@pytest.fixture(scope="module")
+def board_folder(tmp_path_factory, air_views):
+    folder = tmp_path_factory.mktemp("board")
+    for i, image in enumerate(air_views[2]):
+        cv2.imwrite(str(folder / f"view{i:02d}.png"), image)
+    return folder
+
+
+def assert_clean_failure(result, code, phrase):
+    assert result.returncode == code, result.stderr
+    assert "Traceback" not in result.stderr
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.startswith("veg-area calibrate:") and phrase in last, result.stderr
+
+
+def test_calibrate_writes_yaml_json_and_report(board_folder, tmp_path):
+    out = tmp_path / "calib.yaml"
+    result = run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out), "--json",
+                     "--report", str(tmp_path / "report"), "--medium", "air", "--distance", "0.6")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    for key in ("rms_px", "max_residual_px", "views_used", "views_rejected", "fx", "fy", "cx", "cy", "dist", "std"):
+        assert key in summary
+    assert summary["views_used"] == 15 and summary["views_rejected"] == 0 and summary["rms_px"] < 0.1
+    assert set(summary["std"]) >= {"fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"}
+    assert len(summary["dist"]) == 5
+    assert "[15] view14.png: 54 board points" in result.stderr  # progress on stderr
+    saved = yaml.safe_load(out.read_text())
+    assert saved["veg_area_ros"]["medium"] == "air" and saved["veg_area_ros"]["calibration_distance_m"] == 0.6
+    assert saved["camera_matrix"]["data"][0] == pytest.approx(summary["fx"])
+    for name in ("residuals.png", "per_view.png", "coverage.png", "calibration.json"):
+        assert (tmp_path / "report" / name).stat().st_size > 1000
+
+
+def test_real_images_through_the_cli(tmp_path):
+    out = tmp_path / "left.yaml"
+    result = run_cli("calibrate", str(OPENCV_LEFT), "--board", "chessboard:9x6:1", "-o", str(out), "--json",
+                     "--no-outlier-rejection", "-q")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["rms_px"] <= 0.4087 * 1.01
+    assert result.stderr == ""
+
+
+def test_video_input(tmp_path, air_views):
+    video = tmp_path / "board.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (640, 480))
+    for image in air_views[2]:
+        writer.write(cv2.cvtColor(image, cv2.COLOR_GRAY2BGR))
+    writer.release()
+    result = run_cli("calibrate", str(video), "--board", BOARD, "-o", str(tmp_path / "c.yaml"), "--json")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["views_used"] == 15
+    assert "board.avi#14" in result.stderr
+
+
+def test_empty_folder(tmp_path):
+    (tmp_path / "empty").mkdir()
+    result = run_cli("calibrate", str(tmp_path / "empty"), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))
+    assert_clean_failure(result, 1, "folder holds no image or video files")
+
+
+def test_non_image_file(tmp_path):
+    (tmp_path / "notes.txt").write_text("not a picture")
+    result = run_cli("calibrate", str(tmp_path / "notes.txt"), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))
+    assert_clean_failure(result, 1, "no readable image")
+    assert "notes.txt: skipped, is neither an image nor a video" in result.stderr
+
+
+def test_images_without_a_board(tmp_path):
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / f"grey{i}.png"), (i * 40 + 50) * __import__("numpy").ones((480, 640), "uint8"))
+    result = run_cli("calibrate", str(tmp_path), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))
+    assert_clean_failure(result, 1, "board found in any of 3 images")
+    assert not (tmp_path / "c.yaml").exists()
+
+
+def test_truncated_jpeg_is_skipped_and_alone_is_a_failure(tmp_path, board_folder):
+    good = cv2.imencode(".jpg", cv2.imread(str(board_folder / "view00.png")))[1].tobytes()
+    (tmp_path / "cut.jpg").write_bytes(good[: len(good) // 2])
+    result = run_cli("calibrate", str(tmp_path / "cut.jpg"), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))
+    assert_clean_failure(result, 1, "no readable image")
+    assert "cut.jpg: skipped, is a truncated JPEG" in result.stderr
+    mixed = tmp_path / "mixed"
+    shutil.copytree(board_folder, mixed)
+    shutil.copy(tmp_path / "cut.jpg", mixed / "cut.jpg")
+    result = run_cli("calibrate", str(mixed), "--board", BOARD, "-o", str(tmp_path / "c.yaml"), "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["unreadable"] == ["cut.jpg"] and summary["views_used"] == 15
+
+
+def test_corrupt_existing_output_is_not_overwritten(tmp_path, board_folder):
+    out = tmp_path / "c.yaml"
+    out.write_text("camera_matrix: [oops\n")
+    result = run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out))
+    assert_clean_failure(result, 3, "not a readable calibration")
+    assert out.read_text() == "camera_matrix: [oops\n"
+
+
+def test_a_better_calibration_is_never_silently_replaced(tmp_path, board_folder):
+    out = tmp_path / "c.yaml"
+    assert run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out), "-q").returncode == 0
+    saved = yaml.safe_load(out.read_text())
+    saved["veg_area_ros"]["rms_px"] = 0.001  # pretend the file holds a far better fit
+    out.write_text(yaml.safe_dump(saved))
+    before = out.read_text()
+    result = run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out), "-q")
+    assert_clean_failure(result, 3, "holds a better calibration")
+    assert out.read_text() == before
+    forced = run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out), "-q", "--force")
+    assert forced.returncode == 0 and out.read_text() != before
+
+
+def test_bad_board_spec_is_a_usage_error(tmp_path, board_folder):
+    result = run_cli("calibrate", str(board_folder), "--board", "chessboard:9x6", "-o", str(tmp_path / "c.yaml"))
+    assert_clean_failure(result, 2, "should look like chessboard:COLSxROWS:SQUARE_M")
+
+
+def test_missing_input(tmp_path):
+    result = run_cli("calibrate", str(tmp_path / "nowhere"), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))
+    assert_clean_failure(result, 1, "no such file or folder")
+
+
+def test_charuco_video_from_a_real_webcam(tmp_path):
+    video = shared("charuco-video/cam_0.mp4")
+    result = run_cli("calibrate", str(video), "--board", "charuco:4x5:0.054:0.0405:DICT_4X4_1000",
+                     "-o", str(tmp_path / "c.yaml"), "--json", "--video-step", "1")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["views_used"] >= 40  # 46 of 48 frames detect once inverted
+    assert summary["rms_px"] < 1.0
