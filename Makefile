@@ -24,6 +24,7 @@ $(VENV)/.deps-installed: requirements.txt
 	touch $@
 
 $(VENV)/.package-installed: $(VENV)/.deps-installed $(SOURCES)
+	mkdir -p build
 	$(VENV)/bin/colcon --log-base build/log build --base-paths . --build-base build \
 	    --install-base $(VENV) --merge-install >build/colcon.out 2>&1 \
 	    || { cat build/colcon.out; exit 1; }
