@@ -4,7 +4,7 @@
 SHELL := /bin/bash
 VENV := .venv
 PY := $(VENV)/bin/python
-SOURCES := $(shell find veg_area_ros config resource -type f -not -name '*.pyc') setup.py setup.cfg package.xml
+SOURCES := $(shell find veg_area_ros resource -type f -not -name "*.pyc") $(wildcard config/*) setup.py setup.cfg package.xml
 
 .PHONY: demo test install lint bench clean
 

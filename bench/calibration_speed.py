@@ -17,9 +17,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from veg_area_ros.board import BoardSpec  # noqa: E402
-from veg_area_ros.calibration import View, calibrate  # noqa: E402
-from veg_area_ros.synthetic import ENDOSCOPE, board_views, render_board_views  # noqa: E402
+from veg_area_ros.board import BoardSpec
+from veg_area_ros.calibration import View, calibrate
+from veg_area_ros.synthetic import ENDOSCOPE, board_views, render_board_views
 
 
 def median_seconds(function, repeats: int) -> float:
