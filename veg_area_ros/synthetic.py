@@ -198,3 +198,58 @@ def render_board_views(
         image += rng.normal(0.0, noise_sigma, image.shape).astype(np.float32)
         images.append(np.clip(np.rint(image), 0, 255).astype(np.uint8))
     return images
+
+
+# --- measurement scenes: a target frame of ArUco markers in the object's plane, and an object --------------
+CUBE_SIDE_M = 0.1027  # the paper's cube: face area 0.01055 m²
+SCENE_MARKERS = {0: (-0.22, -0.16), 1: (0.22, -0.16), 2: (0.22, 0.16), 3: (-0.22, 0.16)}
+SCENE_DICTIONARY = "DICT_4X4_50"
+
+
+@dataclass(frozen=True)
+class Scene:
+    texture: np.ndarray  # grey, covering `extent` of the object plane
+    extent: tuple[float, float, float, float]
+    true_area_m2: float
+    markers: dict[int, tuple[float, float]]
+    dictionary: str = SCENE_DICTIONARY
+
+
+def _coverage_1d(n: int, start: float, stop: float) -> np.ndarray:
+    """Fraction of each unit texel [i, i+1] inside [start, stop] (texel units)."""
+    edges = np.arange(n + 1, dtype=float)
+    return np.clip(np.minimum(edges[1:], stop) - np.maximum(edges[:-1], start), 0.0, 1.0)
+
+
+def cube_scene(side: float = CUBE_SIDE_M, marker_size: float = 0.05, pixels_per_metre: float = 2000.0,
+               background: int = 200, object_level: int = 40) -> Scene:
+    """A dark square cube face of exactly `side` metres centred between four ArUco markers on a bright
+    board; texels on the face's edge carry their exact coverage, so the true area is side² to rounding."""
+    x0, y0, x1, y1 = -0.3, -0.225, 0.3, 0.225
+    width, height = round((x1 - x0) * pixels_per_metre), round((y1 - y0) * pixels_per_metre)
+    cover_x = _coverage_1d(width, (-side / 2 - x0) * pixels_per_metre, (side / 2 - x0) * pixels_per_metre)
+    cover_y = _coverage_1d(height, (-side / 2 - y0) * pixels_per_metre, (side / 2 - y0) * pixels_per_metre)
+    texture = background + (object_level - background) * np.outer(cover_y, cover_x)
+    texture = np.rint(texture).astype(np.uint8)
+    dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, SCENE_DICTIONARY))
+    size = round(marker_size * pixels_per_metre)
+    for marker_id, (mx, my) in SCENE_MARKERS.items():
+        image = cv2.aruco.generateImageMarker(dictionary, marker_id, size)
+        left = round((mx - x0) * pixels_per_metre - size / 2)
+        top = round((my - y0) * pixels_per_metre - size / 2)
+        quiet = size // 4
+        texture[top - quiet: top + size + quiet, left - quiet: left + size + quiet] = 255
+        texture[top: top + size, left: left + size] = image
+    return Scene(texture, (x0, y0, x1, y1), side * side, dict(SCENE_MARKERS))
+
+
+def render_scene(camera: BrownCamera, scene: Scene, distance: float = 0.7, port: FlatPort | None = None,
+                 tilt_deg: float = 0.0, roll_deg: float = 4.0, noise_sigma: float = 1.0, seed: int = 0) -> np.ndarray:
+    """The scene plane facing the camera at `distance`, tilted about its vertical axis by `tilt_deg` and
+    rolled a little by default: edges exactly along pixel rows would make every edge pixel err the same way,
+    which real scenes do not do. BGR."""
+    rvec, tvec = look_at_pose(distance, tilt_y_deg=tilt_deg, roll_deg=roll_deg)
+    image = render_plane(camera, scene.texture, scene.extent, rvec, tvec, port, background=60).astype(np.float32)
+    image += np.random.default_rng(seed).normal(0, noise_sigma, image.shape).astype(np.float32)
+    grey = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+    return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)

@@ -1,0 +1,214 @@
+"""Scale from targets in the object's plane: metres per pixel (two targets, the paper's calliper distance),
+an affine map (three) or a plane homography (four or more, exact for a plane not quite perpendicular to the
+camera). Targets are ArUco markers (their centre) or points picked by hand, listed in a targets file:
+
+    dictionary: DICT_4X4_50
+    markers:            # marker id: centre [x, y] in the object plane, metres
+      0: [-0.22, -0.16]
+      1: [0.22, -0.16]
+    points:             # optional hand-picked targets: raw-frame pixel and plane position
+      - {pixel: [u, v], plane: [x, y]}
+    distance_std_m: 0.0005      # calliper uncertainty of target distances (default 0.5 mm)
+    pixel_std: 0.1              # localisation uncertainty of a target centre, px (default 0.1)
+
+No ROS here. All pixel coordinates handed to a PlaneScale are in the idealized image.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+
+class TargetsError(ValueError):
+    """A targets file or a frame's targets that cannot give a scale; the message says why."""
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML keeps the last of duplicate keys silently; a duplicate marker id must be an error."""
+
+
+def _construct_unique_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
+    keys = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in keys:
+            raise TargetsError(f"duplicate key {key!r} at line {key_node.start_mark.line + 1}")
+        keys.add(key)
+    return yaml.SafeLoader.construct_mapping(loader, node, deep)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_unique_mapping)
+
+
+def _pair(value, what: str) -> np.ndarray:
+    try:
+        pair = np.array(value, dtype=float).ravel()
+    except (TypeError, ValueError) as exc:
+        raise TargetsError(f"{what} must be two numbers, got {value!r}") from exc
+    if pair.size != 2 or not np.all(np.isfinite(pair)):
+        raise TargetsError(f"{what} must be two finite numbers, got {value!r}")
+    return pair
+
+
+@dataclass
+class TargetsSpec:
+    dictionary: str = ""
+    markers: dict[int, np.ndarray] = field(default_factory=dict)  # id -> plane (x, y), metres
+    points: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)  # (raw pixel, plane)
+    distance_std_m: float = 0.0005
+    pixel_std: float = 0.1
+
+    @classmethod
+    def load(cls, path: str | Path) -> TargetsSpec:
+        path = Path(path)
+        try:
+            content = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
+        except TargetsError as exc:
+            raise TargetsError(f"{path}: {exc}") from exc
+        except FileNotFoundError as exc:
+            raise TargetsError(f"{path}: no such targets file") from exc
+        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+            raise TargetsError(f"{path}: not a readable YAML targets file ({exc.__class__.__name__})") from exc
+        try:
+            return cls.from_dict(content)
+        except TargetsError as exc:
+            raise TargetsError(f"{path}: {exc}") from exc
+
+    @classmethod
+    def from_dict(cls, content) -> TargetsSpec:
+        if not isinstance(content, dict):
+            raise TargetsError("expected a mapping with 'markers' and/or 'points'")
+        spec = cls(dictionary=str(content.get("dictionary", "")).upper())
+        markers = content.get("markers") or {}
+        if not isinstance(markers, dict):
+            raise TargetsError("'markers' must map marker ids to [x, y]")
+        for marker_id, plane in markers.items():
+            if not isinstance(marker_id, int) or isinstance(marker_id, bool) or marker_id < 0:
+                raise TargetsError(f"marker id {marker_id!r} is not a non-negative integer")
+            spec.markers[marker_id] = _pair(plane, f"marker {marker_id}")
+        if spec.markers and not (spec.dictionary.startswith("DICT_") and hasattr(cv2.aruco, spec.dictionary)):
+            raise TargetsError(f"unknown or missing ArUco dictionary {content.get('dictionary')!r}")
+        for k, entry in enumerate(content.get("points") or []):
+            if not isinstance(entry, dict) or "pixel" not in entry or "plane" not in entry:
+                raise TargetsError(f"point {k} needs 'pixel' and 'plane'")
+            spec.points.append((_pair(entry["pixel"], f"point {k} pixel"), _pair(entry["plane"], f"point {k} plane")))
+        for key in ("distance_std_m", "pixel_std"):
+            if key in content:
+                value = content[key]
+                if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
+                    raise TargetsError(f"'{key}' must be a non-negative number, got {value!r}")
+                setattr(spec, key, float(value))
+        planes = [tuple(p) for p in spec.markers.values()] + [tuple(p) for _, p in spec.points]
+        if len(planes) < 2:
+            raise TargetsError(f"{len(planes)} target(s) given; at least 2 are needed for a scale")
+        if len(set(planes)) != len(planes):
+            raise TargetsError("two targets share the same plane position")
+        return spec
+
+
+@dataclass(frozen=True)
+class DetectedMarker:
+    centre: np.ndarray  # (2,) px, the projective centre (intersection of the diagonals)
+    corners: np.ndarray  # (4, 2) px
+
+
+def marker_centre(corners: np.ndarray) -> np.ndarray:
+    """Intersection of the marker's diagonals: the image of its centre under any perspective."""
+    p0, p1, p2, p3 = np.asarray(corners, float).reshape(4, 2)
+    d1, d2 = p2 - p0, p3 - p1
+    denom = d1[0] * d2[1] - d1[1] * d2[0]
+    if abs(denom) < 1e-12:
+        return (p0 + p1 + p2 + p3) / 4
+    s = ((p1[0] - p0[0]) * d2[1] - (p1[1] - p0[1]) * d2[0]) / denom
+    return p0 + s * d1
+
+
+def detect_markers(image: np.ndarray, dictionary: str) -> dict[int, DetectedMarker]:
+    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    parameters = cv2.aruco.DetectorParameters()
+    parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)), parameters)
+    corners, ids, _ = detector.detectMarkers(grey)
+    found: dict[int, DetectedMarker] = {}
+    if ids is None:
+        return found
+    for marker_corners, marker_id in zip(corners, ids.ravel(), strict=True):
+        c = marker_corners.reshape(4, 2).astype(np.float64)
+        found[int(marker_id)] = DetectedMarker(marker_centre(c), c)
+    return found
+
+
+@dataclass
+class PlaneScale:
+    """Pixel (idealized image) -> object plane (metres), and the metric area of every pixel."""
+
+    kind: str  # "distance", "affine" or "homography"
+    pixels: np.ndarray  # (N, 2) the targets used
+    planes: np.ndarray  # (N, 2)
+    matrix: np.ndarray  # 3x3 pixel -> plane (similarity, affine or homography)
+    metres_per_pixel: float  # at the centre of the targets
+    distance_std_m: float = 0.0005
+    pixel_std: float = 0.1
+
+    @classmethod
+    def fit(cls, pixels: np.ndarray, planes: np.ndarray, distance_std_m: float = 0.0005,
+            pixel_std: float = 0.1) -> PlaneScale:
+        pixels = np.asarray(pixels, float).reshape(-1, 2)
+        planes = np.asarray(planes, float).reshape(-1, 2)
+        n = len(pixels)
+        if n < 2:
+            raise TargetsError(f"{n} target(s) found; at least 2 are needed for a scale")
+        if n == 2:
+            pixel_length = np.linalg.norm(pixels[1] - pixels[0])
+            plane_length = np.linalg.norm(planes[1] - planes[0])
+            if pixel_length < 1.0:
+                raise TargetsError("the two targets are less than a pixel apart")
+            s = plane_length / pixel_length
+            matrix = np.array([[s, 0, 0], [0, s, 0], [0, 0, 1.0]])  # area only: orientation does not matter
+            kind = "distance"
+        elif n == 3:
+            matrix = np.vstack([cv2.getAffineTransform(pixels.astype(np.float32), planes.astype(np.float32)),
+                                [0, 0, 1]]).astype(float)
+            kind = "affine"
+        else:
+            matrix, _ = cv2.findHomography(pixels, planes, 0)
+            if matrix is None:
+                raise TargetsError("the targets are degenerate (collinear?); no homography")
+            kind = "homography"
+        if kind != "distance" and abs(np.linalg.det(matrix[:2, :2])) < 1e-18:
+            raise TargetsError("the targets are collinear; they do not span the plane")
+        scale = cls(kind, pixels, planes, matrix, 0.0, distance_std_m, pixel_std)
+        scale.metres_per_pixel = float(np.sqrt(scale.pixel_area(pixels.mean(axis=0, keepdims=True))[0]))
+        return scale
+
+    def pixel_area(self, uv: np.ndarray) -> np.ndarray:
+        """Metric area (m²) of the unit pixel at each (u, v): |det| of the map's Jacobian there."""
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        H = self.matrix
+        w = H[2, 0] * uv[:, 0] + H[2, 1] * uv[:, 1] + H[2, 2]
+        return np.abs(np.linalg.det(H)) / np.abs(w) ** 3
+
+    def area(self, uv: np.ndarray) -> float:
+        """Σ of the metric areas of the given pixel centres."""
+        return float(self.pixel_area(uv).sum()) if len(uv) else 0.0
+
+    def relative_area_std(self, rng: np.random.Generator, uv_sample: np.ndarray, samples: int = 200) -> float:
+        """Relative standard deviation of an area from the targets' localisation (pixel_std) and the measured
+        distances between them (distance_std_m), by Monte Carlo over the fit."""
+        if len(uv_sample) == 0:
+            return 0.0
+        base = self.area(uv_sample)
+        areas = []
+        for _ in range(samples):
+            pixels = self.pixels + rng.normal(0, self.pixel_std, self.pixels.shape)
+            planes = self.planes + rng.normal(0, self.distance_std_m / np.sqrt(2), self.planes.shape)
+            try:
+                areas.append(PlaneScale.fit(pixels, planes).area(uv_sample))
+            except TargetsError:
+                continue
+        return float(np.std(areas) / base) if areas and base > 0 else float("inf")
