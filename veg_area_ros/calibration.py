@@ -28,6 +28,7 @@ RECOMMENDED_VIEWS = 12
 CORRELATION_WARNING = 0.95
 ROTATION_WARNING_DEG = 45.0
 RADIAL = {"k1", "k2", "k3"}
+MAX_REJECTION_ROUNDS = 5
 
 
 class CalibrationError(RuntimeError):
@@ -218,12 +219,13 @@ def calibrate(
     if len(views) < MIN_VIEWS:
         raise CalibrationError(f"{len(views)} usable views; at least {MIN_VIEWS} are needed "
                                f"({RECOMMENDED_VIEWS}+ recommended)")
-    object_points = [v.detection.object_points.astype(np.float32) for v in views]
-    image_points = [v.detection.image_points.astype(np.float32) for v in views]
+    object_points = [v.detection.object_points.astype(np.float64) for v in views]
+    image_points = [v.detection.image_points.astype(np.float64) for v in views]
     say(f"initial estimate (OpenCV) from {len(views)} views")
     try:
         opencv_rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
-            object_points, image_points, (width, height), None, None)
+            [p.astype(np.float32) for p in object_points], [p.astype(np.float32) for p in image_points],
+            (width, height), None, None)
     except cv2.error as exc:
         raise CalibrationError(f"OpenCV could not initialise the calibration: {exc.err}") from exc
     if not np.isfinite(opencv_rms):
@@ -232,37 +234,40 @@ def calibrate(
     x = np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], dist]
                        + [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs, strict=True)])
 
+    def pose_of(v: int) -> slice:
+        return slice(N_INTRINSIC + 6 * v, N_INTRINSIC + 6 * v + 6)
+
     keep = [np.ones(len(p), bool) for p in object_points]
     rejected_views: dict[str, str] = {}
     active = list(range(len(views)))
     iterations = 0
-    for round_ in range(6):
-        obj = [object_points[v][keep[v]].astype(np.float64) for v in active]
-        img = [image_points[v][keep[v]].astype(np.float64) for v in active]
-        problem = _Problem(obj, img)
-        x_active = np.concatenate([x[:N_INTRINSIC]] + [x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6]
-                                                       for v in active])
-        say(f"bundle adjustment round {round_ + 1}: {len(active)} views, {sum(map(len, obj))} points")
+
+    def refine() -> np.ndarray:
+        """Joint least squares over the active views' kept points; updates x, returns the residuals."""
+        nonlocal iterations
+        problem = _Problem([object_points[v][keep[v]] for v in active], [image_points[v][keep[v]] for v in active])
+        x_active = np.concatenate([x[:N_INTRINSIC]] + [x[pose_of(v)] for v in active])
+        say(f"bundle adjustment: {len(active)} views, {problem.shape[0] // 2} points")
         fit = least_squares(problem.residuals, x_active, jac=problem.jacobian, method="trf", x_scale="jac",
                             loss=robust_loss, f_scale=1.0, tr_solver="lsmr", ftol=1e-12, xtol=1e-12,
                             gtol=1e-12, max_nfev=200)
         iterations += fit.nfev
         x[:N_INTRINSIC] = fit.x[:N_INTRINSIC]
         for k, v in enumerate(active):
-            x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6] = fit.x[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6]
-        if outlier_sigma is None:
-            break
+            x[pose_of(v)] = fit.x[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6]
+        return fit.fun
+
+    residuals = refine()
+    for _ in range(MAX_REJECTION_ROUNDS if outlier_sigma is not None else 0):
         # robust scale of the inlier residuals; then every point of every active view is judged afresh
         # against the new fit, so points condemned by an earlier, bent fit come back
-        inlier_err = np.hypot(*fit.fun.reshape(-1, 2).T)
+        inlier_err = np.hypot(*residuals.reshape(-1, 2).T)
         robust_sigma = 1.4826 * np.median(inlier_err) / np.sqrt(np.log(4))  # Rayleigh median -> per-axis sigma
         limit = max(outlier_sigma * robust_sigma * np.sqrt(2), 0.05)
         changed = False
         for v in list(active):
-            pose = x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6]
-            uv, _ = _project_with_jacobian(x[:N_INTRINSIC], pose, object_points[v].astype(np.float64))
-            err = np.hypot(*(uv.reshape(-1, 2) - image_points[v]).T)
-            new_keep = err <= limit
+            uv, _ = _project_with_jacobian(x[:N_INTRINSIC], x[pose_of(v)], object_points[v])
+            new_keep = np.hypot(*(uv.reshape(-1, 2) - image_points[v]).T) <= limit
             if not np.array_equal(new_keep, keep[v]):
                 keep[v] = new_keep
                 changed = True
@@ -270,17 +275,16 @@ def calibrate(
                 active.remove(v)
                 rejected_views[views[v].name] = (f"more than half of its points are outliers "
                                                  f"(residual > {limit:.2f} px)")
-                changed = True
         if len(active) < MIN_VIEWS:
             raise CalibrationError(f"only {len(active)} views left after rejecting outliers")
         if not changed:
             break
+        residuals = refine()  # the reported solution is always fitted to the final set of points
 
     # final solution over the kept points; covariance from the Jacobian there
-    obj = [object_points[v][keep[v]].astype(np.float64) for v in active]
-    img = [image_points[v][keep[v]].astype(np.float64) for v in active]
-    problem = _Problem(obj, img)
-    x_final = np.concatenate([x[:N_INTRINSIC]] + [x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6] for v in active])
+    obj = [object_points[v][keep[v]] for v in active]
+    problem = _Problem(obj, [image_points[v][keep[v]] for v in active])
+    x_final = np.concatenate([x[:N_INTRINSIC]] + [x[pose_of(v)] for v in active])
     residuals = problem.residuals(x_final)
     J = problem.jacobian(x_final).toarray()
     dof = len(residuals) - len(x_final)
