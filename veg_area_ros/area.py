@@ -65,9 +65,7 @@ class AreaMeasurer:
         """Hand-picked raw-frame pixels -> the idealized image."""
         if self.camera is None or len(raw_pixels) == 0:
             return raw_pixels
-        xy = self.camera.pixels_to_normalized(raw_pixels)
-        ideal = self.camera.ideal()
-        return np.column_stack([ideal.xp + ideal.fx * xy[:, 0], ideal.yp + ideal.fy * xy[:, 1]])
+        return self.camera.ideal().normalized_to_pixels(self.camera.pixels_to_normalized(raw_pixels))
 
     def measure(self, frame: np.ndarray) -> AreaResult:
         image = self.idealizer(frame) if self.idealizer is not None else frame
@@ -101,20 +99,22 @@ class AreaMeasurer:
         band = self.classifier.index_image(image)
         threshold = self.classifier.resolve_threshold(band, roi)
 
-        def area_at(level: float) -> tuple[float, np.ndarray]:
-            mask = self.classifier.mask(band, roi, level)
-            v, u = np.nonzero(mask)
-            return scale.area(np.column_stack([u, v])), mask
+        areas: dict[float, float] = {}  # the sweep, T and T ± delta share levels: classify each once
 
-        area, mask = area_at(threshold)
-        delta = self.threshold_delta
-        sweep = [(level, area_at(level)[0]) for level in threshold + delta * np.arange(-3, 4)
-                 if 0 <= level <= 255]
-        below = area_at(max(threshold - delta, 0))[0]
-        above = area_at(min(threshold + delta, 255))[0]
-        threshold_std = abs(above - below) / 2
+        def area_at(level: float) -> float:
+            level = float(level)
+            if level not in areas:
+                v, u = np.nonzero(self.classifier.mask(band, roi, level))
+                areas[level] = scale.area(np.column_stack([u, v]))
+            return areas[level]
+
+        mask = self.classifier.mask(band, roi, threshold)
         v, u = np.nonzero(mask)
         sample = np.column_stack([u, v])
+        area = areas[float(threshold)] = scale.area(sample)
+        delta = self.threshold_delta
+        sweep = [(level, area_at(level)) for level in threshold + delta * np.arange(-3, 4) if 0 <= level <= 255]
+        threshold_std = abs(area_at(min(threshold + delta, 255)) - area_at(max(threshold - delta, 0))) / 2
         if len(sample) > 2000:
             sample = sample[self._rng.choice(len(sample), 2000, replace=False)]
         scale_std = area * scale.relative_area_std(self._rng, sample)
