@@ -1,6 +1,7 @@
 """`veg-area`: the command line for researchers without ROS. Same core as the nodes.
 
     veg-area calibrate IMAGES_OR_DIR_OR_VIDEO... --board SPEC -o calib.yaml [--json] [--report DIR]
+    veg-area measure IMAGE_OR_DIR_OR_VIDEO... --calibration calib.yaml|none --targets targets.yaml [--json]
     veg-area demo
 
 Exit codes: 0 success, 1 failed (with a one-line reason on stderr), 2 usage error, 3 refused to replace a
@@ -156,6 +157,153 @@ def _format_calibration(result, output: Path) -> str:
     return "\n".join(lines)
 
 
+def _threshold(text: str) -> float | str:
+    if text.lower() == "otsu":
+        return "otsu"
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (math.isfinite(value) and 0 <= value <= 255):
+        raise argparse.ArgumentTypeError(f"must be a number from 0 to 255 or 'otsu', got {text!r}")
+    return value
+
+
+def _roi(text: str):
+    import numpy as np
+
+    try:
+        values = [float(v) for v in text.replace(" ", "").split(",") if v]
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"expected x1,y1,x2,y2,x3,y3,... in pixels, got {text!r}") from exc
+    if len(values) % 2 or len(values) < 6 or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"needs at least 3 x,y corner pairs, got {text!r}")
+    polygon = np.array(values).reshape(-1, 2)
+    x, y = polygon.T
+    if abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1))) / 2 < 1.0:
+        raise argparse.ArgumentTypeError(f"the region {text!r} is empty: its corners enclose no area")
+    return polygon
+
+
+def _frame_file_name(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(name).stem if c) + ".png"
+
+
+CSV_COLUMNS = ("frame", "time_s", "area_m2", "area_std_m2", "pixel_count", "threshold", "scale_m_per_px",
+               "scale_kind", "calibrated", "missing_targets", "error")
+
+
+def cmd_measure(args: argparse.Namespace) -> int:
+    import cv2
+
+    from .area import AreaMeasurer, draw_overlay
+    from .calib_io import CalibrationFileError, read_calibration, write_calibration
+    from .classify import Classifier, ClassifyError
+    from .frames import IMAGE_SUFFIXES, VIDEO_SUFFIXES, InputError, expand_inputs, iter_frames, video_frame_count
+    from .idealize import FrameSizeError
+    from .scale import TargetsError, TargetsSpec
+
+    say = _progress(args.quiet)
+    if args.video_step < 1:
+        raise CliError("--video-step must be 1 or more", 2)
+    camera = None
+    if args.calibration.lower() != "none":
+        try:
+            camera = read_calibration(args.calibration).camera
+        except CalibrationFileError as exc:
+            raise CliError(str(exc)) from exc
+    try:
+        targets = TargetsSpec.load(args.targets)
+        classifier = Classifier(threshold=args.threshold, object=args.object, channel=args.channel,
+                                open_px=args.open, close_px=args.close)
+    except TargetsError as exc:
+        raise CliError(str(exc)) from exc
+    except ClassifyError as exc:
+        raise CliError(str(exc), 2) from exc
+    try:
+        files = expand_inputs(args.inputs)
+    except InputError as exc:
+        raise CliError(str(exc)) from exc
+    videos = [f for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
+    total = sum(video_frame_count(v) // args.video_step for v in videos) + len(files) - len(videos)
+    csv_path = Path(args.csv) if args.csv else (Path(f"{videos[0].stem}_area.csv") if videos else None)
+    single_overlay = args.overlay and Path(args.overlay).suffix.lower() in IMAGE_SUFFIXES
+    if single_overlay and total > 1:
+        raise CliError(f"--overlay {args.overlay} names one image but the input has {total} frames; "
+                       "give a folder", 2)
+
+    measurer = AreaMeasurer(camera, targets, classifier, roi=args.roi, threshold_delta=args.sweep_step)
+    if args.idealized and camera is not None:
+        folder = Path(args.idealized)
+        write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
+                          {"idealized_from": str(Path(args.calibration).resolve())})
+    rows: list[dict] = []
+    measured = 0
+    for index, frame in enumerate(iter_frames(files, args.video_step), 1):
+        row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
+        try:
+            if frame.image is None:
+                raise InputError(f"skipped: {frame.problem}")
+            result = measurer.measure(frame.image)
+        except (InputError, FrameSizeError, TargetsError, ClassifyError) as exc:
+            row["error"] = str(exc)
+            say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
+        else:
+            measured += 1
+            summary = result.summary()
+            row.update(summary)
+            if result.missing_targets:
+                say(f"[{index}/{total}] {frame.name}: targets not found: markers {result.missing_targets}")
+            if not args.json or index % 25 == 0 or index == total:
+                line = (f"[{index}/{total}] {frame.name}: Af = {result.area_m2:.6g} ± {result.area_std_m2:.2g} m² "
+                        f"({result.pixel_count} px, threshold {result.threshold:g}, {result.scale.kind} scale"
+                        f"{'' if result.calibrated else ', UNCALIBRATED'})")
+                print(line, file=sys.stderr if args.json else sys.stdout, flush=True)
+            if args.overlay:
+                target = Path(args.overlay) if single_overlay else Path(args.overlay) / _frame_file_name(frame.name)
+                target.parent.mkdir(parents=True, exist_ok=True)
+                cv2.imwrite(str(target), draw_overlay(result))
+            if args.idealized and camera is not None:
+                cv2.imwrite(str(Path(args.idealized) / _frame_file_name(frame.name)), result.image)
+        if args.json:
+            print(json.dumps({k: v for k, v in row.items() if k != "error" or v}), flush=True)
+        rows.append(row)
+
+    if csv_path is not None:
+        _write_area_csv(csv_path, rows)
+        say(f"time series: {csv_path}")
+        if len(rows) > 1:
+            from .report import plot_area_series
+
+            nan = float("nan")
+            timed = all(r["time_s"] is not None for r in rows)
+            plot = plot_area_series([r["time_s"] if timed else k for k, r in enumerate(rows)],
+                                    [r.get("area_m2", nan) for r in rows], [r.get("area_std_m2", nan) for r in rows],
+                                    csv_path.with_suffix(".png"), title=f"Projected area, {csv_path.stem}",
+                                    time_label="time [s]" if timed else "frame")
+            say(f"plot: {plot}")
+    if measured == 0:
+        reasons = sorted({r["error"] for r in rows})
+        raise CliError(f"no frame measured: {'; '.join(reasons)[:500]}")
+    if measured < len(rows):
+        say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
+    return 0
+
+
+def _write_area_csv(path: Path, rows: list[dict]) -> None:
+    import csv
+    import io
+
+    from .calib_io import write_atomic
+
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, CSV_COLUMNS, extrasaction="ignore")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({**row, "missing_targets": " ".join(map(str, row.get("missing_targets", [])))})
+    write_atomic(path, buffer.getvalue())
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
     from .demo import run_demo
 
@@ -188,6 +336,31 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--force", action="store_true", help="replace the output even if it holds a better fit")
     cal.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     cal.set_defaults(func=cmd_calibrate)
+
+    mea = sub.add_parser("measure", help="projected area Af of an object in images, folders or videos")
+    mea.add_argument("inputs", nargs="+", help="images, folders of images, videos")
+    mea.add_argument("--calibration", required=True,
+                     help="camera_info YAML from 'veg-area calibrate', or 'none' to measure the raw image")
+    mea.add_argument("--targets", required=True, help="targets YAML: ArUco marker ids or hand-picked points")
+    mea.add_argument("--threshold", type=_threshold, default="otsu", help="0..255 or 'otsu' (default)")
+    mea.add_argument("--object", default="dark", choices=["dark", "bright", "green"],
+                     help="object darker/brighter than the background, or greener (excess-green index)")
+    mea.add_argument("--channel", default="grey", choices=["grey", "blue", "green", "red"],
+                     help="band the threshold acts on (dark/bright)")
+    mea.add_argument("--roi", type=_roi, default=None, metavar="x1,y1,x2,y2,...",
+                     help="region of interest, polygon in idealized-image pixels (default: inside the targets)")
+    mea.add_argument("--open", type=int, default=0, metavar="PX", help="morphological opening radius")
+    mea.add_argument("--close", type=int, default=0, metavar="PX", help="morphological closing radius")
+    mea.add_argument("--sweep-step", type=_positive_float, default=5.0,
+                     help="threshold step of the sweep and of the threshold uncertainty (grey levels)")
+    mea.add_argument("--json", action="store_true", help="one JSON object per frame on stdout")
+    mea.add_argument("--overlay", metavar="PNG_OR_DIR", help="draw mask, ROI and targets (a file, or a folder)")
+    mea.add_argument("--csv", metavar="FILE", help="time series CSV (+ PNG plot beside it); "
+                     "default for a video: VIDEO_area.csv here")
+    mea.add_argument("--idealized", metavar="DIR", help="write the idealized frames and their camera here")
+    mea.add_argument("--video-step", type=int, default=1, help="measure every Nth video frame")
+    mea.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    mea.set_defaults(func=cmd_measure)
 
     demo = sub.add_parser("demo", help="the built-in default: calibrate a synthetic underwater endoscope")
     demo.add_argument("--output", default="veg_area_demo", help="folder for the calibration and report")

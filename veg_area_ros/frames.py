@@ -25,6 +25,7 @@ class Frame:
     name: str  # file name, or "video.mp4#123" for frame 123 of a video
     image: np.ndarray | None  # None where the frame could not be read
     problem: str = ""  # why image is None
+    time_s: float | None = None  # position in a video, seconds
 
 
 def read_image(path: Path) -> tuple[np.ndarray | None, str]:
@@ -74,6 +75,7 @@ def iter_video(path: Path, step: int = 1) -> Iterator[Frame]:
     if not capture.isOpened():
         yield Frame(path.name, None, "is not a video OpenCV can open")
         return
+    fps = capture.get(cv2.CAP_PROP_FPS)
     try:
         index = 0
         while True:
@@ -81,7 +83,7 @@ def iter_video(path: Path, step: int = 1) -> Iterator[Frame]:
                 ok, image = capture.read()
                 if not ok:
                     break
-                yield Frame(f"{path.name}#{index}", image)
+                yield Frame(f"{path.name}#{index}", image, time_s=index / fps if fps > 0 else None)
             elif not capture.grab():
                 break
             index += 1

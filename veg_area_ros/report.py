@@ -80,3 +80,28 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path) -> l
     written.append(folder / "calibration.json")
     written[-1].write_text(json.dumps(result.summary(), indent=2))
     return written
+
+
+def plot_area_series(times: list[float], areas: list[float], stds: list[float], path: str | Path,
+                     title: str = "Projected area", time_label: str = "time [s]") -> Path:
+    """Af(t) with its ±1 standard deviation band (PNG); NaN areas (frames that failed) leave gaps."""
+    plt = _pyplot()
+    t = np.asarray(times, float)
+    a = np.asarray(areas, float) * 1e4
+    s = np.asarray(stds, float) * 1e4
+    fig, ax = plt.subplots(figsize=(9, 4))
+    ax.fill_between(t, a - s, a + s, color="tab:blue", alpha=0.25, label="±1 std")
+    ax.plot(t, a, ".-", color="tab:blue", markersize=3, lw=1, label="Af")
+    failed = np.isnan(a)
+    if failed.any():
+        ax.plot(t[failed], np.full(failed.sum(), np.nanmin(a) if (~failed).any() else 0), "rx",
+                label="not measured")
+    ax.set_xlabel(time_label)
+    ax.set_ylabel("Af [cm²]")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best")
+    path = Path(path)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path

@@ -110,6 +110,10 @@ class TargetsSpec:
             raise TargetsError("two targets share the same plane position")
         return spec
 
+    def all_planes(self) -> np.ndarray:
+        """Plane positions of every listed target, markers then points (N, 2)."""
+        return np.array([*self.markers.values(), *(plane for _, plane in self.points)], float).reshape(-1, 2)
+
 
 @dataclass(frozen=True)
 class DetectedMarker:
@@ -192,6 +196,11 @@ class PlaneScale:
         H = self.matrix
         w = H[2, 0] * uv[:, 0] + H[2, 1] * uv[:, 1] + H[2, 2]
         return np.abs(np.linalg.det(H)) / np.abs(w) ** 3
+
+    def plane_to_pixels(self, planes: np.ndarray) -> np.ndarray:
+        """Plane (x, y) metres -> idealized-image pixels (not for the 'distance' kind: it has no orientation)."""
+        planes = np.asarray(planes, float).reshape(-1, 1, 2)
+        return cv2.perspectiveTransform(planes, np.linalg.inv(self.matrix)).reshape(-1, 2)
 
     def area(self, uv: np.ndarray) -> float:
         """Σ of the metric areas of the given pixel centres."""

@@ -184,20 +184,40 @@ def board_views(
     return poses
 
 
+def degrade(image: np.ndarray, rng: np.random.Generator, noise_sigma: float = 1.0, blur_sigma_px: float = 0.0,
+            light_gradient: float = 0.0) -> np.ndarray:
+    """What a flume adds to a clean render: uneven light (brightness falling by `light_gradient` across the
+    image, diagonally, plus vignetting of the same strength), turbidity blur and sensor noise. uint8 out."""
+    out = image.astype(np.float32)
+    if light_gradient:
+        h, w = out.shape[:2]
+        y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+        ramp = 1 + light_gradient * (0.5 - (x / w + y / h) / 2)
+        vignette = 1 - light_gradient * (((x - w / 2) / w) ** 2 + ((y - h / 2) / h) ** 2)
+        out *= ramp * vignette
+    if blur_sigma_px:
+        out = cv2.GaussianBlur(out, (0, 0), blur_sigma_px)
+    out += rng.normal(0.0, noise_sigma, out.shape).astype(np.float32)
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
 def render_board_views(
     camera: BrownCamera, board: BoardSpec, poses: list[tuple[np.ndarray, np.ndarray]],
     port: FlatPort | None = None, noise_sigma: float = 1.0, rng: np.random.Generator | None = None,
+    blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3,
 ) -> list[np.ndarray]:
-    """Grey images of the board at each pose, with mild sensor noise."""
+    """Grey images of the board at each pose, with mild sensor noise (and flume degradation if asked)."""
     rng = rng or np.random.default_rng(0)
     pixels_per_metre = 40.0 / board.square  # 40 texels per square: finer than any camera pixel here
     texture = board.texture(pixels_per_metre)
-    images = []
-    for rvec, tvec in poses:
-        image = render_plane(camera, texture, board.extent(), rvec, tvec, port, background=110).astype(np.float32)
-        image += rng.normal(0.0, noise_sigma, image.shape).astype(np.float32)
-        images.append(np.clip(np.rint(image), 0, 255).astype(np.uint8))
-    return images
+    return [degrade(render_plane(camera, texture, board.extent(), rvec, tvec, port, background=110,
+                                 supersample=supersample), rng, noise_sigma, blur_sigma_px, light_gradient)
+            for rvec, tvec in poses]
+
+
+# a DSLR as in the paper (3872x2592) with an 18 mm-class lens: milder distortion than the endoscope
+DSLR = BrownCamera(3872, 2592, c=2450.0, xp=1941.0, yp=1290.5, aspect=1.0, k1=-0.09, k2=0.03, k3=0.0,
+                   p1=0.0003, p2=-0.0002)
 
 
 # --- measurement scenes: a target frame of ArUco markers in the object's plane, and an object --------------
@@ -221,16 +241,14 @@ def _coverage_1d(n: int, start: float, stop: float) -> np.ndarray:
     return np.clip(np.minimum(edges[1:], stop) - np.maximum(edges[:-1], start), 0.0, 1.0)
 
 
-def cube_scene(side: float = CUBE_SIDE_M, marker_size: float = 0.05, pixels_per_metre: float = 2000.0,
-               background: int = 200, object_level: int = 40) -> Scene:
-    """A dark square cube face of exactly `side` metres centred between four ArUco markers on a bright
-    board; texels on the face's edge carry their exact coverage, so the true area is side² to rounding."""
+def _compose_scene(coverage_fn, pixels_per_metre: float, marker_size: float, background: int,
+                   object_level: int) -> Scene:
+    """A bright board with the four ArUco markers and an object whose per-texel coverage (0..1) comes from
+    `coverage_fn(width, height, x0, y0)`; the true area is the coverage sum, so it is exact for the texture."""
     x0, y0, x1, y1 = -0.3, -0.225, 0.3, 0.225
     width, height = round((x1 - x0) * pixels_per_metre), round((y1 - y0) * pixels_per_metre)
-    cover_x = _coverage_1d(width, (-side / 2 - x0) * pixels_per_metre, (side / 2 - x0) * pixels_per_metre)
-    cover_y = _coverage_1d(height, (-side / 2 - y0) * pixels_per_metre, (side / 2 - y0) * pixels_per_metre)
-    texture = background + (object_level - background) * np.outer(cover_y, cover_x)
-    texture = np.rint(texture).astype(np.uint8)
+    coverage = coverage_fn(width, height, x0, y0)
+    texture = np.rint(background + (object_level - background) * coverage).astype(np.uint8)
     dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, SCENE_DICTIONARY))
     size = round(marker_size * pixels_per_metre)
     for marker_id, (mx, my) in SCENE_MARKERS.items():
@@ -240,16 +258,62 @@ def cube_scene(side: float = CUBE_SIDE_M, marker_size: float = 0.05, pixels_per_
         quiet = size // 4
         texture[top - quiet: top + size + quiet, left - quiet: left + size + quiet] = 255
         texture[top: top + size, left: left + size] = image
-    return Scene(texture, (x0, y0, x1, y1), side * side, dict(SCENE_MARKERS))
+    true_area = float(coverage.sum()) / pixels_per_metre**2
+    return Scene(texture, (x0, y0, x1, y1), true_area, dict(SCENE_MARKERS))
+
+
+def cube_scene(side: float = CUBE_SIDE_M, marker_size: float = 0.05, pixels_per_metre: float = 2000.0,
+               background: int = 200, object_level: int = 40) -> Scene:
+    """A dark square cube face of exactly `side` metres centred between four ArUco markers on a bright
+    board; texels on the face's edge carry their exact coverage, so the true area is side² to rounding."""
+    def coverage(width: int, height: int, x0: float, y0: float) -> np.ndarray:
+        cover_x = _coverage_1d(width, (-side / 2 - x0) * pixels_per_metre, (side / 2 - x0) * pixels_per_metre)
+        cover_y = _coverage_1d(height, (-side / 2 - y0) * pixels_per_metre, (side / 2 - y0) * pixels_per_metre)
+        return np.outer(cover_y, cover_x)
+
+    return _compose_scene(coverage, pixels_per_metre, marker_size, background, object_level)
+
+
+def bush_scene(seed: int = 7, marker_size: float = 0.05, pixels_per_metre: float = 2000.0, background: int = 200,
+               object_level: int = 40, oversample: int = 8) -> Scene:
+    """A bush-like silhouette: a stem, branches of 3-8 mm and elliptic leaves, about 0.2 m tall, drawn at
+    `oversample` x the texture resolution and averaged, so its true area is known to the texel."""
+    rng = np.random.default_rng(seed)
+
+    def coverage(width: int, height: int, x0: float, y0: float) -> np.ndarray:
+        k = pixels_per_metre * oversample
+        fine = np.zeros((height * oversample, width * oversample), np.uint8)
+
+        def px(x: float, y: float) -> tuple[int, int]:
+            return round((x - x0) * k), round((y - y0) * k)
+
+        def grow(x: float, y: float, angle: float, length: float, thick: float, depth: int) -> None:
+            x2, y2 = x + length * np.sin(angle), y - length * np.cos(angle)
+            cv2.line(fine, px(x, y), px(x2, y2), 255, max(1, round(thick * k)), cv2.LINE_8)
+            if depth == 0:
+                for _ in range(3):
+                    lx, ly = x2 + rng.normal(0, 0.006), y2 + rng.normal(0, 0.006)
+                    axes = (round(rng.uniform(0.008, 0.014) * k), round(rng.uniform(0.003, 0.006) * k))
+                    cv2.ellipse(fine, px(lx, ly), axes, float(rng.uniform(0, 180)), 0, 360, 255, -1)
+                return
+            for turn in (-1, 1):
+                grow(x2, y2, angle + turn * rng.uniform(0.3, 0.7), length * rng.uniform(0.6, 0.8),
+                     max(0.003, thick * 0.7), depth - 1)
+
+        grow(0.0, 0.11, rng.normal(0, 0.05), 0.07, 0.008, 3)
+        return cv2.resize(fine.astype(np.float32) / 255, (width, height), interpolation=cv2.INTER_AREA)
+
+    return _compose_scene(coverage, pixels_per_metre, marker_size, background, object_level)
 
 
 def render_scene(camera: BrownCamera, scene: Scene, distance: float = 0.7, port: FlatPort | None = None,
-                 tilt_deg: float = 0.0, roll_deg: float = 4.0, noise_sigma: float = 1.0, seed: int = 0) -> np.ndarray:
+                 tilt_deg: float = 0.0, roll_deg: float = 4.0, noise_sigma: float = 1.0, seed: int = 0,
+                 blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3) -> np.ndarray:
     """The scene plane facing the camera at `distance`, tilted about its vertical axis by `tilt_deg` and
     rolled a little by default: edges exactly along pixel rows would make every edge pixel err the same way,
     which real scenes do not do. BGR."""
     rvec, tvec = look_at_pose(distance, tilt_y_deg=tilt_deg, roll_deg=roll_deg)
-    image = render_plane(camera, scene.texture, scene.extent, rvec, tvec, port, background=60).astype(np.float32)
-    image += np.random.default_rng(seed).normal(0, noise_sigma, image.shape).astype(np.float32)
-    grey = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+    image = render_plane(camera, scene.texture, scene.extent, rvec, tvec, port, background=60,
+                         supersample=supersample)
+    grey = degrade(image, np.random.default_rng(seed), noise_sigma, blur_sigma_px, light_gradient)
     return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)

@@ -1,0 +1,134 @@
+"""`veg-area measure` (issue #3): images, videos, JSON, CSV, overlays, and bad input with a clear message."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from helpers import calibrated_endoscope, run_cli
+
+from veg_area_ros.calib_io import write_calibration
+from veg_area_ros.reproduction import run as reproduce
+from veg_area_ros.synthetic import ENDOSCOPE, SCENE_MARKERS, FlatPort, cube_scene, render_scene
+
+SCENE = cube_scene()
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory):
+    """A water calibration, a targets file as the issue writes it, and an underwater frame of the cube."""
+    folder = tmp_path_factory.mktemp("measure")
+    write_calibration(folder / "water.yaml", calibrated_endoscope("water"), "endoscope", {"medium": "water"})
+    lines = ["dictionary: DICT_4X4_50", "markers:            # marker id: centre [x, y], metres"]
+    lines += [f"  {k}: [{x}, {y}]" for k, (x, y) in SCENE_MARKERS.items()]
+    (folder / "targets.yaml").write_text("\n".join(lines) + "\n")
+    cv2.imwrite(str(folder / "cube.png"), render_scene(ENDOSCOPE, SCENE, 0.7, FlatPort()))
+    return folder
+
+
+def measure(workspace, *extra: str, image: str = "cube.png", calibration: str = "water.yaml"):
+    calibration = calibration if calibration == "none" else str(workspace / calibration)
+    return run_cli("measure", str(workspace / image), "--calibration", calibration,
+                   "--targets", str(workspace / "targets.yaml"), *extra, cwd=workspace)
+
+
+def test_one_image_json_calibrated_and_raw(workspace, tmp_path):
+    done = measure(workspace, "--threshold", "120", "--json", "--overlay", str(tmp_path / "overlay.png"),
+                   "--idealized", str(tmp_path / "ideal"))
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    for key in ("area_m2", "area_std_m2", "pixel_count", "scale_m_per_px", "homography", "threshold", "frame"):
+        assert key in result
+    assert result["calibrated"] is True and result["frame"] == "cube.png" and result["threshold"] == 120
+    assert abs(result["area_m2"] / SCENE.true_area_m2 - 1) <= 0.005
+    overlay = cv2.imread(str(tmp_path / "overlay.png"))
+    centre = overlay[230:250, 310:330].reshape(-1, 3).mean(axis=0)
+    assert centre[2] > 1.5 * centre[0]  # the cube is tinted red
+    assert (tmp_path / "ideal" / "ideal_camera.yaml").exists() and (tmp_path / "ideal" / "cube.png").exists()
+    ideal = yaml.safe_load((tmp_path / "ideal" / "ideal_camera.yaml").read_text())
+    assert ideal["distortion_coefficients"]["data"] == [0.0] * 5
+
+    raw = measure(workspace, "--threshold", "120", "--json", calibration="none")
+    assert raw.returncode == 0, raw.stderr
+    raw_result = json.loads(raw.stdout)
+    assert raw_result["calibrated"] is False and raw_result["area_m2"] / SCENE.true_area_m2 - 1 > 0.04
+
+
+def test_video_gives_progress_csv_and_plot(workspace, tmp_path):
+    video = tmp_path / "run.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, ENDOSCOPE.image_size)
+    for k in range(4):
+        writer.write(render_scene(ENDOSCOPE, SCENE, 0.7 + 0.01 * k, FlatPort(), seed=k))
+    writer.release()
+    done = run_cli("measure", str(video), "--calibration", str(workspace / "water.yaml"), "--targets",
+                   str(workspace / "targets.yaml"), "--threshold", "otsu", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "[4/4] run.avi#3" in done.stdout
+    rows = list(csv.DictReader((tmp_path / "run_area.csv").open()))
+    assert [r["frame"] for r in rows] == [f"run.avi#{k}" for k in range(4)]
+    assert [float(r["time_s"]) for r in rows] == pytest.approx([0, 0.1, 0.2, 0.3])
+    for row in rows:  # Otsu on a bimodal scene: close to the truth at every distance
+        assert abs(float(row["area_m2"]) / SCENE.true_area_m2 - 1) <= 0.01
+    assert cv2.imread(str(tmp_path / "run_area.png")) is not None
+
+
+def test_calibration_of_another_image_size(workspace, tmp_path):
+    small = tmp_path / "small.yaml"
+    write_calibration(small, calibrated_endoscope("water").__class__(320, 240, c=260, xp=160, yp=120))
+    done = measure(workspace, calibration=str(small))
+    assert done.returncode == 1
+    assert "frame is 640x480 but the calibration is for 320x240" in done.stderr
+
+
+def test_targets_not_found(workspace):
+    cv2.imwrite(str(workspace / "blank.png"), np.full((480, 640, 3), 180, np.uint8))
+    done = measure(workspace, image="blank.png")
+    assert done.returncode == 1
+    assert "only 0 target(s) found" in done.stderr and "missing marker ids [0, 1, 2, 3]" in done.stderr
+
+
+def test_targets_file_with_a_duplicate_id(workspace, tmp_path):
+    bad = tmp_path / "targets.yaml"
+    bad.write_text("dictionary: DICT_4X4_50\nmarkers:\n  0: [-0.22, -0.16]\n  0: [0.22, -0.16]\n")
+    done = run_cli("measure", str(workspace / "cube.png"), "--calibration", "none", "--targets", str(bad))
+    assert done.returncode == 1 and "duplicate key 0 at line 4" in done.stderr
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--threshold", "300"], "must be a number from 0 to 255 or 'otsu', got '300'"),
+    (["--threshold", "dark"], "must be a number from 0 to 255"),
+    (["--roi", "10,10,20,20,30,30"], "is empty: its corners enclose no area"),
+    (["--roi", "10,10,20"], "needs at least 3 x,y corner pairs"),
+    (["--video-step", "0"], "--video-step must be 1 or more"),
+])
+def test_usage_errors(workspace, args, message):
+    done = measure(workspace, *args)
+    assert done.returncode == 2 and message in done.stderr
+
+
+def test_roi_outside_the_image_and_corrupt_calibration(workspace, tmp_path):
+    done = measure(workspace, "--roi", "2000,2000,2100,2000,2100,2100")
+    assert done.returncode == 1 and "region of interest is empty" in done.stderr
+    corrupt = tmp_path / "corrupt.yaml"
+    corrupt.write_text("image_width: 640\ncamera_matrix: [oops\n")
+    done = measure(workspace, calibration=str(corrupt))
+    assert done.returncode == 1 and "corrupt.yaml" in done.stderr
+
+
+def test_paper_reproduction_endoscope():
+    """The paper's table on synthetic ground truth, endoscope rows: calibrated errors within the issue's
+    bounds in every medium, and the several-percent uncalibrated effect."""
+    rows = reproduce(("endoscope",))
+    assert {(r.condition, r.object) for r in rows} == {(c, o) for c in ("air", "water tank", "flume")
+                                                       for o in ("cube", "bush")}
+    for row in rows:
+        limit = 0.3 if row.condition == "air" else 0.5
+        if row.object == "cube":
+            assert abs(row.calibrated_error_pct) <= limit, row
+        else:  # the bush's thin branches are harder: held to its own reported uncertainty
+            assert abs(row.calibrated_error_pct) <= row.calibrated_std_pct, row
+        assert abs(row.raw_error_pct) > 4 * abs(row.calibrated_error_pct) and abs(row.raw_error_pct) > 2, row

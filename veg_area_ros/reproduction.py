@@ -1,0 +1,167 @@
+"""The paper's experiment on synthetic ground truth: Af of a 0.1027 m cube face and of a bush at 0.7 m, seen by
+a 640x480 endoscope and a 3872x2592 DSLR, in air, in a water tank (flat port, refraction) and in a "flume"
+(water plus noise, blur and uneven light), each without and with a calibration made in the same medium at
+the same distance. Prints the table beside the paper's Table 1.
+
+    .venv/bin/python -m veg_area_ros.reproduction [--cameras endoscope dslr] [--json]
+
+No ROS here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from .area import AreaMeasurer
+from .board import BoardSpec
+from .calibration import View, calibrate
+from .camera_model import BrownCamera
+from .classify import Classifier
+from .scale import TargetsSpec
+from .synthetic import (
+    DSLR,
+    ENDOSCOPE,
+    FlatPort,
+    Scene,
+    board_views,
+    bush_scene,
+    cube_scene,
+    render_board_views,
+    render_scene,
+)
+
+DISTANCE_M = 0.7
+BOARD = "chessboard:9x6:0.04"
+THRESHOLD = 120  # midway between the object (40) and the board (200): what a researcher would pick
+
+# Paper, Table 1 (cube, endoscope): error of Af in % without / with calibration
+PAPER_CUBE_ENDOSCOPE = {"air": (1.4, 0.1), "water tank": (9.0, 1.4), "flume": (7.1, 1.4)}
+
+
+@dataclass(frozen=True)
+class Condition:
+    name: str
+    port: FlatPort | None
+    noise_sigma: float = 1.0
+    blur_fraction: float = 0.0  # blur sigma as a fraction of the image width (the same optics at any size)
+    light_gradient: float = 0.0
+
+
+CONDITIONS = (
+    Condition("air", None),
+    Condition("water tank", FlatPort()),
+    Condition("flume", FlatPort(), noise_sigma=4.0, blur_fraction=1.2 / 640, light_gradient=0.3),
+)
+
+
+@dataclass(frozen=True)
+class Setup:
+    name: str
+    camera: BrownCamera
+    views: int
+    supersample: int  # render supersampling: 3 for the endoscope, 1 for the DSLR (its pixels are already fine)
+    texels_per_metre: float
+
+
+SETUPS = {"endoscope": Setup("endoscope", ENDOSCOPE, 15, 3, 2000.0),
+          "dslr": Setup("dslr", DSLR, 12, 1, 6000.0)}
+
+
+@dataclass
+class Row:
+    camera: str
+    condition: str
+    object: str
+    true_area_m2: float
+    raw_error_pct: float
+    calibrated_error_pct: float
+    calibrated_std_pct: float
+    calibration_rms_px: float
+    paper_raw_pct: float | None
+    paper_calibrated_pct: float | None
+
+
+def _calibrate(setup: Setup, condition: Condition, rng: np.random.Generator):
+    board = BoardSpec.parse(BOARD)
+    poses = board_views(setup.camera, board, setup.views, DISTANCE_M, rng, port=condition.port)
+    images = render_board_views(setup.camera, board, poses, port=condition.port, rng=rng,
+                                noise_sigma=condition.noise_sigma,
+                                blur_sigma_px=condition.blur_fraction * setup.camera.width,
+                                light_gradient=condition.light_gradient, supersample=setup.supersample)
+    views = [View(f"view{k}", d) for k, d in enumerate(board.detect(im) for im in images) if d is not None]
+    return calibrate(views, setup.camera.image_size)
+
+
+def run(cameras: tuple[str, ...] = ("endoscope", "dslr"), progress: Callable[[str], None] = lambda _: None,
+        seed: int = 11) -> list[Row]:
+    rows = []
+    for camera_name in cameras:
+        setup = SETUPS[camera_name]
+        scenes: dict[str, Scene] = {
+            "cube": cube_scene(pixels_per_metre=setup.texels_per_metre),
+            "bush": bush_scene(pixels_per_metre=setup.texels_per_metre,
+                               oversample=max(2, round(16000 / setup.texels_per_metre))),
+        }
+        targets = TargetsSpec.from_dict({"dictionary": scenes["cube"].dictionary,
+                                         "markers": {k: list(v) for k, v in scenes["cube"].markers.items()}})
+        for condition in CONDITIONS:
+            started = time.perf_counter()
+            rng = np.random.default_rng(seed)
+            calibration = _calibrate(setup, condition, rng)
+            progress(f"{camera_name}, {condition.name}: calibrated on {calibration.views_used} views, "
+                     f"RMS {calibration.rms_px:.3f} px ({time.perf_counter() - started:.0f} s)")
+            for object_name, scene in scenes.items():
+                frame = render_scene(setup.camera, scene, DISTANCE_M, condition.port,
+                                     noise_sigma=condition.noise_sigma, seed=seed,
+                                     blur_sigma_px=condition.blur_fraction * setup.camera.width,
+                                     light_gradient=condition.light_gradient, supersample=setup.supersample)
+                classifier = Classifier(threshold=THRESHOLD)
+                raw = AreaMeasurer(None, targets, classifier).measure(frame)
+                calibrated = AreaMeasurer(calibration.camera, targets, classifier).measure(frame)
+                truth = scene.true_area_m2
+                paper = PAPER_CUBE_ENDOSCOPE.get(condition.name) if (object_name, camera_name) == (
+                    "cube", "endoscope") else None
+                rows.append(Row(camera_name, condition.name, object_name, truth,
+                                100 * (raw.area_m2 / truth - 1), 100 * (calibrated.area_m2 / truth - 1),
+                                100 * calibrated.area_std_m2 / truth, calibration.rms_px,
+                                paper[0] if paper else None, paper[1] if paper else None))
+                progress(f"  {object_name}: raw {rows[-1].raw_error_pct:+.2f} %, "
+                         f"calibrated {rows[-1].calibrated_error_pct:+.3f} % (± {rows[-1].calibrated_std_pct:.2f} %)")
+    return rows
+
+
+def format_table(rows: list[Row]) -> str:
+    def paper(value: float | None) -> str:
+        return f"{value:.1f} %" if value is not None else "–"
+
+    lines = ["| camera | condition | object | true Af [cm²] | error uncalibrated | error calibrated (± std) "
+             "| paper uncalibrated | paper calibrated |",
+             "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: |"]
+    for r in rows:
+        lines.append(f"| {r.camera} | {r.condition} | {r.object} | {1e4 * r.true_area_m2:.2f} "
+                     f"| {r.raw_error_pct:+.2f} % | {r.calibrated_error_pct:+.3f} % (± {r.calibrated_std_pct:.2f} %) "
+                     f"| {paper(r.paper_raw_pct)} | {paper(r.paper_calibrated_pct)} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cameras", nargs="+", choices=list(SETUPS), default=list(SETUPS))
+    parser.add_argument("--json", action="store_true", help="rows as JSON instead of a Markdown table")
+    parser.add_argument("-q", "--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    rows = run(tuple(args.cameras), progress=(lambda _: None) if args.quiet else
+               (lambda m: print(m, file=sys.stderr, flush=True)))
+    print(json.dumps([asdict(r) for r in rows], indent=1) if args.json else format_table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
