@@ -1,24 +1,30 @@
-"""ROS 2 node entry points. The nodes themselves arrive with the ROS 2 graph issue (#4); until then each
-entry point says so and exits non-zero instead of pretending to run."""
+"""ROS 2 node entry points (`ros2 run veg_area_ros <node>`); rclpy is imported only when a node starts, so
+the core and the `veg-area` command work without ROS."""
 
 from __future__ import annotations
 
 import sys
 
 
-def _not_yet(node: str) -> int:
-    print(f"{node}: not available yet; the ROS 2 nodes arrive with issue #4. "
-          "Use `veg-area calibrate` meanwhile.", file=sys.stderr)
-    return 1
-
-
 def camera_main() -> int:
-    return _not_yet("camera_node")
+    from .ros.camera_node import main
+
+    return main(sys.argv)
 
 
 def calibration_main() -> int:
-    return _not_yet("calibration_node")
+    from .ros.calibration_node import main
+
+    return main(sys.argv)
 
 
 def area_main() -> int:
-    return _not_yet("area_node")
+    from .ros.area_node import main
+
+    return main(sys.argv)
+
+
+def graph_main() -> int:
+    from .ros.graph import main
+
+    return main(sys.argv)

@@ -1,0 +1,60 @@
+"""Runs a ROS scenario (test/ros_scenarios.py) confined to this machine and reaped.
+
+As root with `unshare` (CI): the scenario runs in a private network namespace that has only loopback and
+a private /dev/shm (tmpfs), so no traffic can leave and nothing is left in the host's /dev/shm; every node
+it starts lives and dies in there. Elsewhere (fallback): the nodes use the shared-memory-only Fast DDS
+profile (no network transport at all), and the harness removes from /dev/shm what the run added.
+Either way the scenario checks the sockets of its namespace and reports them.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from helpers import REPO
+
+PROFILE = REPO / "config" / "fastdds_shm.xml"
+_domains = itertools.count((os.getpid() % 50) * 4 + 1)
+
+
+@functools.cache
+def netns_available() -> bool:
+    try:
+        probe = ["unshare", "--net", "--mount", "sh", "-c", "ip link set lo up && mount -t tmpfs tmpfs /dev/shm"]
+        return subprocess.run(probe, capture_output=True, timeout=10).returncode == 0
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+
+
+def run_scenario(name: str, tmp_path: Path, timeout: float = 240.0, **options) -> dict:
+    """Run scenario `name` with `options` (JSON); returns its JSON result. A unique ROS_DOMAIN_ID per call."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_"))}
+    env.update(HOME=str(tmp_path), ROS_LOG_DIR=str(tmp_path / "ros_log"), PYTHONPATH=str(REPO),
+               ROS_DOMAIN_ID=str(next(_domains) % 230), RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
+               FASTDDS_DEFAULT_PROFILES_FILE=str(PROFILE), PYTHONUNBUFFERED="1")
+    command = [sys.executable, str(REPO / "test" / "ros_scenarios.py"), name, json.dumps(options)]
+    before = set(os.listdir("/dev/shm"))
+    if netns_available():
+        script = ('ip link set lo up && mount -t tmpfs -o size=4g tmpfs /dev/shm && exec "$@"')
+        command = ["unshare", "--net", "--mount", "--kill-child", "--fork", "sh", "-c", script, "sh", *command]
+    try:
+        done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=timeout, cwd=tmp_path)
+    finally:
+        if not netns_available():
+            for leftover in set(os.listdir("/dev/shm")) - before:
+                if "fast" in leftover.lower():
+                    Path("/dev/shm", leftover).unlink(missing_ok=True)
+    lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
+    if done.returncode != 0 or not lines:
+        raise AssertionError(f"scenario {name} failed (exit {done.returncode}):\n{done.stdout[-3000:]}\n"
+                             f"{done.stderr[-6000:]}")
+    result = json.loads(lines[-1][len("RESULT "):])
+    result["isolated"] = netns_available()
+    result["log"] = done.stderr[-4000:]
+    return result

@@ -1,0 +1,285 @@
+"""ROS scenarios run by test/ros_harness.py (inside a private network namespace where possible): real node
+processes plus a probe node in this process. Prints `RESULT {json}` for the test to judge; always reaps."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+
+class Nodes:
+    """Node processes started with `python -m veg_area_ros.ros.<module> --ros-args ...`; always reaped."""
+
+    def __init__(self):
+        self.processes: list[tuple[str, subprocess.Popen]] = []
+
+    def start(self, module: str, remap: dict | None = None, name: str | None = None, **parameters) -> subprocess.Popen:
+        args = [sys.executable, "-m", f"veg_area_ros.ros.{module}", "--ros-args"]
+        for source, target in (remap or {}).items():
+            args += ["-r", f"{source}:={target}"]
+        if name:
+            args += ["-r", f"__node:={name}"]
+        for key, value in parameters.items():
+            args += ["-p", f"{key}:={json.dumps(value) if isinstance(value, list | bool) else value}"]
+        process = subprocess.Popen(args, stdout=sys.stderr, stderr=sys.stderr)
+        self.processes.append((module, process))
+        return process
+
+    def alive(self) -> dict[str, bool]:
+        return {module: process.poll() is None for module, process in self.processes}
+
+    def reap(self) -> None:
+        for _, process in self.processes:
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + 10
+        for _, process in self.processes:
+            try:
+                process.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+def _address(hex_address: str) -> str:
+    host, port = hex_address.split(":")
+    if len(host) == 8:
+        return f"{socket.inet_ntop(socket.AF_INET, struct.pack('<I', int(host, 16)))}:{int(port, 16)}"
+    raw = bytes.fromhex(host)
+    words = b"".join(raw[i:i + 4][::-1] for i in range(0, 16, 4))
+    return f"[{socket.inet_ntop(socket.AF_INET6, words)}]:{int(port, 16)}"
+
+
+def sockets_of(pids: list[int]) -> list[dict]:
+    """Internet sockets held by these processes: protocol, local and remote address."""
+    inodes = set()
+    for pid in pids:
+        try:
+            for fd in os.listdir(f"/proc/{pid}/fd"):
+                target = os.readlink(f"/proc/{pid}/fd/{fd}")
+                if target.startswith("socket:["):
+                    inodes.add(target[8:-1])
+        except OSError:
+            continue
+    found = []
+    for proto in ("tcp", "tcp6", "udp", "udp6"):
+        try:
+            lines = Path(f"/proc/net/{proto}").read_text().splitlines()[1:]
+        except OSError:
+            continue
+        for line in lines:
+            fields = line.split()
+            if fields[9] in inodes:
+                found.append({"proto": proto, "local": _address(fields[1]), "remote": _address(fields[2])})
+    return found
+
+
+def off_machine(sockets: list[dict]) -> list[dict]:
+    """Sockets bound to or talking to anything but loopback / the unspecified address."""
+    def local_only(address: str) -> bool:
+        host = address.rsplit(":", 1)[0].strip("[]")
+        return host in ("0.0.0.0", "::", "::1") or host.startswith("127.") or host.startswith("::ffff:127.")
+    return [s for s in sockets if not (local_only(s["local"]) and local_only(s["remote"]))]
+
+
+def interfaces() -> list[str]:
+    return [line.split(":")[0].strip() for line in Path("/proc/net/dev").read_text().splitlines()[2:]]
+
+
+def scenario_delivery(options: dict, nodes: Nodes) -> dict:
+    """camera_node publishing a still image of each size in a loop; a probe counts what arrives."""
+    import cv2
+    import rclpy
+    from rclpy.node import Node
+    from sensor_msgs.msg import Image
+
+    from veg_area_ros.ros.common import IMAGE_QOS
+
+    results = {}
+    rclpy.init()
+    probe = Node("probe")
+    try:
+        for width, height, rate, seconds in options["cases"]:
+            still = Path(f"still_{width}x{height}.png")
+            cv2.imwrite(str(still), np.random.default_rng(0).integers(0, 255, (height, width, 3), np.uint8))
+            stamps: list[float] = []
+            latencies: list[float] = []
+
+            def on_image(msg, stamps=stamps, latencies=latencies):
+                sent = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+                stamps.append(sent)
+                latencies.append(time.time() - sent)
+
+            subscription = probe.create_subscription(Image, f"image_{width}", on_image, IMAGE_QOS)
+            process = nodes.start("camera_node", remap={"image_raw": f"image_{width}"}, name=f"camera_{width}",
+                                  source=str(still.resolve()), loop=True, rate_hz=float(rate))
+            deadline = time.monotonic() + 60
+            while not stamps and time.monotonic() < deadline:
+                rclpy.spin_once(probe, timeout_sec=0.1)
+            stamps.clear()
+            latencies.clear()
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                rclpy.spin_once(probe, timeout_sec=0.05)
+            gaps = np.diff(stamps) * rate if len(stamps) > 1 else np.array([])
+            missing = int(np.sum(np.maximum(np.round(gaps) - 1, 0)))
+            results[f"{width}x{height}"] = {
+                "received": len(stamps), "missing": missing, "rate_hz": rate, "seconds": seconds,
+                "mean_latency_ms": 1000 * float(np.mean(latencies)) if latencies else None,
+                "sockets": sockets_of([os.getpid(), process.pid])}
+            probe.destroy_subscription(subscription)
+            process.send_signal(signal.SIGINT)
+            process.wait(10)
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return results
+
+
+def main() -> int:
+    name, options = sys.argv[1], json.loads(sys.argv[2])
+    nodes = Nodes()
+    try:
+        result = {"delivery": scenario_delivery, "graph": scenario_graph}[name](options, nodes)
+        result["interfaces"] = interfaces()
+        result["alive_at_end"] = nodes.alive()
+    finally:
+        nodes.reap()
+    result["exit_codes"] = {module: process.returncode for module, process in nodes.processes}
+    print("RESULT " + json.dumps(result), flush=True)
+    return 0
+
+
+def scenario_graph(options: dict, nodes: Nodes) -> dict:
+    """camera (synthetic, board views then the cube) -> calibration_node -> area_node, each its own process;
+    then run-time changes (set_camera_info, parameters) and bad frames injected on image_raw."""
+    import rclpy
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import CameraInfo, Image
+    from sensor_msgs.srv import SetCameraInfo
+    from std_msgs.msg import String
+
+    from veg_area_ros.calib_io import read_calibration
+    from veg_area_ros.ros.common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
+    from veg_area_ros.ros.messages import camera_to_info, info_to_camera
+    from veg_area_ros.synthetic import cube_scene
+
+    out: dict = {"truth_m2": cube_scene().true_area_m2}
+    calibration_file = Path("served.yaml").resolve()
+    rate = float(options.get("rate_hz", 10.0))
+    nodes.start("camera_node", rate_hz=rate)
+    nodes.start("calibration_node", camera_info_url=f"file://{calibration_file}", min_views=12)
+    nodes.start("area_node")
+    rclpy.init()
+    probe = Node("probe")
+    image_stamps: list[float] = []
+    infos: list[dict] = []
+    camera_infos: list[CameraInfo] = []
+    probe.create_subscription(Image, "image_raw", lambda m: image_stamps.append(time.monotonic()), IMAGE_QOS)
+    probe.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)), RESULT_QOS)
+    probe.create_subscription(CameraInfo, "camera_info", camera_infos.append, LATCHED_QOS)
+    inject = probe.create_publisher(Image, "image_raw", IMAGE_QOS)
+
+    def spin_until(condition, seconds: float) -> bool:
+        deadline = time.monotonic() + seconds
+        while not condition() and time.monotonic() < deadline:
+            rclpy.spin_once(probe, timeout_sec=0.05)
+        return condition()
+
+    def calibrated(after: int = 0) -> list[dict]:
+        return [i for i in infos[after:] if i["calibrated"]]
+
+    def call(client, request, seconds: float = 20.0):
+        if not client.wait_for_service(timeout_sec=seconds):
+            return None
+        future = client.call_async(request)
+        rclpy.spin_until_future_complete(probe, future, timeout_sec=seconds)
+        return future.result()
+
+    try:
+        spin_until(lambda: len(calibrated()) >= 5, 180)
+        out["rate_window"] = image_stamps[-20:]
+        areas = [i["area_m2"] for i in calibrated()]
+        out["calibrated_areas"] = areas
+        out["camera_info_received"] = bool(camera_infos)
+        out["persisted"] = calibration_file.exists()
+        if calibration_file.exists():
+            out["persisted_fx"] = read_calibration(calibration_file).camera.fx
+        if camera_infos:
+            out["served_fx"] = info_to_camera(camera_infos[-1]).fx
+
+        # a late joiner still gets the latched calibration
+        late: list[CameraInfo] = []
+        late_node = Node("late_probe")
+        late_node.create_subscription(CameraInfo, "camera_info", late.append, LATCHED_QOS)
+        deadline = time.monotonic() + 10
+        while not late and time.monotonic() < deadline:
+            rclpy.spin_once(late_node, timeout_sec=0.1)
+        out["late_joiner_got_camera_info"] = bool(late)
+        late_node.destroy_node()
+
+        # set_camera_info: a camera with 3 % longer focal length -> Af of the same frames changes
+        served = info_to_camera(camera_infos[-1])
+        import dataclasses
+
+        changed = dataclasses.replace(served, c=served.c * 1.03)
+        request = SetCameraInfo.Request()
+        request.camera_info = camera_to_info(changed)
+        response = call(probe.create_client(SetCameraInfo, "set_camera_info"), request)
+        out["set_camera_info"] = None if response is None else [response.success, response.status_message]
+        mark = len(infos)
+        spin_until(lambda: len(calibrated(mark)) >= 8, 30)
+        out["areas_after_set_camera_info"] = [i["area_m2"] for i in calibrated(mark)[3:]]
+        out["persisted_fx_after_set"] = read_calibration(calibration_file).camera.fx
+
+        # parameters at run time: an out-of-range threshold is refused with a reason, a valid change applies
+        parameters = probe.create_client(SetParameters, "area_node/set_parameters")
+
+        def set_parameter(name: str, value):
+            return call(parameters, SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()]))
+
+        bad = set_parameter("threshold", 300.0)
+        out["bad_threshold"] = None if bad is None else [bad.results[0].successful, bad.results[0].reason]
+        bad_roi = set_parameter("roi", [1.0, 2.0])
+        out["bad_roi"] = None if bad_roi is None else [bad_roi.results[0].successful, bad_roi.results[0].reason]
+        good = set_parameter("threshold", 60.0)
+        out["good_threshold"] = None if good is None else good.results[0].successful
+        mark = len(infos)
+        spin_until(lambda: len(calibrated(mark)) >= 6, 30)
+        out["thresholds_after_change"] = sorted({i["threshold"] for i in calibrated(mark)[3:]})
+
+        # bad frames on image_raw: wrong encoding, wrong size, empty data, lying step
+        for encoding, width, height, data in (("16UC1", 640, 480, bytes(640 * 480 * 2)),
+                                              ("bgr8", 320, 240, bytes(320 * 240 * 3)),
+                                              ("bgr8", 640, 480, b""),
+                                              ("mono8", 640, 480, bytes(100))):
+            msg = Image(encoding=encoding, width=width, height=height, step=width * (3 if encoding == "bgr8" else 2),
+                        data=data)
+            msg.header.stamp = probe.get_clock().now().to_msg()
+            inject.publish(msg)
+            rclpy.spin_once(probe, timeout_sec=0.05)
+        mark = len(infos)
+        out["measures_after_bad_frames"] = spin_until(lambda: len(calibrated(mark)) >= 3, 30)
+        out["sockets"] = sockets_of([os.getpid()] + [p.pid for _, p in nodes.processes])
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return out
+
+
+if __name__ == "__main__":
+    sys.exit(main())

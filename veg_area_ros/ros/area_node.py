@@ -1,0 +1,163 @@
+"""area_node: idealizes each frame with the calibration from `camera_info` (or a file), classifies it and
+publishes Af (`projected_area`, geometry_msgs/Vector3Stamped: x = Af m², y = its standard deviation m²,
+z = object pixels; header = the source frame's), `projected_area/info` (JSON with everything else), the
+binary `mask` (mono8, same header), and on demand (when subscribed) `image_rect` and `overlay`."""
+
+from __future__ import annotations
+
+import json
+import math
+
+from geometry_msgs.msg import Vector3Stamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import String
+
+from ..area import AreaMeasurer, draw_overlay
+from ..calib_io import CalibrationFileError, read_calibration
+from ..classify import CHANNELS, OBJECTS, Classifier, ClassifyError
+from ..idealize import FrameSizeError
+from ..scale import TargetsError, TargetsSpec
+from ..synthetic import SCENE_DICTIONARY, SCENE_MARKERS
+from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, declare, publish_safely
+from .messages import ImageMessageError, image_to_msg, info_to_camera, msg_to_image
+
+TUNABLE = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "targets_file")
+
+
+def default_targets() -> TargetsSpec:
+    """The synthetic scene's four markers: what the built-in default camera shows."""
+    return TargetsSpec.from_dict({"dictionary": SCENE_DICTIONARY,
+                                  "markers": {k: list(v) for k, v in SCENE_MARKERS.items()}})
+
+
+class AreaNode(Node):
+    def __init__(self, name: str = "area_node", **kwargs):
+        super().__init__(name, **kwargs)
+        declare(self, "threshold", 120.0, "Grey level separating object and background.", low=0.0, high=255.0)
+        declare(self, "threshold_mode", "fixed", "'fixed' uses `threshold`; 'otsu' picks it in the ROI.",
+                choices=("fixed", "otsu"))
+        declare(self, "object", "dark", "Object darker/brighter than the background, or greener.", choices=OBJECTS)
+        declare(self, "channel", "grey", "Band the threshold acts on.", choices=CHANNELS)
+        declare(self, "roi", [0.0], "Region of interest x1,y1,x2,y2,... in idealized pixels; [0.0] = inside "
+                "the targets, markers excluded.")
+        declare(self, "open_px", 0, "Morphological opening radius (removes specks).", low=0, high=50)
+        declare(self, "close_px", 0, "Morphological closing radius (fills pin-holes).", low=0, high=50)
+        declare(self, "targets_file", "", "Targets YAML; '' = the synthetic scene's four markers.")
+        self.uncalibrated = declare(self, "uncalibrated_frames", "drop",
+                                    "Frames before any calibration: 'drop' (throttled warning) or 'measure' "
+                                    "(as an uncalibrated camera, flagged calibrated=false).",
+                                    choices=("drop", "measure"))
+        calibration_file = declare(self, "calibration_file", "", "Calibration YAML to start with ('' = wait for "
+                                   "camera_info).", read_only=True)
+        self.camera = None
+        self.frames_in = 0
+        self.frames_measured = 0
+        self.area_pub = self.create_publisher(Vector3Stamped, "projected_area", RESULT_QOS)
+        self.info_pub = self.create_publisher(String, "projected_area/info", RESULT_QOS)
+        self.mask_pub = self.create_publisher(Image, "mask", IMAGE_QOS)
+        self.rect_pub = self.create_publisher(Image, "image_rect", IMAGE_QOS)
+        self.overlay_pub = self.create_publisher(Image, "overlay", IMAGE_QOS)
+        if calibration_file:
+            try:
+                self.camera = read_calibration(calibration_file).camera
+                self.get_logger().info(f"calibration from {calibration_file}")
+            except CalibrationFileError as exc:
+                self.get_logger().error(f"{exc}; waiting for camera_info instead")
+        self.settings = {p: self.get_parameter(p).value for p in TUNABLE}
+        self.measurer = self._build(self.settings, self.camera)  # invalid start parameters: the node fails
+        self.add_on_set_parameters_callback(self._on_parameters)
+        self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, LATCHED_QOS)
+        self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS)
+
+    def _build(self, settings: dict, camera) -> AreaMeasurer:
+        """A measurer for these settings; raises ValueError (TargetsError, ClassifyError) with the reason."""
+        threshold = "otsu" if settings["threshold_mode"] == "otsu" else float(settings["threshold"])
+        classifier = Classifier(threshold=threshold, object=settings["object"], channel=settings["channel"],
+                                open_px=int(settings["open_px"]), close_px=int(settings["close_px"]))
+        roi = list(settings["roi"])
+        if roi == [0.0] or not roi:
+            polygon = None
+        else:
+            if len(roi) % 2 or len(roi) < 6 or not all(math.isfinite(v) for v in roi):
+                raise ClassifyError("roi needs at least 3 x,y pairs of finite numbers (or [0.0] for the default)")
+            polygon = roi
+        targets = TargetsSpec.load(settings["targets_file"]) if settings["targets_file"] else default_targets()
+        return AreaMeasurer(camera, targets, classifier, roi=polygon)
+
+    def _on_parameters(self, parameters) -> SetParametersResult:
+        proposed = dict(self.settings)
+        for parameter in parameters:
+            if parameter.name in proposed:
+                proposed[parameter.name] = parameter.value
+            elif parameter.name == "uncalibrated_frames" and parameter.value not in ("drop", "measure"):
+                return SetParametersResult(successful=False, reason="uncalibrated_frames must be drop or measure")
+        try:
+            measurer = self._build(proposed, self.camera)
+        except (ValueError, OSError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.settings, self.measurer = proposed, measurer
+        for parameter in parameters:
+            if parameter.name == "uncalibrated_frames":
+                self.uncalibrated = parameter.value
+        return SetParametersResult(successful=True)
+
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        try:
+            camera = info_to_camera(msg)
+        except ValueError as exc:
+            self.get_logger().warning(f"camera_info ignored: {exc}", throttle_duration_sec=10.0)
+            return
+        if camera != self.camera:
+            self.camera = camera
+            self.measurer = self._build(self.settings, camera)
+            self.get_logger().info(f"calibration received: {camera.width}x{camera.height}, fx {camera.fx:.2f}")
+
+    def _on_image(self, msg: Image) -> None:
+        self.frames_in += 1
+        log = self.get_logger()
+        try:
+            frame = msg_to_image(msg)
+        except ImageMessageError as exc:
+            log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
+            return
+        if self.camera is None and self.uncalibrated == "drop":
+            log.warning("no calibration yet (camera_info or calibration_file): frames dropped; set "
+                        "uncalibrated_frames:=measure to measure them uncalibrated", throttle_duration_sec=10.0)
+            return
+        try:
+            result = self.measurer.measure(frame)
+        except FrameSizeError as exc:
+            log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
+            return
+        except (TargetsError, ClassifyError) as exc:
+            log.warning(f"frame not measured: {exc}", throttle_duration_sec=5.0)
+            return
+        self.frames_measured += 1
+        area = Vector3Stamped()
+        area.header = msg.header
+        area.vector.x, area.vector.y, area.vector.z = result.area_m2, result.area_std_m2, float(result.pixel_count)
+        publish_safely(self, self.area_pub, area)
+        summary = result.summary()
+        summary.update(stamp={"sec": msg.header.stamp.sec, "nanosec": msg.header.stamp.nanosec},
+                       frame_id=msg.header.frame_id)
+        publish_safely(self, self.info_pub, String(data=json.dumps(summary)))
+        publish_safely(self, self.mask_pub, image_to_msg(result.mask, msg.header.stamp, msg.header.frame_id))
+        if self.rect_pub.get_subscription_count():
+            publish_safely(self, self.rect_pub, image_to_msg(result.image, msg.header.stamp, msg.header.frame_id))
+        if self.overlay_pub.get_subscription_count():
+            publish_safely(self, self.overlay_pub,
+                           image_to_msg(draw_overlay(result), msg.header.stamp, msg.header.frame_id))
+
+
+def main(args: list[str] | None = None) -> int:
+    from .common import run_nodes
+
+    return run_nodes([AreaNode], args)
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main(sys.argv))

@@ -1,0 +1,204 @@
+"""calibration_node: collects board views from `image_raw`, fits the combined lens-and-refraction model,
+and serves it: `camera_info` (latched), `set_camera_info`, and the YAML at `camera_info_url`."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import math
+import os
+
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.srv import SetCameraInfo
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from .. import __version__
+from ..board import BoardSpec, BoardSpecError
+from ..calib_io import CalibrationFileError, quality_rms, read_calibration, write_calibration
+from ..calibration import CalibrationError, View, calibrate
+from ..camera_model import BrownCamera
+from ..sources import SYNTHETIC_BOARD
+from .camera_node import url_to_path
+from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, declare, publish_safely
+from .messages import ImageMessageError, camera_to_info, info_to_camera, msg_to_image
+
+NEW_POSE_DISTANCE = 0.08  # pose signature distance below which a view adds nothing new
+
+
+def pose_signature(points: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """Where the board is (centre), how big (sqrt of its hull area), and how it is turned (doubled angle of
+    its principal axis, so a 180° turn is the same pose): all scaled to about 0..1."""
+    width, height = image_size
+    centre = points.mean(axis=0)
+    spread = points - centre
+    _, s, vt = np.linalg.svd(spread, full_matrices=False)
+    angle = math.atan2(vt[0, 1], vt[0, 0])
+    size = math.sqrt(max(s[0] * s[1], 1e-9) / len(points)) / width
+    return np.array([centre[0] / width, centre[1] / height, 2 * size, 0.25 * math.cos(2 * angle),
+                     0.25 * math.sin(2 * angle), s[1] / max(s[0], 1e-9) * 0.3])
+
+
+class CalibrationNode(Node):
+    def __init__(self, name: str = "calibration_node", **kwargs):
+        super().__init__(name, **kwargs)
+        board_text = declare(self, "board", SYNTHETIC_BOARD, "Board spec, as for `veg-area calibrate --board`.",
+                             read_only=True)
+        self.medium = declare(self, "medium", "water", "Medium the calibration is made in.", choices=("air", "water"))
+        self.distance = declare(self, "calibration_distance_m", 0.7, "Camera-to-board distance, metres.",
+                                low=0.01, high=100.0)
+        self.min_views = declare(self, "min_views", 12, "Views kept before an automatic fit.", low=4, high=500)
+        self.auto_calibrate = declare(self, "auto_calibrate", True, "Fit once min_views good views are in.")
+        self.camera_name = declare(self, "camera_name", "camera", "camera_name written in the YAML.")
+        url = declare(self, "camera_info_url", "file://" + os.path.expanduser("~/.ros/camera_info/veg_area.yaml"),
+                      "Where the calibration is loaded from at start and written to (file://).", read_only=True)
+        self.frame_id = declare(self, "frame_id", "camera", "frame_id of the published camera_info.")
+        try:
+            self.board = BoardSpec.parse(board_text)
+        except BoardSpecError as exc:
+            raise ValueError(f"parameter board: {exc}") from exc
+        self.path = url_to_path(url)
+        self.views: list[View] = []
+        self.signatures: list[np.ndarray] = []
+        self.covered = np.zeros((3, 3), bool)
+        self.image_size: tuple[int, int] | None = None
+        self.frames_seen = 0
+        self.camera: BrownCamera | None = None
+        self.rms: float = math.inf
+        self.fitted = False
+        self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
+        self.progress_pub = self.create_publisher(String, "~/progress", RESULT_QOS)
+        self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS)
+        self.create_service(Trigger, "~/calibrate", self._on_calibrate)
+        self.create_service(SetCameraInfo, "set_camera_info", self._on_set_camera_info)
+        if self.path is not None and self.path.exists():
+            try:
+                existing = read_calibration(self.path)
+            except CalibrationFileError as exc:
+                self.get_logger().error(f"not serving the existing calibration: {exc}")
+            else:
+                self._serve(existing.camera, quality_rms(existing), persist=False)
+                self.get_logger().info(f"serving {self.path} (RMS {self.rms:.3f} px)")
+
+    # --- views -----------------------------------------------------------------------------------------
+    def _on_image(self, msg: Image) -> None:
+        self.frames_seen += 1
+        if self.fitted and not self.auto_calibrate:
+            return
+        try:
+            image = msg_to_image(msg)
+        except ImageMessageError as exc:
+            self.get_logger().warning(f"frame ignored: {exc}", throttle_duration_sec=5.0)
+            return
+        size = (image.shape[1], image.shape[0])
+        if self.image_size is None:
+            self.image_size = size
+        elif size != self.image_size:
+            self.get_logger().warning(f"frame ignored: {size[0]}x{size[1]}, the views so far are "
+                                      f"{self.image_size[0]}x{self.image_size[1]}", throttle_duration_sec=5.0)
+            return
+        if self.fitted:
+            return  # a served fit: views are collected again only after ~/calibrate is called
+        detection = self.board.detect(image)
+        if detection is None:
+            return
+        signature = pose_signature(detection.image_points, size)
+        cells = self._cells(detection.image_points, size)
+        new_cells = cells & ~self.covered
+        nearest = min((np.linalg.norm(signature - s) for s in self.signatures), default=math.inf)
+        if nearest < NEW_POSE_DISTANCE and not new_cells.any():
+            return
+        self.views.append(View(f"frame{self.frames_seen}", detection))
+        self.signatures.append(signature)
+        self.covered |= cells
+        self._report(f"view {len(self.views)} kept ({len(detection)} points, coverage "
+                     f"{self.covered.mean():.0%})")
+        if self.auto_calibrate and len(self.views) >= self.min_views:
+            self._fit()
+
+    @staticmethod
+    def _cells(points: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+        cells = np.zeros((3, 3), bool)
+        col = np.clip((points[:, 0] * 3 / size[0]).astype(int), 0, 2)
+        row = np.clip((points[:, 1] * 3 / size[1]).astype(int), 0, 2)
+        cells[row, col] = True
+        return cells
+
+    def _report(self, text: str, **extra) -> None:
+        self.get_logger().info(text)
+        state = {"views_kept": len(self.views), "frames_seen": self.frames_seen,
+                 "coverage": float(self.covered.mean()), "fitted": self.fitted,
+                 "rms_px": None if math.isinf(self.rms) else self.rms, "message": text, **extra}
+        publish_safely(self, self.progress_pub, String(data=json.dumps(state)))
+
+    # --- fitting and serving ---------------------------------------------------------------------------
+    def _fit(self) -> tuple[bool, str]:
+        if self.image_size is None or len(self.views) < 4:
+            return False, f"{len(self.views)} views kept; at least 4 are needed (12+ recommended)"
+        try:
+            result = calibrate(self.views, self.image_size)
+        except CalibrationError as exc:
+            self._report(f"fit failed: {exc}")
+            return False, str(exc)
+        self.fitted = True
+        warnings = list(result.warnings)
+        if result.rms_px > self.rms:
+            text = (f"new fit RMS {result.rms_px:.4f} px is worse than the served {self.rms:.4f} px; "
+                    "kept the served calibration (use set_camera_info to replace it)")
+            self._report(text, warnings=warnings)
+            return False, text
+        metadata = {"medium": self.medium, "calibration_distance_m": self.distance, "board": str(self.board),
+                    "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+                    "software": f"veg_area_ros {__version__} calibration_node", "rms_px": result.rms_px,
+                    "max_residual_px": result.max_residual_px, "views_used": result.views_used,
+                    "std": result.summary()["std"], "warnings": warnings}
+        self._serve(result.camera, result.rms_px, persist=True, metadata=metadata)
+        text = (f"calibrated on {result.views_used} views: RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} "
+                f"fy {result.camera.fy:.2f} cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}")
+        self._report(text, warnings=warnings)
+        for warning in warnings:
+            self.get_logger().warning(warning)
+        return True, text
+
+    def _serve(self, camera: BrownCamera, rms: float, persist: bool, metadata: dict | None = None) -> None:
+        if persist and self.path is not None:
+            try:
+                write_calibration(self.path, camera, self.camera_name, metadata)
+            except OSError as exc:
+                self.get_logger().error(f"calibration served but not written to {self.path}: {exc}")
+        self.camera, self.rms = camera, rms
+        info = camera_to_info(camera, self.frame_id, self.get_clock().now().to_msg())
+        publish_safely(self, self.info_pub, info)
+
+    def _on_calibrate(self, request, response):
+        self.fitted = False  # a fit on request: also resumes collecting views afterwards
+        response.success, response.message = self._fit()
+        return response
+
+    def _on_set_camera_info(self, request, response):
+        try:
+            camera = info_to_camera(request.camera_info)
+        except ValueError as exc:
+            response.success, response.status_message = False, f"refused: {exc}"
+            return response
+        # an explicit replacement by the user: persisted and served whatever its RMS (unknown here)
+        self._serve(camera, math.inf, persist=True, metadata={"source": "set_camera_info",
+                                                              "date": dt.datetime.now(dt.UTC).isoformat()})
+        self.fitted = True
+        response.success, response.status_message = True, f"camera_info set and written to {self.path}"
+        self.get_logger().info(response.status_message)
+        return response
+
+
+def main(args: list[str] | None = None) -> int:
+    from .common import run_nodes
+
+    return run_nodes([CalibrationNode], args)
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main(sys.argv))

@@ -1,0 +1,111 @@
+"""camera_node: publishes `image_raw` (sensor_msgs/Image, bgr8) and, when it has a calibration,
+`camera_info`, from the synthetic endoscope (default), a device, a video file, or an image folder/glob."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+from urllib.parse import urlparse
+
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image
+
+from ..calib_io import CalibrationFileError, read_calibration
+from ..sources import SYNTHETIC_SCENES, DeviceSource, SourceError, open_source
+from .common import IMAGE_QOS, LATCHED_QOS, declare, publish_safely
+from .messages import camera_to_info, image_to_msg
+
+
+def url_to_path(url: str) -> Path | None:
+    """camera_info_manager style: file:///abs/path.yaml or a plain path; '' = none."""
+    if not url:
+        return None
+    if url.startswith("file://"):
+        return Path(urlparse(url).path)
+    if "://" in url:
+        raise ValueError(f"only file:// camera_info URLs are supported, got {url!r}")
+    return Path(url).expanduser()
+
+
+class CameraNode(Node):
+    def __init__(self, name: str = "camera_node", **kwargs):
+        super().__init__(name, **kwargs)
+        source = declare(self, "source", "synthetic",
+                         "'synthetic', a V4L2 device (index or /dev/videoN), a video file, an image folder or glob.",
+                         read_only=True)
+        self.frame_id = declare(self, "frame_id", "camera", "frame_id of the published headers.")
+        rate = declare(self, "rate_hz", 10.0, "Frames per second published.", low=0.1, high=1000.0)
+        loop = declare(self, "loop", False, "Start files over at their end (else stop cleanly).")
+        width = declare(self, "image_width", 0, "Requested device width (0: the device's).", low=0, high=20000)
+        height = declare(self, "image_height", 0, "Requested device height (0: the device's).", low=0, high=20000)
+        url = declare(self, "camera_info_url", "", "file:// YAML calibration published on camera_info.",
+                      read_only=True)
+        scene = declare(self, "synthetic_scene", "board_then_cube", "What the synthetic camera shows.",
+                        choices=SYNTHETIC_SCENES, read_only=True)
+        medium = declare(self, "synthetic_medium", "water", "Synthetic camera in air or behind a port in water.",
+                         choices=("air", "water"), read_only=True)
+        self.stop_requested = False
+        self.frames_published = 0
+        self.image_pub = self.create_publisher(Image, "image_raw", IMAGE_QOS)
+        self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
+        self.camera_info = None
+        path = url_to_path(url)
+        if path is not None:
+            try:
+                calibration = read_calibration(path)
+            except CalibrationFileError as exc:
+                self.get_logger().error(f"camera_info not published: {exc}")
+            else:
+                self.camera_info = camera_to_info(calibration.camera, self.frame_id)
+                self.get_logger().info(f"camera_info from {path}")
+        self.source = open_source(source, loop, width, height, scene, medium)
+        self.source_name = source
+        self.timer = self.create_timer(1.0 / rate, self._tick)
+        self.add_on_set_parameters_callback(self._on_parameters)
+        self.get_logger().info(f"publishing {source} on {self.image_pub.topic_name} at {rate:g} Hz")
+
+    def _on_parameters(self, parameters):
+        from rcl_interfaces.msg import SetParametersResult
+
+        for parameter in parameters:
+            if parameter.name == "rate_hz":
+                self.timer.cancel()
+                self.timer = self.create_timer(1.0 / parameter.value, self._tick)
+        return SetParametersResult(successful=True)
+
+    def _tick(self) -> None:
+        try:
+            image = self.source.read()
+        except SourceError as exc:
+            self.get_logger().warning(f"{exc}; retrying", throttle_duration_sec=5.0)
+            if isinstance(self.source, DeviceSource):
+                with contextlib.suppress(SourceError):  # still gone: the next tick retries
+                    self.source.reopen()
+            return
+        if image is None:
+            self.get_logger().info(f"end of {self.source_name} after {self.frames_published} frames; stopping")
+            self.timer.cancel()
+            self.stop_requested = True
+            return
+        stamp = self.get_clock().now().to_msg()
+        if publish_safely(self, self.image_pub, image_to_msg(image, stamp, self.frame_id)):
+            self.frames_published += 1
+        if self.camera_info is not None:
+            self.camera_info.header.stamp = stamp
+            publish_safely(self, self.info_pub, self.camera_info)
+
+    def destroy_node(self) -> None:
+        self.source.release()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    from .common import run_nodes
+
+    return run_nodes([CameraNode], args)
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main(sys.argv))

@@ -1,0 +1,106 @@
+"""What every node shares: parameter declaration with descriptors, safe publishing, the QoS profiles and
+the process entry point."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable
+
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+
+# images: what camera drivers use (best effort, newest frame only); a slow consumer never queues frames
+IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
+                       durability=DurabilityPolicy.VOLATILE)
+SENSOR_QOS = qos_profile_sensor_data
+# camera_info from a calibration: latched, so a node that starts later still gets the calibration
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+RESULT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def declare(node: Node, name: str, default, description: str, *, low: float | None = None,
+            high: float | None = None, choices: tuple[str, ...] = (), read_only: bool = False):
+    """Declare a parameter with a descriptor (and a range or the allowed values in its description)."""
+    text = description + (f" One of: {', '.join(choices)}." if choices else "")
+    descriptor = ParameterDescriptor(description=text, read_only=read_only)
+    if low is not None and high is not None:
+        if isinstance(default, bool):
+            pass
+        elif isinstance(default, int):
+            descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=0)]
+        elif isinstance(default, float):
+            descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high),
+                                                                  step=0.0)]
+    return node.declare_parameter(name, default, descriptor).value
+
+
+def publish_safely(node: Node, publisher, msg) -> bool:
+    """Publish; a transport under back-pressure raises RCLError: log it (throttled) and go on."""
+    try:
+        publisher.publish(msg)
+        return True
+    except Exception as exc:  # rclpy raises RCLError (not importable by a stable name) or RuntimeError
+        node.get_logger().warning(f"publishing on {publisher.topic_name} failed: {exc}", throttle_duration_sec=5.0)
+        return False
+
+
+def transport_profile() -> str | None:
+    """The shipped shared-memory Fast DDS profile (config/fastdds_shm.xml): installed share/ or the source tree."""
+    from pathlib import Path
+
+    candidates = [Path(__file__).resolve().parents[2] / "config" / "fastdds_shm.xml"]
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        candidates.insert(0, Path(get_package_share_directory("veg_area_ros")) / "config" / "fastdds_shm.xml")
+    except Exception:  # not in an ament prefix (PackageNotFoundError) or no ament_index_python
+        pass
+    return next((str(p) for p in candidates if p.is_file()), None)
+
+
+def ensure_ros_environment() -> None:
+    """Before rclpy.init(): HOME or ROS_LOG_DIR (rclpy needs one; a service manager may give neither), and
+    the shared-memory transport for camera-sized images unless the user chose a profile, another rmw, or
+    VEG_AREA_TRANSPORT=default (keep Fast DDS's UDP + small-segment SHM defaults, e.g. for multi-machine)."""
+    if "HOME" not in os.environ and "ROS_LOG_DIR" not in os.environ:
+        os.environ["ROS_LOG_DIR"] = "/tmp/veg_area_ros_log"
+    if os.environ.get("VEG_AREA_TRANSPORT", "shm") == "default" or "FASTDDS_DEFAULT_PROFILES_FILE" in os.environ:
+        return
+    if os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") != "rmw_fastrtps_cpp":
+        return
+    profile = transport_profile()
+    if profile:
+        os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = profile
+
+
+def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None) -> int:
+    """Create the nodes, spin them in one executor until Ctrl-C / shutdown, clean up. Exit code 0 on a
+    clean stop (a node may call `request_stop()` on itself, e.g. at the end of a video), 1 on a failure."""
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+    ensure_ros_environment()
+    rclpy.init(args=args if args is not None else sys.argv)
+    executor = SingleThreadedExecutor()
+    nodes: list[Node] = []
+    code = 0
+    try:
+        for factory in factories:
+            nodes.append(factory())
+            executor.add_node(nodes[-1])
+        while rclpy.ok() and not any(getattr(n, "stop_requested", False) for n in nodes):
+            executor.spin_once(timeout_sec=0.1)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception as exc:  # a node that cannot start (bad parameter file, ...) says why and exits 1
+        print(f"veg_area_ros: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.try_shutdown()
+    return code

@@ -1,0 +1,83 @@
+"""numpy <-> sensor_msgs/Image and BrownCamera <-> sensor_msgs/CameraInfo (no cv_bridge)."""
+
+from __future__ import annotations
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from sensor_msgs.msg import CameraInfo, Image
+
+from ..camera_model import BrownCamera
+
+CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1}
+
+
+class ImageMessageError(ValueError):
+    """An Image message that cannot be turned into a frame; the message says why."""
+
+
+def image_to_msg(image: np.ndarray, stamp: Time, frame_id: str) -> Image:
+    """bgr8 for (H, W, 3) uint8, mono8 for (H, W) uint8."""
+    if image.dtype != np.uint8 or image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
+        raise ImageMessageError(f"cannot publish an image of shape {image.shape} and type {image.dtype}")
+    msg = Image()
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.height, msg.width = image.shape[:2]
+    msg.encoding = "bgr8" if image.ndim == 3 else "mono8"
+    msg.is_bigendian = 0
+    msg.step = msg.width * (3 if image.ndim == 3 else 1)
+    msg.data = np.ascontiguousarray(image).tobytes()  # bytes: the fast path into the message (see issue #6)
+    return msg
+
+
+def msg_to_image(msg: Image) -> np.ndarray:
+    """A BGR (H, W, 3) or grey (H, W) uint8 view of the message; rgb8 is converted to BGR."""
+    channels = CHANNELS.get(msg.encoding)
+    if channels is None:
+        raise ImageMessageError(f"encoding {msg.encoding!r} is not supported (use {', '.join(CHANNELS)})")
+    if msg.width == 0 or msg.height == 0:
+        raise ImageMessageError(f"empty image ({msg.width}x{msg.height})")
+    if msg.step < msg.width * channels:
+        raise ImageMessageError(f"step {msg.step} is shorter than a {msg.width}-pixel {msg.encoding} row")
+    data = np.frombuffer(msg.data, np.uint8)
+    if data.size != msg.step * msg.height:
+        raise ImageMessageError(f"data holds {data.size} bytes, {msg.height} rows of step {msg.step} need "
+                                f"{msg.step * msg.height}")
+    rows = data.reshape(msg.height, msg.step)[:, : msg.width * channels]
+    image = rows.reshape(msg.height, msg.width, channels) if channels == 3 else rows
+    if msg.encoding == "rgb8":
+        image = image[..., ::-1]
+    return np.ascontiguousarray(image)
+
+
+def camera_to_info(camera: BrownCamera, frame_id: str = "camera", stamp: Time | None = None) -> CameraInfo:
+    """plumb_bob CameraInfo; the projection matrix is the ideal camera (what `image_rect` is in)."""
+    msg = CameraInfo()
+    if stamp is not None:
+        msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    msg.width, msg.height = camera.image_size
+    msg.distortion_model = "plumb_bob"
+    msg.d = [float(v) for v in camera.dist]
+    msg.k = camera.camera_matrix.ravel().astype(float)
+    msg.r = np.eye(3).ravel()
+    ideal = camera.ideal().camera_matrix
+    msg.p = np.hstack([ideal, np.zeros((3, 1))]).ravel()
+    return msg
+
+
+def info_to_camera(msg: CameraInfo) -> BrownCamera:
+    """The calibrated camera in a CameraInfo; ValueError (with the reason) for an uncalibrated or bad one."""
+    if msg.distortion_model != "plumb_bob" and np.any(np.asarray(msg.d, float) != 0):
+        raise ValueError(f"distortion model {msg.distortion_model!r} is not supported (plumb_bob)")
+    k = np.asarray(msg.k, float).reshape(3, 3)
+    if not np.all(np.isfinite(k)) or k[0, 0] <= 0 or k[1, 1] <= 0:
+        raise ValueError("camera matrix is zero or not finite (an uncalibrated camera_info)")
+    dist = np.zeros(5)
+    d = np.asarray(msg.d, float)[:5]
+    if not np.all(np.isfinite(d)):
+        raise ValueError("distortion coefficients are not finite")
+    dist[: d.size] = d
+    if msg.width == 0 or msg.height == 0:
+        raise ValueError("camera_info has no image size")
+    return BrownCamera.from_opencv(k, dist, (msg.width, msg.height))
