@@ -1,0 +1,54 @@
+"""Frame sources of the camera node: end of file, unreadable frames, loops, globs, bad sources."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from veg_area_ros.sources import FolderSource, SourceError, SyntheticSource, VideoSource, open_source
+
+
+def test_folder_ends_loops_and_reports_unreadable_frames(tmp_path):
+    cv2.imwrite(str(tmp_path / "a.png"), np.zeros((4, 6, 3), np.uint8))
+    (tmp_path / "b.png").write_bytes(b"not an image")
+    source = open_source(str(tmp_path))
+    assert isinstance(source, FolderSource) and source.read().shape == (4, 6, 3)
+    with pytest.raises(SourceError, match=r"b\.png"):
+        source.read()
+    assert source.read() is None  # the end, cleanly
+    looping = open_source(str(tmp_path / "*.png"), loop=True)
+    assert looping.read() is not None
+    with pytest.raises(SourceError):
+        looping.read()
+    assert looping.read() is not None  # started over
+
+
+def test_video_end_and_loop(tmp_path):
+    path = tmp_path / "v.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 5, (32, 24))
+    for k in range(3):
+        writer.write(np.full((24, 32, 3), 40 * k, np.uint8))
+    writer.release()
+    once = open_source(str(path))
+    assert isinstance(once, VideoSource)
+    assert [once.read() is not None for _ in range(4)] == [True, True, True, False]
+    looping = open_source(str(path), loop=True)
+    assert all(looping.read() is not None for _ in range(7))
+
+
+def test_bad_sources_say_why(tmp_path):
+    with pytest.raises(SourceError, match="not 'synthetic'"):
+        open_source(str(tmp_path / "nothing*.png"))
+    with pytest.raises(SourceError, match="synthetic scene"):
+        SyntheticSource("teapot")
+
+
+def test_synthetic_source_shows_board_views_then_the_cube():
+    source = SyntheticSource("board_then_cube", "water", board_passes=1)
+    first = source.read()
+    assert first.shape == (480, 640, 3)
+    source.index = source.board_frames  # skip the rest of the board views
+    cube = source.read()
+    assert cube.shape == (480, 640, 3) and not np.array_equal(cube, first)
+    assert source.true_area_m2 == pytest.approx(0.1027**2, rel=1e-6)
