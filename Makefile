@@ -36,6 +36,7 @@ lint: install
 
 bench: install
 	$(PY) bench/calibration_speed.py
+	$(PY) bench/area_speed.py
 
 clean:
 	rm -rf $(VENV) build .pytest_cache
