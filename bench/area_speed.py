@@ -8,28 +8,19 @@ measured in one run. Prints ms per frame and ratios, and the share of a 30 fps f
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import cv2
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from timing import median_seconds  # bench/ is the script's folder, first on sys.path
+
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.classify import Classifier
 from veg_area_ros.scale import TargetsSpec
 from veg_area_ros.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, FlatPort, cube_scene, render_scene
-
-
-def median_ms(function, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        started = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - started)
-    return 1000 * statistics.median(times)
 
 
 def main() -> int:
@@ -46,9 +37,9 @@ def main() -> int:
         ideal = cv2.undistort(frame, ENDOSCOPE.camera_matrix, ENDOSCOPE.dist)
         cv2.threshold(cv2.cvtColor(ideal, cv2.COLOR_BGR2GRAY), 120, 255, cv2.THRESH_BINARY_INV)
 
-    copy_ms = median_ms(lambda: frame.copy(), args.repeats)
-    naive_ms = median_ms(naive, args.repeats)
-    core_ms = median_ms(lambda: measurer.measure(frame), args.repeats)
+    copy_ms = 1000 * median_seconds(lambda: frame.copy(), args.repeats)
+    naive_ms = 1000 * median_seconds(naive, args.repeats)
+    core_ms = 1000 * median_seconds(lambda: measurer.measure(frame), args.repeats)
     print(f"640x480 bgr8, median of {args.repeats}")
     print(f"  memory copy                      {copy_ms:8.3f} ms")
     print(f"  naive undistort + threshold      {naive_ms:8.3f} ms  ({naive_ms / copy_ms:6.1f}x copy)")

@@ -7,9 +7,7 @@ cv2.calibrateCamera on the very same detections, measured in one run. Prints rat
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import cv2
@@ -17,18 +15,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from timing import median_seconds  # bench/ is the script's folder, first on sys.path
+
 from veg_area_ros.board import BoardSpec
 from veg_area_ros.calibration import View, calibrate
 from veg_area_ros.synthetic import ENDOSCOPE, board_views, render_board_views
-
-
-def median_seconds(function, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        started = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - started)
-    return statistics.median(times)
 
 
 def main() -> None:

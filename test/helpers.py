@@ -52,11 +52,7 @@ def render_views(seed: int, count: int = 15, port: FlatPort | None = None, spec:
 def calibrated_endoscope(medium: str):
     """The synthetic endoscope calibrated in `medium` ('air' or 'water') at 0.7 m, the measuring distance,
     from 15 rendered 9x6 chessboard views (seed 3); computed once per test session."""
-    from veg_area_ros.calibration import View, calibrate
+    from veg_area_ros.reproduction import CONDITIONS, SETUPS, calibrate_synthetic
 
-    port = FlatPort() if medium == "water" else None
-    board = BoardSpec.parse("chessboard:9x6:0.04")
-    rng = np.random.default_rng(3)
-    poses = board_views(ENDOSCOPE, board, 15, 0.7, rng, port=port)
-    images = render_board_views(ENDOSCOPE, board, poses, port=port, rng=rng)
-    return calibrate([View(str(i), board.detect(im)) for i, im in enumerate(images)], ENDOSCOPE.image_size).camera
+    condition = next(c for c in CONDITIONS if c.name == {"air": "air", "water": "water tank"}[medium])
+    return calibrate_synthetic(SETUPS["endoscope"], condition, np.random.default_rng(3)).camera

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from .camera_model import BrownCamera
-from .classify import Classifier, ClassifyError, polygon_roi
+from .classify import Classifier, ClassifyError, check_polygon, polygon_roi
 from .idealize import Idealizer
 from .scale import DetectedMarker, PlaneScale, TargetsError, TargetsSpec, detect_markers, marker_centre
 
@@ -57,7 +57,7 @@ class AreaMeasurer:
         self.idealizer = Idealizer(camera) if camera is not None else None
         self.targets = targets
         self.classifier = classifier
-        self.roi_polygon = None if roi is None else np.asarray(roi, float).reshape(-1, 2)
+        self.roi_polygon = None if roi is None else check_polygon(roi)  # refused now, not at every frame
         self.threshold_delta = threshold_delta
         self._rng = np.random.default_rng(seed)
         self._hand_pixels = self._idealize_points(np.array([p for p, _ in targets.points]).reshape(-1, 2))
@@ -66,7 +66,7 @@ class AreaMeasurer:
         """Hand-picked raw-frame pixels -> the idealized image."""
         if self.camera is None or len(raw_pixels) == 0:
             return raw_pixels
-        return self.camera.ideal().normalized_to_pixels(self.camera.pixels_to_normalized(raw_pixels))
+        return self.idealizer.ideal.normalized_to_pixels(self.camera.pixels_to_normalized(raw_pixels))
 
     def _find_markers(self, frame: np.ndarray) -> dict:
         """Markers found in the raw frame (all of it: idealization pushes the periphery of a barrel-distorted

@@ -162,7 +162,8 @@ def _view_roll_deg(camera: BrownCamera, detection: Detection, rvec: np.ndarray, 
     return float(np.degrees(np.arctan2(dv, du)))
 
 
-def _coverage(image_points: Sequence[np.ndarray], width: int, height: int, nx: int, ny: int) -> np.ndarray:
+def coverage_grid(image_points: Sequence[np.ndarray], width: int, height: int, nx: int, ny: int) -> np.ndarray:
+    """Which cells of an nx x ny grid over the image hold at least one of the points."""
     grid = np.zeros((ny, nx), bool)
     for points in image_points:
         ix = np.clip((points[:, 0] / width * nx).astype(int), 0, nx - 1)
@@ -185,7 +186,7 @@ def _weak_geometry_warnings(
         warnings.append(
             f"no view is rotated by about 90 degrees (largest rotation between views {separation:.0f} deg): "
             "the principal point is poorly determined; add views with the camera or board turned by 90 deg")
-    cells = _coverage(image_points, width, height, 3, 3)
+    cells = coverage_grid(image_points, width, height, 3, 3)
     missing = [name for name, (r, c) in
                {"top-left": (0, 0), "top-right": (0, 2), "bottom-left": (2, 0), "bottom-right": (2, 2)}.items()
                if not cells[r, c]]
@@ -323,7 +324,7 @@ def calibrate(
     err = np.hypot(*residuals.reshape(-1, 2).T)
     used_points = [views[v].detection.image_points[keep[v]] for v in active]
     warnings = _weak_geometry_warnings(reports, used_points, correlation, width, height)
-    coverage = float(_coverage(used_points, width, height, 8, 6).mean())
+    coverage = float(coverage_grid(used_points, width, height, 8, 6).mean())
     say(f"done: RMS {np.sqrt(np.mean(err**2)):.4f} px over {len(active)} views")
     return CalibrationResult(
         camera=camera, std=dict(zip(PARAM_NAMES, map(float, std_values), strict=True)), correlation=correlation,

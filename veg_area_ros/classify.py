@@ -72,14 +72,20 @@ class Classifier:
         return mask
 
 
-def polygon_roi(shape: tuple[int, int], polygon: np.ndarray, holes: list[np.ndarray] = ()) -> np.ndarray:
-    """uint8 ROI mask: inside `polygon` (N, 2 px) and outside every hole polygon."""
-    roi = np.zeros(shape[:2], np.uint8)
+def check_polygon(polygon) -> np.ndarray:
+    """A region-of-interest polygon as (N, 2) floats; ClassifyError unless it has 3+ corners enclosing area."""
     polygon = np.asarray(polygon, float).reshape(-1, 2)
     if len(polygon) < 3:
         raise ClassifyError(f"a region of interest needs at least 3 corners, got {len(polygon)}")
-    if cv2.contourArea(polygon.astype(np.float32)) < 1.0:
+    if not np.all(np.isfinite(polygon)) or cv2.contourArea(polygon.astype(np.float32)) < 1.0:
         raise ClassifyError("the region of interest is empty (its corners enclose no area)")
+    return polygon
+
+
+def polygon_roi(shape: tuple[int, int], polygon: np.ndarray, holes: list[np.ndarray] = ()) -> np.ndarray:
+    """uint8 ROI mask: inside `polygon` (N, 2 px) and outside every hole polygon."""
+    roi = np.zeros(shape[:2], np.uint8)
+    polygon = check_polygon(polygon)
     shift = 4
     cv2.fillPoly(roi, [np.round(polygon * 2**shift).astype(np.int32)], 255, cv2.LINE_8, shift)
     for hole in holes:

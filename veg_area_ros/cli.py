@@ -170,7 +170,7 @@ def _threshold(text: str) -> float | str:
 
 
 def _roi(text: str):
-    import numpy as np
+    from .classify import ClassifyError, check_polygon
 
     try:
         values = [float(v) for v in text.replace(" ", "").split(",") if v]
@@ -178,15 +178,14 @@ def _roi(text: str):
         raise argparse.ArgumentTypeError(f"expected x1,y1,x2,y2,x3,y3,... in pixels, got {text!r}") from exc
     if len(values) % 2 or len(values) < 6 or not all(math.isfinite(v) for v in values):
         raise argparse.ArgumentTypeError(f"needs at least 3 x,y corner pairs, got {text!r}")
-    polygon = np.array(values).reshape(-1, 2)
-    x, y = polygon.T
-    if abs(np.dot(x, np.roll(y, 1)) - np.dot(y, np.roll(x, 1))) / 2 < 1.0:
-        raise argparse.ArgumentTypeError(f"the region {text!r} is empty: its corners enclose no area")
-    return polygon
+    try:
+        return check_polygon(values)
+    except ClassifyError as exc:
+        raise argparse.ArgumentTypeError(f"the region {text!r} is empty: its corners enclose no area") from exc
 
 
 def _frame_file_name(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(name).stem if c) + ".png"
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(name).stem) + ".png"
 
 
 CSV_COLUMNS = ("frame", "time_s", "area_m2", "area_std_m2", "pixel_count", "threshold", "scale_m_per_px",

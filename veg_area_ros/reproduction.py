@@ -88,7 +88,8 @@ class Row:
     paper_calibrated_pct: float | None
 
 
-def _calibrate(setup: Setup, condition: Condition, rng: np.random.Generator):
+def calibrate_synthetic(setup: Setup, condition: Condition, rng: np.random.Generator):
+    """Calibrate `setup`'s camera on board views rendered in `condition` at the measuring distance."""
     board = BoardSpec.parse(BOARD)
     poses = board_views(setup.camera, board, setup.views, DISTANCE_M, rng, port=condition.port)
     images = render_board_views(setup.camera, board, poses, port=condition.port, rng=rng,
@@ -114,7 +115,7 @@ def run(cameras: tuple[str, ...] = ("endoscope", "dslr"), progress: Callable[[st
         for condition in CONDITIONS:
             started = time.perf_counter()
             rng = np.random.default_rng(seed)
-            calibration = _calibrate(setup, condition, rng)
+            calibration = calibrate_synthetic(setup, condition, rng)
             progress(f"{camera_name}, {condition.name}: calibrated on {calibration.views_used} views, "
                      f"RMS {calibration.rms_px:.3f} px ({time.perf_counter() - started:.0f} s)")
             for object_name, scene in scenes.items():

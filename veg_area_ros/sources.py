@@ -15,7 +15,16 @@ import numpy as np
 
 from .board import BoardSpec
 from .frames import IMAGE_SUFFIXES, read_image
-from .synthetic import ENDOSCOPE, FlatPort, board_views, bush_scene, cube_scene, render_board_views, render_scene
+from .synthetic import (
+    ENDOSCOPE,
+    FlatPort,
+    board_views,
+    bush_scene,
+    cube_scene,
+    degrade,
+    render_board_views,
+    render_scene,
+)
 
 SYNTHETIC_SCENES = ("cube", "bush", "board", "board_then_cube")
 SYNTHETIC_BOARD = "chessboard:9x6:0.04"  # what the synthetic calibration views show (calibration_node's default)
@@ -66,8 +75,7 @@ class SyntheticSource:
         return self._board_cache[k]
 
     def _noisy(self, clean: np.ndarray) -> np.ndarray:
-        noise = self._rng.normal(0.0, 1.0, clean.shape).astype(np.float32)
-        return np.clip(np.rint(clean.astype(np.float32) + noise), 0, 255).astype(np.uint8)
+        return degrade(clean, self._rng, noise_sigma=1.0)
 
     def read(self) -> np.ndarray | None:
         k = self.index

@@ -18,7 +18,7 @@ from std_srvs.srv import Trigger
 from .. import __version__
 from ..board import BoardSpec, BoardSpecError
 from ..calib_io import CalibrationFileError, quality_rms, read_calibration, write_calibration
-from ..calibration import CalibrationError, View, calibrate
+from ..calibration import CalibrationError, View, calibrate, coverage_grid
 from ..camera_model import BrownCamera
 from ..sources import SYNTHETIC_BOARD
 from .camera_node import url_to_path
@@ -105,7 +105,7 @@ class CalibrationNode(Node):
         if detection is None:
             return
         signature = pose_signature(detection.image_points, size)
-        cells = self._cells(detection.image_points, size)
+        cells = coverage_grid([detection.image_points], *size, 3, 3)
         new_cells = cells & ~self.covered
         nearest = min((np.linalg.norm(signature - s) for s in self.signatures), default=math.inf)
         if nearest < NEW_POSE_DISTANCE and not new_cells.any():
@@ -117,14 +117,6 @@ class CalibrationNode(Node):
                      f"{self.covered.mean():.0%})")
         if self.auto_calibrate and len(self.views) >= self.min_views:
             self._fit()
-
-    @staticmethod
-    def _cells(points: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-        cells = np.zeros((3, 3), bool)
-        col = np.clip((points[:, 0] * 3 / size[0]).astype(int), 0, 2)
-        row = np.clip((points[:, 1] * 3 / size[1]).astype(int), 0, 2)
-        cells[row, col] = True
-        return cells
 
     def _report(self, text: str, **extra) -> None:
         self.get_logger().info(text)

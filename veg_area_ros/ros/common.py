@@ -27,10 +27,8 @@ def declare(node: Node, name: str, default, description: str, *, low: float | No
     """Declare a parameter with a descriptor (and a range or the allowed values in its description)."""
     text = description + (f" One of: {', '.join(choices)}." if choices else "")
     descriptor = ParameterDescriptor(description=text, read_only=read_only)
-    if low is not None and high is not None:
-        if isinstance(default, bool):
-            pass
-        elif isinstance(default, int):
+    if low is not None and high is not None and not isinstance(default, bool):
+        if isinstance(default, int):
             descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=0)]
         elif isinstance(default, float):
             descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high),

@@ -3,7 +3,6 @@ the main job: synthetic camera -> calibration from board views -> Af of the cube
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -73,14 +72,11 @@ def run_graph(output: Path, measurements: int = 10, timeout_s: float = 300.0, ra
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="camera, calibration and area nodes in one process")
-    parser.parse_known_args(argv)
+    """graph_node: the three nodes composed in one process, each with its own parameters and names."""
     from .common import run_nodes
 
     return run_nodes([CameraNode, CalibrationNode, AreaNode], argv if argv is not None else sys.argv)
 
 
 if __name__ == "__main__":
-    import sys
-
     sys.exit(main(sys.argv))
