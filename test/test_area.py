@@ -58,9 +58,12 @@ def test_two_markers_give_the_papers_distance_scale(calibrated):
     frame = render_scene(ENDOSCOPE, SCENE, 0.7, port)
     top = targets((0, 1))
     roi = np.array([[200, 150], [440, 150], [440, 330], [200, 330]], float)
-    result = AreaMeasurer(camera, top, Classifier(threshold=120), roi=roi).measure(frame)
-    assert result.scale.kind == "distance"
-    assert result.area_m2 == pytest.approx(result.pixel_count * result.scale.metres_per_pixel**2, rel=1e-12)
+    measurer = AreaMeasurer(camera, top, Classifier(threshold=120), roi=roi)
+    result, paper = measurer.measure(frame), measurer.measure_idealized(frame)
+    assert result.scale.kind == paper.scale.kind == "distance"
+    # the paper's Af = count x scale² on the idealized image; the raw-pixel weights agree with it
+    assert paper.area_m2 == pytest.approx(paper.pixel_count * paper.scale.metres_per_pixel**2, rel=1e-12)
+    assert result.area_m2 == pytest.approx(paper.area_m2, rel=0.002)
     assert abs(result.area_m2 / SCENE.true_area_m2 - 1) <= 0.01
 
 
@@ -88,12 +91,12 @@ def test_missing_targets_are_reported_not_guessed():
 def test_a_missing_marker_is_reported_and_its_place_still_bounds_the_roi():
     camera = calibrated_endoscope("water")
     frame = render_scene(ENDOSCOPE, SCENE, 0.7, FlatPort())
-    full = AreaMeasurer(camera, targets(), Classifier(threshold=120)).measure(frame)
+    full = AreaMeasurer(camera, targets(), Classifier(threshold=120)).measure(frame, keep_images=True)
     hidden = frame.copy()
     marker = detect_markers(frame, SCENE.dictionary)[2]
     cv2.fillConvexPoly(hidden, np.round(marker.centre + 1.3 * (marker.corners - marker.centre)).astype(np.int32),
                        (200, 200, 200))
-    result = AreaMeasurer(camera, targets(), Classifier(threshold=120)).measure(hidden)
+    result = AreaMeasurer(camera, targets(), Classifier(threshold=120)).measure(hidden, keep_images=True)
     assert result.missing_targets == [2] and result.scale.kind == "affine"
     # the ROI is the whole target frame, not the triangle of the three found: the cube is counted whole
     assert abs(result.area_m2 / SCENE.true_area_m2 - 1) <= 0.01

@@ -1,8 +1,15 @@
-"""Projected area Af of an object in a frame: idealize, locate the targets, classify, sum pixel areas.
+"""Projected area Af of an object in a frame: locate the targets, classify, sum pixel areas.
 
-No ROS here. Af = Σ over object pixels of their metric footprint on the object plane (constant for the
-paper's two-target scale, varying over the image for a homography), with an uncertainty combining the
-scale (target localisation, calliper distances) and the classification (threshold sensitivity).
+No ROS here. Af = Σ over the object's pixels of the raw frame of each pixel's metric footprint on the object
+plane: the idealized-image area the pixel covers (from the calibration) times the metric area of an
+idealized pixel there (from the scale or homography). The weights are built once and rebuilt only when the
+targets move; the frame itself is never resampled, and one 2-D histogram (band value x weight level) gives
+Af for every threshold at once — the sweep and the threshold sensitivity come free. The idealize-then-count
+path of the paper (`measure_idealized`) stays as the reference the fast path is tested against.
+
+The weights are quantized into 256 levels (each level's weight is the mean of its pixels' exact weights) and,
+while the targets stay put, carried to each frame's scale fit by its ratio at the ROI's centre; every result
+reports the bound both put on Af (`weight_error_bound`, relative: 2e-4 to 1e-3 for the endoscope).
 """
 
 from __future__ import annotations
@@ -15,9 +22,12 @@ import numpy as np
 from .camera_model import BrownCamera
 from .classify import Classifier, ClassifyError, check_polygon, polygon_roi
 from .idealize import Idealizer
-from .scale import DetectedMarker, PlaneScale, TargetsError, TargetsSpec, detect_markers, marker_centre
+from .scale import DetectedMarker, PlaneScale, TargetsError, TargetsSpec, marker_centre, track_markers
 
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
+WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per frame
+ROI_TOLERANCE_PX = 0.5  # targets moved further than this (idealized px) since the weights were built: rebuild
+SCALE_TOLERANCE = 2e-4  # the scale changed unevenly by more than this (relative) over the ROI: rebuild
 
 
 @dataclass
@@ -36,6 +46,7 @@ class AreaResult:
     roi: np.ndarray | None = field(default=None, repr=False)
     image: np.ndarray | None = field(default=None, repr=False)  # the idealized frame
     target_pixels: dict[str, np.ndarray] = field(default_factory=dict)  # "marker 3" / "point 0" -> idealized px
+    weight_error_bound: float = 0.0  # relative bound on Af from quantizing the pixel weights
 
     def summary(self) -> dict:
         return {
@@ -45,104 +56,254 @@ class AreaResult:
             "threshold": self.threshold, "calibrated": self.calibrated,
             "scale_std_m2": self.scale_std_m2, "threshold_std_m2": self.threshold_std_m2,
             "missing_targets": list(self.missing_targets), "sweep": [list(s) for s in self.sweep],
+            "weight_error_bound": self.weight_error_bound,
         }
 
 
+@dataclass
+class _Located:
+    """The targets of one frame, in the idealized image, and the scale they give."""
+    scale: PlaneScale
+    pixels: list[np.ndarray]
+    labels: list[str]
+    missing: list[int]
+    holes: list[np.ndarray]  # marker squares (enlarged) to cut out of the default ROI
+    offsets: list[np.ndarray]  # found markers' corners relative to their centre
+
+
+@dataclass
+class _Weights:
+    """Per-pixel metric areas of the raw frame inside the ROI, quantized to levels, for one target layout."""
+    window: tuple[slice, slice]  # the ROI's bounding box in the raw frame
+    roi: np.ndarray  # uint8 raw-frame ROI inside the window
+    levels: np.ndarray  # uint8 weight level of every window pixel
+    level_area: np.ndarray  # (WEIGHT_LEVELS,) m², the mean exact weight of the ROI pixels at each level
+    error_bound: float  # max over ROI pixels of |quantized - exact| / exact
+    roi_ideal: np.ndarray  # the same ROI in the idealized image (for overlays)
+    scale: PlaneScale  # the fit the weights were built with
+    labels: list[str]
+    pixels: np.ndarray  # target positions the weights were built with
+    corners: np.ndarray  # ROI polygon corners (idealized px): where a homography's change is extreme
+    centre: np.ndarray  # ROI centroid (idealized px)
+    relative_scale_std: float
+
+
+def _centroid(mask: np.ndarray) -> np.ndarray:
+    moments = cv2.moments(mask, binaryImage=True)
+    return np.array([moments["m10"], moments["m01"]]) / moments["m00"]
+
+
 class AreaMeasurer:
-    """Measures frames of one camera; the idealization maps are built once."""
+    """Measures the frames of one camera: per-pixel geometry once per camera, weights once per target layout."""
 
     def __init__(self, camera: BrownCamera | None, targets: TargetsSpec, classifier: Classifier,
-                 roi: np.ndarray | None = None, threshold_delta: float = 5.0, seed: int = 0):
+                 roi: np.ndarray | None = None, threshold_delta: float = 5.0):
         self.camera = camera
         self.idealizer = Idealizer(camera) if camera is not None else None
         self.targets = targets
         self.classifier = classifier
         self.roi_polygon = None if roi is None else check_polygon(roi)  # refused now, not at every frame
         self.threshold_delta = threshold_delta
-        self._rng = np.random.default_rng(seed)
         self._hand_pixels = self._idealize_points(np.array([p for p, _ in targets.points]).reshape(-1, 2))
+        self._markers: dict[int, DetectedMarker] = {}  # raw-frame markers of the previous frame
+        self._geometry: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._weights: _Weights | None = None
+        self.rebuilds = 0  # how often the weights were (re)built: once for a steady camera
 
     def _idealize_points(self, raw_pixels: np.ndarray) -> np.ndarray:
-        """Hand-picked raw-frame pixels -> the idealized image."""
+        """Raw-frame pixels -> the idealized image."""
         if self.camera is None or len(raw_pixels) == 0:
             return raw_pixels
         return self.idealizer.ideal.normalized_to_pixels(self.camera.pixels_to_normalized(raw_pixels))
 
-    def _find_markers(self, frame: np.ndarray) -> dict:
-        """Markers found in the raw frame (all of it: idealization pushes the periphery of a barrel-distorted
-        frame out of view), their corners mapped into the idealized image, the centre intersected there."""
-        found = detect_markers(frame, self.targets.dictionary)
-        if self.camera is None:
-            return found
-        return {marker_id: DetectedMarker(marker_centre(ideal), ideal)
-                for marker_id, marker in found.items()
-                for ideal in [self._idealize_points(marker.corners)]}
+    def _check_size(self, frame: np.ndarray) -> None:
+        if self.idealizer is not None:
+            self.idealizer.check(frame)
 
-    def measure(self, frame: np.ndarray) -> AreaResult:
-        image = self.idealizer(frame) if self.idealizer is not None else frame
-        pixels, planes, holes, missing, labels = [], [], [], [], []
-        offsets = []  # marker corners relative to their centre, to cut missing markers out of the ROI
+    def _locate(self, frame: np.ndarray) -> _Located:
+        """Markers found in the raw frame (all of it: idealization pushes the periphery of a barrel-distorted
+        frame out of view), their corners mapped into the idealized image and the centre intersected there;
+        hand-picked points; the scale fit."""
+        located = _Located(None, [], [], [], [], [])
         if self.targets.markers:
-            found = self._find_markers(frame)
-            for marker_id, plane in self.targets.markers.items():
-                if marker_id not in found:
-                    missing.append(marker_id)
+            self._markers = track_markers(frame, self.targets.dictionary, self._markers)
+            for marker_id in self.targets.markers:
+                if marker_id not in self._markers:
+                    located.missing.append(marker_id)
                     continue
-                marker = found[marker_id]
-                pixels.append(marker.centre)
-                planes.append(plane)
-                labels.append(f"marker {marker_id}")
-                offsets.append(marker.corners - marker.centre)
-                holes.append(marker.centre + MARKER_EXCLUSION * offsets[-1])
+                corners = self._idealize_points(self._markers[marker_id].corners)
+                centre = marker_centre(corners)
+                located.pixels.append(centre)
+                located.labels.append(f"marker {marker_id}")
+                located.offsets.append(corners - centre)
+                located.holes.append(centre + MARKER_EXCLUSION * located.offsets[-1])
+        planes = [self.targets.markers[int(label.split()[1])] for label in located.labels]
         for k, ((_, plane), pixel) in enumerate(zip(self.targets.points, self._hand_pixels, strict=True)):
-            pixels.append(pixel)
+            located.pixels.append(pixel)
+            located.labels.append(f"point {k}")
             planes.append(plane)
-            labels.append(f"point {k}")
-        if len(pixels) < 2:
-            raise TargetsError(f"only {len(pixels)} target(s) found in the frame; missing marker ids {missing}")
-        scale = PlaneScale.fit(np.array(pixels), np.array(planes), self.targets.distance_std_m,
-                               self.targets.pixel_std)
+        if len(located.pixels) < 2:
+            raise TargetsError(f"only {len(located.pixels)} target(s) found in the frame; "
+                               f"missing marker ids {located.missing}")
+        located.scale = PlaneScale.fit(np.array(located.pixels), np.array(planes), self.targets.distance_std_m,
+                                       self.targets.pixel_std)
+        return located
+
+    def _roi_polygon(self, located: _Located) -> tuple[np.ndarray, list[np.ndarray]]:
+        """The ROI polygon and holes in the idealized image: the user's, or by default the frame of ALL listed
+        targets (a missing one placed by the others' fit, for the ROI only) without the marker squares."""
         if self.roi_polygon is not None:
-            roi = polygon_roi(image.shape, self.roi_polygon)
-        else:
-            if scale.kind == "distance":
-                raise ClassifyError("two targets do not enclose a region; give the region of interest (--roi)")
-            # the frame of ALL listed targets: a missing one is placed by the others' fit, for the ROI only
-            corners = scale.plane_to_pixels(self.targets.all_planes())
-            for marker_id in missing:
-                centre = scale.plane_to_pixels(self.targets.markers[marker_id][None])[0]
-                holes.append(centre + MARKER_EXCLUSION * np.mean(offsets, axis=0))
-            hull = cv2.convexHull(corners.astype(np.float32)).reshape(-1, 2)
-            roi = polygon_roi(image.shape, hull, holes)
+            return self.roi_polygon, []
+        scale = located.scale
+        if scale.kind == "distance":
+            raise ClassifyError("two targets do not enclose a region; give the region of interest (--roi)")
+        holes = list(located.holes)
+        for marker_id in located.missing:
+            centre = scale.plane_to_pixels(self.targets.markers[marker_id][None])[0]
+            holes.append(centre + MARKER_EXCLUSION * np.mean(located.offsets, axis=0))
+        hull = cv2.convexHull(scale.plane_to_pixels(self.targets.all_planes()).astype(np.float32)).reshape(-1, 2)
+        return hull.astype(float), holes
+
+    def _roi_ideal(self, shape: tuple[int, ...], located: _Located) -> tuple[np.ndarray, np.ndarray]:
+        polygon, holes = self._roi_polygon(located)
+        roi = polygon_roi(shape, polygon, holes)
         if self.idealizer is not None:
             roi &= self.idealizer.valid_mask()  # never count the black border the remap leaves
+        return roi, polygon
+
+    def _pixel_geometry(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every raw pixel's position in the idealized image (u, v float32 maps) and the idealized-image area
+        it covers; once per camera, in row blocks to bound the memory of a 10-megapixel frame."""
+        if self._geometry is None:
+            ideal_u = np.empty((height, width), np.float32)
+            ideal_v, area = np.empty_like(ideal_u), np.ones_like(ideal_u)
+            u = np.arange(width, dtype=float)
+            if self.camera is None:
+                ideal_u[:] = u
+                ideal_v[:] = np.arange(height, dtype=np.float32)[:, None]
+            for top in range(0, height, 256) if self.camera is not None else ():
+                rows = np.arange(top, min(top + 256, height), dtype=float)
+                uv = np.column_stack([np.tile(u, len(rows)), np.repeat(rows, width)])
+                ideal, block_area = self.camera.pixels_to_ideal(uv)
+                ideal_u[top:top + len(rows)] = ideal[:, 0].reshape(len(rows), width)
+                ideal_v[top:top + len(rows)] = ideal[:, 1].reshape(len(rows), width)
+                area[top:top + len(rows)] = block_area.reshape(len(rows), width)
+            self._geometry = ideal_u, ideal_v, area
+        return self._geometry
+
+    def _build_weights(self, frame: np.ndarray, located: _Located) -> _Weights:
+        height, width = frame.shape[:2]
+        ideal_u, ideal_v, ideal_area = self._pixel_geometry(height, width)
+        roi_ideal, polygon = self._roi_ideal(frame.shape, located)
+        roi_raw = cv2.remap(roi_ideal, ideal_u, ideal_v, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT)
+        x, y, w, h = cv2.boundingRect(roi_raw)
+        if w == 0 or h == 0:
+            raise ClassifyError("the region of interest is empty")
+        window = (slice(y, y + h), slice(x, x + w))
+        roi = np.ascontiguousarray(roi_raw[window])
+        inside = roi > 0
+        uv = np.column_stack([ideal_u[window][inside], ideal_v[window][inside]])
+        exact = ideal_area[window][inside] * located.scale.pixel_area(uv)
+        low, high = exact.min(), exact.max()
+        step = (high - low) / (WEIGHT_LEVELS - 1) if high > low else 1.0
+        level = np.rint((exact - low) / step).astype(np.uint8)
+        counts = np.bincount(level, minlength=WEIGHT_LEVELS)
+        level_area = np.bincount(level, exact, WEIGHT_LEVELS) / np.maximum(counts, 1)
+        levels = np.zeros(roi.shape, np.uint8)
+        levels[inside] = level
+        centre = _centroid(roi_ideal)
+        self.rebuilds += 1
+        return _Weights(window, roi, levels, level_area, float(np.max(np.abs(level_area[level] - exact) / exact)),
+                        roi_ideal, located.scale, list(located.labels), np.array(located.pixels), polygon, centre,
+                        located.scale.relative_area_std_at(centre))
+
+    def _weights_for(self, frame: np.ndarray, located: _Located) -> tuple[_Weights, float, float]:
+        """The weights for this frame's targets, the factor that carries them to this frame's scale and the
+        relative error bound of that factor; rebuilt when the target layout changed, the targets moved, or
+        the scale changed unevenly over the ROI (sensor noise moves the targets by ~0.01 px: no rebuild)."""
+        weights = self._weights
+        if (weights is not None and weights.labels == located.labels
+                and np.max(np.abs(weights.pixels - np.array(located.pixels))) <= ROI_TOLERANCE_PX):
+            # a scale change is a ratio of two linear-fractional functions: extreme at the ROI's corners
+            points = np.vstack([weights.centre, weights.corners])
+            ratio = located.scale.pixel_area(points) / weights.scale.pixel_area(points)
+            uneven = float(np.max(np.abs(ratio / ratio[0] - 1)))
+            if uneven <= SCALE_TOLERANCE:
+                return weights, float(ratio[0]), uneven
+        self._weights = self._build_weights(frame, located)
+        return self._weights, 1.0, 0.0
+
+    def measure(self, frame: np.ndarray, keep_images: bool = False) -> AreaResult:
+        """Af of one raw frame. `keep_images` also returns the idealized frame, its ROI and the object mask
+        in it (for overlays and the node's image topics; costs a remap)."""
+        self._check_size(frame)
+        located = self._locate(frame)
+        weights, factor, carried = self._weights_for(frame, located)
+        band = self.classifier.index_image(frame[weights.window])
+        threshold = self.classifier.resolve_threshold(band, weights.roi)
+        morphology = self.classifier.open_px or self.classifier.close_px
+        if not morphology:  # Af and pixel count at every band value from one 2-D histogram
+            histogram = cv2.calcHist([band, weights.levels], [0, 1], weights.roi, [256, WEIGHT_LEVELS],
+                                     [0, 256, 0, WEIGHT_LEVELS]).astype(np.float64)
+            cumulative_area = np.cumsum(histogram @ weights.level_area) * factor
+            cumulative_count = np.cumsum(histogram.sum(axis=1))
+
+        def area_and_count(level: float) -> tuple[float, int]:
+            if morphology:
+                mask = self.classifier.mask(band, weights.roi, level)
+                counts = cv2.calcHist([weights.levels], [0], mask, [WEIGHT_LEVELS], [0, WEIGHT_LEVELS]).ravel()
+                return float(counts @ weights.level_area * factor), int(counts.sum())
+            index = int(np.floor(level))
+            if self.classifier.object == "dark":  # band <= level
+                return float(cumulative_area[index]), int(cumulative_count[index])
+            return (float(cumulative_area[-1] - cumulative_area[index]),
+                    int(cumulative_count[-1] - cumulative_count[index]))
+
+        area, count = area_and_count(threshold)
+        delta = self.threshold_delta
+        sweep = [(float(level), area_and_count(level)[0])
+                 for level in threshold + delta * np.arange(-3, 4) if 0 <= level <= 255]
+        threshold_std = abs(area_and_count(min(threshold + delta, 255))[0]
+                            - area_and_count(max(threshold - delta, 0))[0]) / 2
+        scale_std = area * weights.relative_scale_std
+        result = AreaResult(
+            area_m2=area, area_std_m2=float(np.hypot(scale_std, threshold_std)), pixel_count=count,
+            threshold=threshold, calibrated=self.camera is not None, scale=located.scale, scale_std_m2=scale_std,
+            threshold_std_m2=threshold_std, missing_targets=located.missing, sweep=sweep,
+            target_pixels=dict(zip(located.labels, located.pixels, strict=True)),
+            weight_error_bound=weights.error_bound + carried)
+        if keep_images:
+            raw_mask = np.zeros(frame.shape[:2], np.uint8)
+            raw_mask[weights.window] = self.classifier.mask(band, weights.roi, threshold)
+            result.mask = self.idealizer(raw_mask, cv2.INTER_NEAREST) if self.idealizer is not None else raw_mask
+            result.image = self.idealizer(frame) if self.idealizer is not None else frame
+            result.roi = weights.roi_ideal
+        return result
+
+    def measure_idealized(self, frame: np.ndarray) -> AreaResult:
+        """The paper's path, kept as the reference: remap the frame to the ideal camera, classify there and
+        count idealized pixels, each weighted by its metric area."""
+        self._check_size(frame)
+        located = self._locate(frame)
+        image = self.idealizer(frame) if self.idealizer is not None else frame
+        roi, _ = self._roi_ideal(image.shape, located)
         band = self.classifier.index_image(image)
         threshold = self.classifier.resolve_threshold(band, roi)
 
-        areas: dict[float, float] = {}  # the sweep, T and T ± delta share levels: classify each once
+        def area_at(level: float) -> tuple[float, np.ndarray]:
+            v, u = np.nonzero(self.classifier.mask(band, roi, level))
+            return located.scale.area(np.column_stack([u, v])), u
 
-        def area_at(level: float) -> float:
-            level = float(level)
-            if level not in areas:
-                v, u = np.nonzero(self.classifier.mask(band, roi, level))
-                areas[level] = scale.area(np.column_stack([u, v]))
-            return areas[level]
-
-        mask = self.classifier.mask(band, roi, threshold)
-        v, u = np.nonzero(mask)
-        sample = np.column_stack([u, v])
-        area = areas[float(threshold)] = scale.area(sample)
+        area, u = area_at(threshold)
         delta = self.threshold_delta
-        sweep = [(level, area_at(level)) for level in threshold + delta * np.arange(-3, 4) if 0 <= level <= 255]
-        threshold_std = abs(area_at(min(threshold + delta, 255)) - area_at(max(threshold - delta, 0))) / 2
-        if len(sample) > 2000:
-            sample = sample[self._rng.choice(len(sample), 2000, replace=False)]
-        scale_std = area * scale.relative_area_std(self._rng, sample)
+        threshold_std = abs(area_at(min(threshold + delta, 255))[0] - area_at(max(threshold - delta, 0))[0]) / 2
+        scale_std = area * located.scale.relative_area_std_at(_centroid(roi))
         return AreaResult(
             area_m2=area, area_std_m2=float(np.hypot(scale_std, threshold_std)), pixel_count=len(u),
-            threshold=threshold, calibrated=self.camera is not None, scale=scale, scale_std_m2=scale_std,
-            threshold_std_m2=threshold_std, missing_targets=missing, sweep=sweep, mask=mask, roi=roi, image=image,
-            target_pixels=dict(zip(labels, pixels, strict=True)))
+            threshold=threshold, calibrated=self.camera is not None, scale=located.scale, scale_std_m2=scale_std,
+            threshold_std_m2=threshold_std, missing_targets=located.missing,
+            mask=self.classifier.mask(band, roi, threshold), roi=roi, image=image,
+            target_pixels=dict(zip(located.labels, located.pixels, strict=True)))
 
 
 def draw_overlay(result: AreaResult) -> np.ndarray:

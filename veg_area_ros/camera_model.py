@@ -146,6 +146,16 @@ class BrownCamera:
             xy[:, 1] -= (a * error[:, 1] - c * error[:, 0]) / det
         return xy
 
+    def pixels_to_ideal(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Raw pixels (N, 2) -> their position in the idealized image (N, 2) and the idealized-image area that
+        each raw pixel covers (N,), from the analytic Jacobian of the distortion (no finite differences)."""
+        xy = self.pixels_to_normalized(uv)
+        ideal = self.ideal()
+        a, b, c, d = self._distortion_jacobian(xy)
+        # d(raw px)/d(ideal px) = diag(fx, fy) . D . (1 / c); its inverse determinant is the area ratio
+        area = ideal.c**2 / (self.fx * self.fy * np.abs(a * d - b * c))
+        return ideal.normalized_to_pixels(xy), area
+
     def _distortion_jacobian(self, xy: np.ndarray) -> tuple[np.ndarray, ...]:
         """d(x_d, y_d)/d(x, y) as the four entries (dxd/dx, dxd/dy, dyd/dx, dyd/dy)."""
         x, y = xy[:, 0], xy[:, 1]

@@ -14,6 +14,7 @@ import numpy as np
 
 OBJECTS = ("dark", "bright", "green")
 CHANNELS = ("grey", "blue", "green", "red")
+EXCESS_GREEN = np.array([[-0.5, 1.0, -0.5, 128.0]])  # B, G, R, offset -> (2G - R - B) / 2 + 128, saturated
 
 
 class ClassifyError(ValueError):
@@ -45,9 +46,8 @@ class Classifier:
             if self.object == "green":
                 raise ClassifyError("the excess-green index needs a colour (BGR) image")
             return image
-        if self.object == "green":
-            b, g, r = (image[..., k].astype(np.int16) for k in range(3))
-            return np.clip((2 * g - r - b) // 2 + 128, 0, 255).astype(np.uint8)  # ExG, 128 = neutral grey
+        if self.object == "green":  # ExG = 2G - R - B, halved and centred on 128 (neutral grey), in one pass
+            return cv2.transform(image, EXCESS_GREEN)
         if self.channel == "grey":
             return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         return np.ascontiguousarray(image[..., CHANNELS.index(self.channel) - 1])
@@ -55,11 +55,7 @@ class Classifier:
     def resolve_threshold(self, band: np.ndarray, roi: np.ndarray) -> float:
         if self.threshold != "otsu":
             return float(self.threshold)
-        values = band[roi > 0]
-        if values.size == 0:
-            raise ClassifyError("the region of interest is empty")
-        level, _ = cv2.threshold(values.reshape(-1, 1), 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
-        return float(level)
+        return otsu_level(np.bincount(band[roi > 0], minlength=256))
 
     def mask(self, band: np.ndarray, roi: np.ndarray, threshold: float) -> np.ndarray:
         """Object pixels (uint8 0/255) inside the ROI for a given threshold on the band."""
@@ -70,6 +66,25 @@ class Classifier:
                 kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
                 mask = cv2.morphologyEx(mask, op, kernel) & roi
         return mask
+
+
+def otsu_level(counts: np.ndarray) -> float:
+    """Otsu's threshold from a 256-bin histogram of the band in the ROI: the level t that maximises the
+    between-class variance of {<= t} and {> t} (the first such level, as OpenCV chooses)."""
+    counts = np.asarray(counts, float)
+    total = counts.sum()
+    if total == 0:
+        raise ClassifyError("the region of interest is empty")
+    levels = np.arange(len(counts))
+    weight_low = np.cumsum(counts) / total
+    mean_low_sum = np.cumsum(counts * levels) / total
+    mean_all = mean_low_sum[-1]
+    weight_high = 1 - weight_low
+    with np.errstate(divide="ignore", invalid="ignore"):
+        between = weight_low * weight_high * (mean_low_sum / weight_low - (mean_all - mean_low_sum) / weight_high) ** 2
+    eps = np.finfo(np.float32).eps
+    between[(np.minimum(weight_low, weight_high) < eps) | ~np.isfinite(between)] = -1
+    return float(np.argmax(between)) if between.max() >= 0 else 0.0
 
 
 def check_polygon(polygon) -> np.ndarray:

@@ -243,7 +243,7 @@ def cmd_measure(args: argparse.Namespace) -> int:
         try:
             if frame.image is None:
                 raise InputError(f"skipped: {frame.problem}")
-            result = measurer.measure(frame.image)
+            result = measurer.measure(frame.image, keep_images=bool(args.overlay or args.idealized))
         except (InputError, FrameSizeError, TargetsError, ClassifyError) as exc:
             row["error"] = str(exc)
             say(f"[{index}/{total}] {frame.name}: not measured, {exc}")

@@ -17,6 +17,7 @@ No ROS here. All pixel coordinates handed to a PlaneScale are in the idealized i
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 
 import cv2
@@ -132,19 +133,45 @@ def marker_centre(corners: np.ndarray) -> np.ndarray:
     return p0 + s * d1
 
 
-def detect_markers(image: np.ndarray, dictionary: str) -> dict[int, DetectedMarker]:
-    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+@lru_cache(maxsize=8)
+def _detector(dictionary: str) -> cv2.aruco.ArucoDetector:
     parameters = cv2.aruco.DetectorParameters()
     parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)), parameters)
-    corners, ids, _ = detector.detectMarkers(grey)
+    return cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)), parameters)
+
+
+def detect_markers(image: np.ndarray, dictionary: str, offset: tuple[int, int] = (0, 0)) -> dict[int, DetectedMarker]:
+    """ArUco markers in an image (or a window of one: `offset` is the window's top-left in the frame)."""
+    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    corners, ids, _ = _detector(dictionary).detectMarkers(grey)
     found: dict[int, DetectedMarker] = {}
     if ids is None:
         return found
     for marker_corners, marker_id in zip(corners, ids.ravel(), strict=True):
-        c = marker_corners.reshape(4, 2).astype(np.float64)
+        c = marker_corners.reshape(4, 2).astype(np.float64) + offset
         found[int(marker_id)] = DetectedMarker(marker_centre(c), c)
     return found
+
+
+def track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, DetectedMarker]) -> dict[int, DetectedMarker]:
+    """Markers of a video frame: each one looked for in a window around where it was in the previous frame
+    (a few small detections instead of one over the whole frame), the whole frame searched again as soon as
+    one of them is not where it was. With no previous markers, the whole frame."""
+    if previous:
+        height, width = frame.shape[:2]
+        found = {}
+        for marker_id, marker in previous.items():
+            (x0, y0), (x1, y1) = marker.corners.min(axis=0), marker.corners.max(axis=0)
+            margin = max(0.5 * max(x1 - x0, y1 - y0), 8.0)  # room for the quiet zone and a small move
+            left, top = max(int(x0 - margin), 0), max(int(y0 - margin), 0)
+            right, bottom = min(int(np.ceil(x1 + margin)), width), min(int(np.ceil(y1 + margin)), height)
+            window = detect_markers(frame[top:bottom, left:right], dictionary, (left, top))
+            if marker_id not in window:
+                break
+            found[marker_id] = window[marker_id]
+        else:
+            return found
+    return detect_markers(frame, dictionary)
 
 
 @dataclass
@@ -206,18 +233,23 @@ class PlaneScale:
         """Σ of the metric areas of the given pixel centres."""
         return float(self.pixel_area(uv).sum()) if len(uv) else 0.0
 
-    def relative_area_std(self, rng: np.random.Generator, uv_sample: np.ndarray, samples: int = 200) -> float:
-        """Relative standard deviation of an area from the targets' localisation (pixel_std) and the measured
-        distances between them (distance_std_m), by Monte Carlo over the fit."""
-        if len(uv_sample) == 0:
-            return 0.0
-        base = self.area(uv_sample)
-        areas = []
-        for _ in range(samples):
-            pixels = self.pixels + rng.normal(0, self.pixel_std, self.pixels.shape)
-            planes = self.planes + rng.normal(0, self.distance_std_m / np.sqrt(2), self.planes.shape)
-            try:
-                areas.append(PlaneScale.fit(pixels, planes).area(uv_sample))
-            except TargetsError:
+    def relative_area_std_at(self, uv: np.ndarray) -> float:
+        """Relative standard deviation of the metric area of a pixel at `uv` (idealized image) from the targets'
+        localisation (pixel_std per coordinate) and the calliper (distance_std_m / sqrt(2) per plane
+        coordinate), propagated to first order through the fit by central differences."""
+        uv = np.asarray(uv, float).reshape(1, 2)
+        base = self.pixel_area(uv)[0]
+        variance = 0.0
+        for name, sigma, step in (("pixels", self.pixel_std, 1e-3), ("planes", self.distance_std_m / np.sqrt(2), 1e-6)):
+            if sigma == 0:
                 continue
-        return float(np.std(areas) / base) if areas and base > 0 else float("inf")
+            values = getattr(self, name)
+            for index in np.ndindex(values.shape):
+                shifted = []
+                for sign in (1, -1):
+                    moved = values.copy()
+                    moved[index] += sign * step
+                    pixels, planes = (moved, self.planes) if name == "pixels" else (self.pixels, moved)
+                    shifted.append(PlaneScale.fit(pixels, planes).pixel_area(uv)[0])
+                variance += ((shifted[0] - shifted[1]) / (2 * step) * sigma) ** 2
+        return float(np.sqrt(variance) / base)

@@ -126,8 +126,9 @@ class AreaNode(Node):
             log.warning("no calibration yet (camera_info or calibration_file): frames dropped; set "
                         "uncalibrated_frames:=measure to measure them uncalibrated", throttle_duration_sec=10.0)
             return
+        wanted = [pub.get_subscription_count() > 0 for pub in (self.mask_pub, self.rect_pub, self.overlay_pub)]
         try:
-            result = self.measurer.measure(frame)
+            result = self.measurer.measure(frame, keep_images=any(wanted))
         except FrameSizeError as exc:
             log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
             return
@@ -143,10 +144,12 @@ class AreaNode(Node):
         summary.update(stamp={"sec": msg.header.stamp.sec, "nanosec": msg.header.stamp.nanosec},
                        frame_id=msg.header.frame_id)
         publish_safely(self, self.info_pub, String(data=json.dumps(summary)))
-        publish_safely(self, self.mask_pub, image_to_msg(result.mask, msg.header.stamp, msg.header.frame_id))
-        if self.rect_pub.get_subscription_count():
+        # the images cost a remap each: made only for topics somebody listens to (rosbag2 counts)
+        if wanted[0]:
+            publish_safely(self, self.mask_pub, image_to_msg(result.mask, msg.header.stamp, msg.header.frame_id))
+        if wanted[1]:
             publish_safely(self, self.rect_pub, image_to_msg(result.image, msg.header.stamp, msg.header.frame_id))
-        if self.overlay_pub.get_subscription_count():
+        if wanted[2]:
             publish_safely(self, self.overlay_pub,
                            image_to_msg(draw_overlay(result), msg.header.stamp, msg.header.frame_id))
 

@@ -1,0 +1,111 @@
+"""Af from precomputed raw-pixel weights (issue #7): agreement with the paper's idealize-then-count path,
+exactness of the weights, their reuse while the targets stay put, and the windowed marker tracking."""
+
+import cv2
+import numpy as np
+import pytest
+from helpers import calibrated_endoscope
+
+from veg_area_ros.area import SCALE_TOLERANCE, AreaMeasurer
+from veg_area_ros.classify import Classifier, otsu_level
+from veg_area_ros.scale import TargetsSpec, detect_markers, track_markers
+from veg_area_ros.synthetic import DSLR, ENDOSCOPE, FlatPort, bush_scene, cube_scene, render_scene
+
+CUBE, BUSH = cube_scene(), bush_scene(seed=1)
+
+
+def targets(scene=CUBE) -> TargetsSpec:
+    return TargetsSpec.from_dict({"dictionary": scene.dictionary,
+                                  "markers": {i: list(p) for i, p in scene.markers.items()}})
+
+
+@pytest.fixture(scope="module")
+def water_camera():
+    return calibrated_endoscope("water")
+
+
+@pytest.mark.parametrize("scene, classifier, tilt", [
+    (CUBE, Classifier(threshold=120), 0.0),
+    (CUBE, Classifier(threshold=120), 10.0),
+    (CUBE, Classifier(threshold="otsu", open_px=1, close_px=1), 0.0),
+    (BUSH, Classifier(threshold=120), -8.0),
+    (BUSH, Classifier(threshold=168, object="green"), 0.0),  # ExG 168 = grey 120
+])
+def test_raw_pixel_weights_agree_with_idealize_then_count(water_camera, scene, classifier, tilt):
+    """The two paths classify the object's edge differently (the remap interpolates it): they must agree
+    within the edge's own sensitivity, the reference's threshold uncertainty, plus the quantization bound."""
+    frame = render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), tilt_deg=tilt)
+    if classifier.object == "green":  # the renderer is grey: make the dark plant green, keep the markers
+        grey = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        frame = cv2.merge([grey, 100 + grey // 2, grey])  # linear in grey: ExG = 228 - grey / 2
+    measurer = AreaMeasurer(water_camera, targets(scene), classifier)
+    fast, reference = measurer.measure(frame), measurer.measure_idealized(frame)
+    tolerance = reference.threshold_std_m2 + fast.weight_error_bound * fast.area_m2
+    assert abs(fast.area_m2 - reference.area_m2) <= tolerance, (fast.area_m2, reference.area_m2, tolerance)
+    assert fast.threshold == pytest.approx(reference.threshold, abs=3)
+    assert abs(fast.area_m2 - scene.true_area_m2) <= fast.area_std_m2
+
+
+def test_dslr_frame_agrees_too():
+    frame = render_scene(DSLR, CUBE, 0.7, supersample=1)  # 10 megapixels: supersampling takes a minute
+    measurer = AreaMeasurer(DSLR, targets(), Classifier(threshold=120))
+    fast, reference = measurer.measure(frame), measurer.measure_idealized(frame)
+    assert fast.area_m2 == pytest.approx(reference.area_m2, rel=0.001)
+    assert fast.area_m2 == pytest.approx(CUBE.true_area_m2, rel=0.003)
+
+
+def test_weights_are_each_pixels_exact_footprint_within_the_stated_bound(water_camera):
+    """Independently: every dark raw pixel whose idealized position lies in the ROI rectangle contributes
+    (its idealized-image area) x (the homography's metric area there); the ROI edges are background."""
+    frame = render_scene(ENDOSCOPE, CUBE, 0.7, FlatPort(), tilt_deg=6.0)
+    roi = np.array([[230, 160], [410, 160], [410, 320], [230, 320]], float)
+    result = AreaMeasurer(water_camera, targets(), Classifier(threshold=120), roi=roi).measure(frame)
+    v, u = np.nonzero(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) <= 120)
+    ideal, footprint = water_camera.pixels_to_ideal(np.column_stack([u, v]).astype(float))
+    inside = np.all((ideal >= roi[0]) & (ideal <= roi[2]), axis=1)
+    near_edge = np.any((np.abs(ideal - roi[0]) < 2) | (np.abs(ideal - roi[2]) < 2), axis=1)
+    assert not np.any(near_edge & inside), "the test needs background at the ROI's edges"
+    exact = float(np.sum(footprint[inside] * result.scale.pixel_area(ideal[inside])))
+    assert result.pixel_count == np.count_nonzero(inside)
+    assert 0 < result.weight_error_bound < 1e-3
+    assert result.area_m2 == pytest.approx(exact, rel=result.weight_error_bound)
+
+
+def test_weights_are_reused_while_the_targets_stay_and_rebuilt_when_they_move(water_camera):
+    measurer = AreaMeasurer(water_camera, targets(), Classifier(threshold=120))
+    steady = [render_scene(ENDOSCOPE, CUBE, 0.7, FlatPort(), seed=k) for k in range(4)]  # new sensor noise
+    for frame in steady:
+        reused = measurer.measure(frame)
+        fresh = AreaMeasurer(water_camera, targets(), Classifier(threshold=120)).measure(frame)
+        # carried to this frame's scale: only the scale tolerance and the two quantizations differ
+        tolerance = reused.weight_error_bound + fresh.weight_error_bound
+        assert reused.weight_error_bound <= fresh.weight_error_bound + SCALE_TOLERANCE
+        assert reused.area_m2 == pytest.approx(fresh.area_m2, rel=tolerance)
+    assert measurer.rebuilds == 1
+    measurer.measure(render_scene(ENDOSCOPE, CUBE, 0.72, FlatPort(), roll_deg=2.0))  # the camera was bumped
+    assert measurer.rebuilds == 2
+
+
+def test_markers_tracked_in_windows_match_a_full_frame_search():
+    frame = render_scene(ENDOSCOPE, CUBE, 0.7, FlatPort())
+    full = detect_markers(frame, CUBE.dictionary)
+    tracked = track_markers(frame, CUBE.dictionary, full)
+    assert set(tracked) == set(full) == set(CUBE.markers)
+    for marker_id, marker in full.items():
+        np.testing.assert_allclose(tracked[marker_id].corners, marker.corners, atol=0.02)
+    moved = np.roll(frame, (40, -60), axis=(0, 1))  # far outside every window: found by the full search
+    again = track_markers(moved, CUBE.dictionary, full)
+    assert set(again) == set(full)
+    np.testing.assert_allclose(again[0].centre, full[0].centre + np.array([-60, 40]), atol=0.05)
+
+
+def test_otsu_from_the_histogram_is_opencvs_otsu():
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        n = int(rng.integers(10, 4000))
+        modes = rng.uniform(0, 255, 2)
+        values = np.clip(np.concatenate([rng.normal(modes[0], rng.uniform(1, 40), n // 2),
+                                         rng.normal(modes[1], rng.uniform(1, 40), n - n // 2)]), 0, 255)
+        values = values.astype(np.uint8)
+        expected, _ = cv2.threshold(values.reshape(-1, 1), 0, 255, cv2.THRESH_BINARY | cv2.THRESH_OTSU)
+        assert otsu_level(np.bincount(values, minlength=256)) == expected
