@@ -193,6 +193,13 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
     probe.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)), RESULT_QOS)
     probe.create_subscription(CameraInfo, "camera_info", camera_infos.append, LATCHED_QOS)
     inject = probe.create_publisher(Image, "image_raw", IMAGE_QOS)
+    masks: list[dict] = []
+
+    def on_mask(m: Image) -> None:
+        masks.append({"encoding": m.encoding, "size": [m.width, m.height], "object_px": sum(1 for b in m.data if b),
+                      "values": sorted(set(m.data)), "stamp": [m.header.stamp.sec, m.header.stamp.nanosec]})
+
+    probe.create_subscription(Image, "mask", on_mask, IMAGE_QOS)
 
     def spin_until(condition, seconds: float) -> bool:
         deadline = time.monotonic() + seconds
@@ -215,6 +222,10 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         out["rate_window"] = image_stamps[-20:]
         areas = [i["area_m2"] for i in calibrated()]
         out["calibrated_areas"] = areas
+        spin_until(lambda: len(masks) >= 3, 20)
+        out["masks"] = masks[-3:]
+        out["info_stamps"] = [[i["stamp"]["sec"], i["stamp"]["nanosec"]] for i in infos]
+        out["frame_counts"] = {k: infos[-1][k] for k in ("frames_received", "frames_dropped", "frames_measured")}
         out["camera_info_received"] = bool(camera_infos)
         out["persisted"] = calibration_file.exists()
         if calibration_file.exists():

@@ -35,6 +35,22 @@ def test_area_of_the_rendered_cube_within_half_a_percent(graph):
     assert np.all(np.abs(areas / graph["truth_m2"] - 1) <= 0.005), areas / graph["truth_m2"] - 1
 
 
+def test_mask_is_published_with_the_frames_stamp(graph):
+    assert graph["masks"], "no mask received"
+    for mask in graph["masks"]:
+        assert mask["encoding"] == "mono8" and mask["size"] == [640, 480] and mask["values"] == [0, 255]
+        assert 5000 < mask["object_px"] < 20000  # the cube face (~10 000 px)
+        assert mask["stamp"] in graph["info_stamps"]
+
+
+def test_frames_are_counted_and_hardly_any_dropped_at_ten_hertz(graph):
+    """At 10 Hz only the frames that arrive while a new calibration's pixel geometry is built (~0.1 s, twice:
+    the fit and set_camera_info) may be skipped: the newest frame is measured, the others counted."""
+    counts = graph["frame_counts"]
+    assert counts["frames_dropped"] <= 4 and counts["frames_measured"] >= 5
+    assert counts["frames_received"] >= counts["frames_measured"]
+
+
 def test_set_camera_info_takes_effect_and_is_persisted(graph):
     assert graph["set_camera_info"][0] is True
     before, after = np.mean(graph["calibrated_areas"]), np.mean(graph["areas_after_set_camera_info"])

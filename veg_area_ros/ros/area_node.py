@@ -1,13 +1,19 @@
 """area_node: idealizes each frame with the calibration from `camera_info` (or a file), classifies it and
 publishes Af (`projected_area`, geometry_msgs/Vector3Stamped: x = Af m², y = its standard deviation m²,
 z = object pixels; header = the source frame's), `projected_area/info` (JSON with everything else), the
-binary `mask` (mono8, same header), and on demand (when subscribed) `image_rect` and `overlay`."""
+binary `mask` (mono8, same header), and on demand (when subscribed) `image_rect` and `overlay`.
+
+Frames arrive as raw CDR bytes (`raw=True`: the pixels are a view, never copied in Python) into a one-frame
+slot; a worker thread measures the newest frame, so a camera faster than the measurement costs dropped
+frames (counted, reported in `projected_area/info` and the log), never a growing queue or stale results."""
 
 from __future__ import annotations
 
 import json
 import math
+import threading
 
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
@@ -16,12 +22,14 @@ from std_msgs.msg import String
 
 from ..area import AreaMeasurer, draw_overlay
 from ..calib_io import CalibrationFileError, read_calibration
+from ..cdr import decode_image
 from ..classify import CHANNELS, OBJECTS, Classifier, ClassifyError
 from ..idealize import FrameSizeError
+from ..latest import LatestSlot
 from ..scale import TargetsError, TargetsSpec
 from ..synthetic import SCENE_DICTIONARY, SCENE_MARKERS
 from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, declare, publish_safely
-from .messages import ImageMessageError, image_to_msg, info_to_camera, msg_to_image
+from .messages import ImageMessageError, image_bytes, info_to_camera
 
 TUNABLE = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "targets_file")
 
@@ -52,8 +60,9 @@ class AreaNode(Node):
         calibration_file = declare(self, "calibration_file", "", "Calibration YAML to start with ('' = wait for "
                                    "camera_info).", read_only=True)
         self.camera = None
-        self.frames_in = 0
+        self.frames = LatestSlot[bytes]()
         self.frames_measured = 0
+        self._dropped_logged = 0
         self.area_pub = self.create_publisher(Vector3Stamped, "projected_area", RESULT_QOS)
         self.info_pub = self.create_publisher(String, "projected_area/info", RESULT_QOS)
         self.mask_pub = self.create_publisher(Image, "mask", IMAGE_QOS)
@@ -69,7 +78,9 @@ class AreaNode(Node):
         self.measurer = self._build(self.settings, self.camera)  # invalid start parameters: the node fails
         self.add_on_set_parameters_callback(self._on_parameters)
         self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, LATCHED_QOS)
-        self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS)
+        self.create_subscription(Image, "image_raw", self.frames.put, IMAGE_QOS, raw=True)
+        self._worker = threading.Thread(target=self._measure_frames, name="area_worker", daemon=True)
+        self._worker.start()
 
     def _build(self, settings: dict, camera) -> AreaMeasurer:
         """A measurer for these settings; raises ValueError (TargetsError, ClassifyError) with the reason."""
@@ -114,11 +125,24 @@ class AreaNode(Node):
             self.measurer = self._build(self.settings, camera)
             self.get_logger().info(f"calibration received: {camera.width}x{camera.height}, fx {camera.fx:.2f}")
 
-    def _on_image(self, msg: Image) -> None:
-        self.frames_in += 1
+    def _measure_frames(self) -> None:
+        while (data := self.frames.take()) is not None:
+            try:
+                self._on_image(data)
+            except Exception as exc:  # one bad frame must not end the node's measuring
+                self.get_logger().error(f"frame not measured: {exc.__class__.__name__}: {exc}",
+                                        throttle_duration_sec=5.0)
+            if self.frames.dropped > self._dropped_logged:
+                self.get_logger().warning(f"{self.frames.dropped} of {self.frames.received} frames dropped: the "
+                                          "camera is faster than the measurement (the newest frame is measured)",
+                                          throttle_duration_sec=10.0)
+                self._dropped_logged = self.frames.dropped
+
+    def _on_image(self, data: bytes) -> None:
         log = self.get_logger()
         try:
-            frame = msg_to_image(msg)
+            fields = decode_image(data)
+            frame = fields.pixels()
         except ImageMessageError as exc:
             log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
             return
@@ -127,8 +151,9 @@ class AreaNode(Node):
                         "uncalibrated_frames:=measure to measure them uncalibrated", throttle_duration_sec=10.0)
             return
         wanted = [pub.get_subscription_count() > 0 for pub in (self.mask_pub, self.rect_pub, self.overlay_pub)]
+        measurer = self.measurer  # parameters may swap it meanwhile: this frame uses one
         try:
-            result = self.measurer.measure(frame, keep_images=any(wanted))
+            result = measurer.measure(frame, keep_images=any(wanted))
         except FrameSizeError as exc:
             log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
             return
@@ -136,22 +161,28 @@ class AreaNode(Node):
             log.warning(f"frame not measured: {exc}", throttle_duration_sec=5.0)
             return
         self.frames_measured += 1
+        header = fields.header
+        stamp = Time(sec=header.sec, nanosec=header.nanosec)
         area = Vector3Stamped()
-        area.header = msg.header
+        area.header.stamp, area.header.frame_id = stamp, header.frame_id
         area.vector.x, area.vector.y, area.vector.z = result.area_m2, result.area_std_m2, float(result.pixel_count)
         publish_safely(self, self.area_pub, area)
         summary = result.summary()
-        summary.update(stamp={"sec": msg.header.stamp.sec, "nanosec": msg.header.stamp.nanosec},
-                       frame_id=msg.header.frame_id)
+        summary.update(stamp={"sec": header.sec, "nanosec": header.nanosec}, frame_id=header.frame_id,
+                       frames_received=self.frames.received, frames_dropped=self.frames.dropped,
+                       frames_measured=self.frames_measured)
         publish_safely(self, self.info_pub, String(data=json.dumps(summary)))
         # the images cost a remap each: made only for topics somebody listens to (rosbag2 counts)
-        if wanted[0]:
-            publish_safely(self, self.mask_pub, image_to_msg(result.mask, msg.header.stamp, msg.header.frame_id))
-        if wanted[1]:
-            publish_safely(self, self.rect_pub, image_to_msg(result.image, msg.header.stamp, msg.header.frame_id))
-        if wanted[2]:
-            publish_safely(self, self.overlay_pub,
-                           image_to_msg(draw_overlay(result), msg.header.stamp, msg.header.frame_id))
+        for publisher, image, want in ((self.mask_pub, result.mask, wanted[0]),
+                                       (self.rect_pub, result.image, wanted[1]),
+                                       (self.overlay_pub, wanted[2] and draw_overlay(result), wanted[2])):
+            if want:
+                publish_safely(self, publisher, image_bytes(image, stamp, header.frame_id))
+
+    def destroy_node(self) -> None:
+        self.frames.close()
+        self._worker.join(timeout=5.0)
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

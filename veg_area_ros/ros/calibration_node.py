@@ -20,10 +20,11 @@ from ..board import BoardSpec, BoardSpecError
 from ..calib_io import CalibrationFileError, quality_rms, read_calibration, write_calibration
 from ..calibration import CalibrationError, View, calibrate, coverage_grid
 from ..camera_model import BrownCamera
+from ..cdr import decode_image
 from ..sources import SYNTHETIC_BOARD
 from .camera_node import url_to_path
 from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, declare, publish_safely
-from .messages import ImageMessageError, camera_to_info, info_to_camera, msg_to_image
+from .messages import ImageMessageError, camera_to_info, info_to_camera
 
 NEW_POSE_DISTANCE = 0.08  # pose signature distance below which a view adds nothing new
 
@@ -70,7 +71,7 @@ class CalibrationNode(Node):
         self.fitted = False
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
         self.progress_pub = self.create_publisher(String, "~/progress", RESULT_QOS)
-        self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS)
+        self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS, raw=True)  # a view, no copy
         self.create_service(Trigger, "~/calibrate", self._on_calibrate)
         self.create_service(SetCameraInfo, "set_camera_info", self._on_set_camera_info)
         if self.path is not None and self.path.exists():
@@ -83,12 +84,12 @@ class CalibrationNode(Node):
                 self.get_logger().info(f"serving {self.path} (RMS {self.rms:.3f} px)")
 
     # --- views -----------------------------------------------------------------------------------------
-    def _on_image(self, msg: Image) -> None:
+    def _on_image(self, data: bytes) -> None:
         self.frames_seen += 1
         if self.fitted and not self.auto_calibrate:
             return
         try:
-            image = msg_to_image(msg)
+            image = decode_image(data).pixels()
         except ImageMessageError as exc:
             self.get_logger().warning(f"frame ignored: {exc}", throttle_duration_sec=5.0)
             return

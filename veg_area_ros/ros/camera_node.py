@@ -1,5 +1,6 @@
 """camera_node: publishes `image_raw` (sensor_msgs/Image, bgr8) and, when it has a calibration,
-`camera_info`, from the synthetic endoscope (default), a device, a video file, or an image folder/glob."""
+`camera_info`, from the synthetic endoscope (default), a device, a video file, or an image folder/glob.
+Frames go out pre-serialized (veg_area_ros.cdr): one copy from the camera's buffer to the wire."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from ..calib_io import CalibrationFileError, read_calibration
 from ..sources import SYNTHETIC_SCENES, DeviceSource, SourceError, open_source
 from .common import IMAGE_QOS, LATCHED_QOS, declare, publish_safely
-from .messages import camera_to_info, image_to_msg
+from .messages import camera_to_info, image_bytes
 
 
 def url_to_path(url: str) -> Path | None:
@@ -88,7 +89,7 @@ class CameraNode(Node):
             self.stop_requested = True
             return
         stamp = self.get_clock().now().to_msg()
-        if publish_safely(self, self.image_pub, image_to_msg(image, stamp, self.frame_id)):
+        if publish_safely(self, self.image_pub, image_bytes(image, stamp, self.frame_id)):
             self.frames_published += 1
         if self.camera_info is not None:
             self.camera_info.header.stamp = stamp

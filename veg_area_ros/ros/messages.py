@@ -7,12 +7,16 @@ from builtin_interfaces.msg import Time
 from sensor_msgs.msg import CameraInfo, Image
 
 from ..camera_model import BrownCamera
+from ..cdr import ImageMessageError, encode_image, frame_pixels
 
-CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1}
+__all__ = ["ImageMessageError", "camera_to_info", "image_bytes", "image_to_msg", "info_to_camera", "msg_to_image"]
 
 
-class ImageMessageError(ValueError):
-    """An Image message that cannot be turned into a frame; the message says why."""
+def image_bytes(image: np.ndarray, stamp: Time, frame_id: str) -> bytes:
+    """A serialized sensor_msgs/Image for `publisher.publish(bytes)`: one copy of the pixels, no Python
+    message object (issue #7; the bytes are rclpy's own, tested in test_cdr)."""
+    return encode_image(image, stamp.sec, stamp.nanosec, frame_id)
+
 
 
 def image_to_msg(image: np.ndarray, stamp: Time, frame_id: str) -> Image:
@@ -32,22 +36,7 @@ def image_to_msg(image: np.ndarray, stamp: Time, frame_id: str) -> Image:
 
 def msg_to_image(msg: Image) -> np.ndarray:
     """A BGR (H, W, 3) or grey (H, W) uint8 view of the message; rgb8 is converted to BGR."""
-    channels = CHANNELS.get(msg.encoding)
-    if channels is None:
-        raise ImageMessageError(f"encoding {msg.encoding!r} is not supported (use {', '.join(CHANNELS)})")
-    if msg.width == 0 or msg.height == 0:
-        raise ImageMessageError(f"empty image ({msg.width}x{msg.height})")
-    if msg.step < msg.width * channels:
-        raise ImageMessageError(f"step {msg.step} is shorter than a {msg.width}-pixel {msg.encoding} row")
-    data = np.frombuffer(msg.data, np.uint8)
-    if data.size != msg.step * msg.height:
-        raise ImageMessageError(f"data holds {data.size} bytes, {msg.height} rows of step {msg.step} need "
-                                f"{msg.step * msg.height}")
-    rows = data.reshape(msg.height, msg.step)[:, : msg.width * channels]
-    image = rows.reshape(msg.height, msg.width, channels) if channels == 3 else rows
-    if msg.encoding == "rgb8":
-        image = image[..., ::-1]
-    return np.ascontiguousarray(image)
+    return frame_pixels(msg.data, msg.height, msg.width, msg.encoding, msg.step)
 
 
 def camera_to_info(camera: BrownCamera, frame_id: str = "camera", stamp: Time | None = None) -> CameraInfo:

@@ -1,0 +1,101 @@
+"""The CDR codec for sensor_msgs/Image and CameraInfo (issue #7), byte for byte against rclpy's own
+serialization (except alignment padding, which rclpy leaves uninitialised), and its refusals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import CameraInfo, Image
+
+from veg_area_ros.cdr import (
+    CameraInfoFields,
+    Header,
+    ImageMessageError,
+    _camera_info_writer,
+    _image_writer,
+    decode_camera_info,
+    decode_image,
+    encode_image,
+)
+from veg_area_ros.ros.messages import camera_to_info, image_to_msg, msg_to_image
+from veg_area_ros.synthetic import DSLR, ENDOSCOPE
+
+
+def same_except_padding(ours, writer, theirs: bytes) -> None:
+    assert len(ours) == len(theirs)
+    padding = {i for span in writer.padding for i in span}
+    differing = [i for i in range(min(len(ours), 4096)) if ours[i] != theirs[i] and i not in padding]
+    assert differing == [], differing[:10]
+    assert ours[4096:] == theirs[4096:]  # the pixels (no padding after the data's length)
+
+
+frame_ids = st.text(alphabet=st.characters(codec="utf-8", exclude_characters="\x00"), max_size=12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(height=st.integers(1, 9), width=st.integers(1, 13), colour=st.booleans(), frame_id=frame_ids,
+       sec=st.integers(-2**31, 2**31 - 1), nanosec=st.integers(0, 999_999_999))
+def test_image_bytes_are_rclpys(height, width, colour, frame_id, sec, nanosec):
+    shape = (height, width, 3) if colour else (height, width)
+    image = np.random.default_rng(height * width).integers(0, 256, shape, dtype=np.uint8)
+    ours = encode_image(image, sec, nanosec, frame_id)
+    theirs = serialize_message(image_to_msg(image, Time(sec=sec, nanosec=nanosec), frame_id))
+    same_except_padding(ours, _image_writer(image, sec, nanosec, frame_id), theirs)
+    fields = decode_image(theirs)
+    assert (fields.header, fields.encoding) == (Header(sec, nanosec, frame_id), "bgr8" if colour else "mono8")
+    assert np.array_equal(fields.pixels(), image)
+    assert np.array_equal(msg_to_image(deserialize_message(ours, Image)), image)
+
+
+@pytest.mark.parametrize("encoding, channels, step_pad", [("rgb8", 3, 5), ("mono8", 1, 3), ("bgr8", 3, 0)])
+def test_foreign_images_with_padded_rows_decode_like_rclpys(encoding, channels, step_pad):
+    rng = np.random.default_rng(3)
+    height, width = 5, 7
+    step = width * channels + step_pad
+    msg = Image(height=height, width=width, encoding=encoding, step=step,
+                data=rng.integers(0, 256, height * step, dtype=np.uint8).tobytes())
+    msg.header.frame_id = "odd"
+    assert np.array_equal(decode_image(serialize_message(msg)).pixels(), msg_to_image(msg))
+
+
+def test_decoding_a_camera_frame_is_a_view_not_a_copy():
+    image = np.zeros((2592, 3872, 3), np.uint8)
+    buffer = encode_image(image, 1, 2, "dslr")
+    pixels = decode_image(buffer).pixels()
+    assert pixels.shape == image.shape and not pixels.flags.owndata and not pixels.flags.writeable
+
+
+@pytest.mark.parametrize("camera", [ENDOSCOPE, DSLR])
+@pytest.mark.parametrize("frame_id", ["", "cam", "camera_optical_frame"])
+def test_camera_info_bytes_are_rclpys(camera, frame_id):
+    msg = camera_to_info(camera, frame_id, Time(sec=5, nanosec=6))
+    msg.binning_x, msg.roi.width, msg.roi.do_rectify = 2, 17, True
+    theirs = serialize_message(msg)
+    fields = decode_camera_info(theirs)
+    assert fields == CameraInfoFields(Header(5, 6, frame_id), msg.height, msg.width, "plumb_bob", list(msg.d),
+                                      list(msg.k), list(msg.r), list(msg.p), (2, 0), (0, 0, 0, 17, True))
+    writer = _camera_info_writer(fields)
+    same_except_padding(writer.bytes(), writer, theirs)
+    empty = CameraInfo()
+    assert decode_camera_info(serialize_message(empty)).d == []
+
+
+@pytest.mark.parametrize("mangle, problem", [
+    (lambda b: b[:40], "ends"),
+    (lambda b: b"\x00\x00" + b[2:], "not little-endian CDR"),
+    (lambda b: b[:-1], "early"),
+])
+def test_broken_bytes_are_refused_with_a_reason(mangle, problem):
+    buffer = encode_image(np.zeros((4, 4), np.uint8), 0, 0, "cam")
+    with pytest.raises(ImageMessageError, match=problem):
+        decode_image(mangle(buffer)).pixels()
+
+
+def test_bad_image_fields_are_refused_like_messages():
+    msg = Image(height=4, width=4, encoding="16UC1", step=8, data=bytes(32))
+    with pytest.raises(ImageMessageError, match="not supported"):
+        decode_image(serialize_message(msg)).pixels()
