@@ -152,7 +152,8 @@ def main() -> int:
     name, options = sys.argv[1], json.loads(sys.argv[2])
     nodes = Nodes()
     try:
-        result = {"delivery": scenario_delivery, "graph": scenario_graph}[name](options, nodes)
+        result = {"delivery": scenario_delivery, "graph": scenario_graph, "record": scenario_record,
+                  "drag": scenario_drag}[name](options, nodes)
         result["interfaces"] = interfaces()
         result["alive_at_end"] = nodes.alive()
     finally:
@@ -290,6 +291,88 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         probe.destroy_node()
         rclpy.try_shutdown()
     return out
+
+
+def scenario_record(options: dict, nodes: Nodes) -> dict:
+    """camera (synthetic cube in air, true calibration published) -> area_node, recorded by two record nodes:
+    one closed with SIGINT, one killed with SIGKILL mid-run. The bags are judged by the test afterwards."""
+    from veg_area_ros.calib_io import write_calibration
+    from veg_area_ros.synthetic import ENDOSCOPE
+
+    calibration = Path("endoscope.yaml").resolve()
+    write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air"})
+    topics = ["image_raw", "camera_info", "projected_area", "projected_area/info"]
+    # recorders and camera first, the area node once they are recording: the bag then holds every frame the
+    # live node measures from its first (it carries its pixel weights from frame to frame)
+    closed = nodes.start("record_node", name="recorder", output=str(Path("closed_bag").resolve()), topics=topics)
+    killed = nodes.start("record_node", name="doomed", output=str(Path("killed_bag").resolve()),
+                         topics=["image_raw"])
+    nodes.start("camera_node", rate_hz=float(options["rate_hz"]), synthetic_scene="cube", synthetic_medium="air",
+                camera_info_url=f"file://{calibration}")
+    time.sleep(float(options["settle_s"]))
+    nodes.start("area_node")
+    time.sleep(float(options["seconds"]))
+    killed.kill()
+    killed.wait(10)
+    time.sleep(1.0)
+    closed.send_signal(signal.SIGINT)
+    closed.wait(20)
+    return {"closed_exit": closed.returncode, "killed_exit": killed.returncode,
+            "sockets": sockets_of([p.pid for _, p in nodes.processes if p.poll() is None])}
+
+
+def scenario_drag(options: dict, nodes: Nodes) -> dict:
+    """drag_node fed synthetic Af (10 Hz), force (200 Hz, noisy) and velocity (50 Hz) with a known Cd."""
+    import rclpy
+    from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
+    from rclpy.node import Node
+
+    from veg_area_ros.ros.common import RESULT_QOS
+
+    cd, density, area, velocity = options["cd"], 998.2, options["area_m2"], options["velocity_m_s"]
+    force = 0.5 * density * velocity**2 * area * cd
+    nodes.start("drag_node", tolerance_s=0.05, force_axis="-y", force_std_n=0.005 * force)
+    rclpy.init()
+    probe = Node("drag_probe")
+    received: list[list[float]] = []
+    probe.create_subscription(Vector3Stamped, "drag_coefficient",
+                              lambda m: received.append([m.vector.x, m.vector.y, m.vector.z]), RESULT_QOS)
+    publishers = {name: probe.create_publisher(kind, name, RESULT_QOS)
+                  for name, kind in (("force", WrenchStamped), ("velocity", TwistStamped),
+                                     ("projected_area", Vector3Stamped))}
+    rng = np.random.default_rng(5)
+    try:
+        deadline = time.monotonic() + 30
+        while any(p.get_subscription_count() == 0 for p in publishers.values()) and time.monotonic() < deadline:
+            rclpy.spin_once(probe, timeout_sec=0.1)
+        start = probe.get_clock().now().nanoseconds
+        for tick in range(int(options["seconds"] * 200)):  # a 200 Hz clock of simulated instruments
+            stamp_ns = start + tick * 5_000_000
+            sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+            if tick % 1 == 0:
+                msg = WrenchStamped()
+                msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+                msg.wrench.force.y = -force * (1 + 0.005 * rng.standard_normal())  # the balance points upstream
+                publishers["force"].publish(msg)
+            if tick % 4 == 0:
+                msg = TwistStamped()
+                msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+                msg.twist.linear.x = velocity
+                publishers["velocity"].publish(msg)
+            if tick % 20 == 10:
+                msg = Vector3Stamped()
+                msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+                msg.vector.x, msg.vector.y = area, 0.002 * area
+                publishers["projected_area"].publish(msg)
+            rclpy.spin_once(probe, timeout_sec=0.0)
+            time.sleep(0.001)
+        deadline = time.monotonic() + 10
+        while len(received) < options["seconds"] * 10 - 2 and time.monotonic() < deadline:
+            rclpy.spin_once(probe, timeout_sec=0.1)
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return {"received": received, "true_cd": cd}
 
 
 if __name__ == "__main__":

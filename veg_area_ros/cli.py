@@ -188,17 +188,27 @@ def _frame_file_name(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(name).stem) + ".png"
 
 
-CSV_COLUMNS = ("frame", "time_s", "area_m2", "area_std_m2", "pixel_count", "threshold", "scale_m_per_px",
-               "scale_kind", "calibrated", "missing_targets", "error")
+CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "pixel_count",
+               "threshold", "scale_m_per_px", "scale_kind", "calibrated", "missing_targets", "error")
 
 
 def cmd_measure(args: argparse.Namespace) -> int:
     import cv2
 
     from .area import AreaMeasurer, draw_overlay
+    from .bags import BagError
     from .calib_io import CalibrationFileError, read_calibration, write_calibration
+    from .cdr import info_to_camera
     from .classify import Classifier, ClassifyError
-    from .frames import IMAGE_SUFFIXES, VIDEO_SUFFIXES, InputError, expand_inputs, iter_frames, video_frame_count
+    from .frames import (
+        IMAGE_SUFFIXES,
+        VIDEO_SUFFIXES,
+        InputError,
+        expand_inputs,
+        is_bag,
+        iter_frames,
+        video_frame_count,
+    )
     from .idealize import FrameSizeError
     from .scale import TargetsError, TargetsSpec
 
@@ -206,7 +216,8 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if args.video_step < 1:
         raise CliError("--video-step must be 1 or more", 2)
     camera = None
-    if args.calibration.lower() != "none":
+    from_bag = args.calibration.lower() == "bag"  # each frame with the camera_info recorded before it
+    if args.calibration.lower() not in ("none", "bag"):
         try:
             camera = read_calibration(args.calibration).camera
         except CalibrationFileError as exc:
@@ -224,8 +235,17 @@ def cmd_measure(args: argparse.Namespace) -> int:
     except InputError as exc:
         raise CliError(str(exc)) from exc
     videos = [f for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
-    total = sum(video_frame_count(v) // args.video_step for v in videos) + len(files) - len(videos)
-    csv_path = Path(args.csv) if args.csv else (Path(f"{videos[0].stem}_area.csv") if videos else None)
+    bags = [f for f in files if is_bag(f)]
+    if from_bag and len(bags) != len(files):
+        raise CliError("--calibration bag needs rosbag2 inputs (their recorded camera_info)", 2)
+    try:
+        bag_frames = sum(_bag_image_count(b, args.image_topic) for b in bags)
+    except BagError as exc:
+        raise CliError(str(exc)) from exc
+    total = (sum(video_frame_count(v) // args.video_step for v in videos) + bag_frames
+             + len(files) - len(videos) - len(bags))
+    series = videos + bags
+    csv_path = Path(args.csv) if args.csv else (Path(f"{series[0].stem}_area.csv") if series else None)
     single_overlay = args.overlay and Path(args.overlay).suffix.lower() in IMAGE_SUFFIXES
     if single_overlay and total > 1:
         raise CliError(f"--overlay {args.overlay} names one image but the input has {total} frames; "
@@ -238,13 +258,25 @@ def cmd_measure(args: argparse.Namespace) -> int:
                           {"idealized_from": str(Path(args.calibration).resolve())})
     rows: list[dict] = []
     measured = 0
-    for index, frame in enumerate(iter_frames(files, args.video_step), 1):
+    for index, frame in enumerate(iter_frames(files, args.video_step, args.image_topic), 1):
         row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
+        if frame.stamp is not None:
+            row["stamp_sec"], row["stamp_nanosec"] = frame.stamp
+            if not (args.start_time <= frame.time_s <= args.end_time):
+                continue
         try:
             if frame.image is None:
                 raise InputError(f"skipped: {frame.problem}")
+            if from_bag:  # as the live area node: the latest camera_info, a new measurer when it changes
+                if frame.camera_info is None:
+                    raise InputError("no camera_info recorded before this frame")
+                recorded = info_to_camera(frame.camera_info)
+                if recorded != camera:
+                    camera = recorded
+                    measurer = AreaMeasurer(camera, targets, classifier, roi=args.roi,
+                                            threshold_delta=args.sweep_step)
             result = measurer.measure(frame.image, keep_images=bool(args.overlay or args.idealized))
-        except (InputError, FrameSizeError, TargetsError, ClassifyError) as exc:
+        except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
             row["error"] = str(exc)
             say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
         else:
@@ -286,6 +318,63 @@ def cmd_measure(args: argparse.Namespace) -> int:
         raise CliError(f"no frame measured: {'; '.join(reasons)[:500]}")
     if measured < len(rows):
         say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
+    return 0
+
+
+def _bag_image_count(path: Path, image_topic: str | None) -> int:
+    from rosbags.rosbag2 import Reader
+
+    from .bags import BagError
+
+    try:
+        with Reader(path) as reader:
+            return sum(c.msgcount for c in reader.connections if c.msgtype == "sensor_msgs/msg/Image"
+                       and (image_topic is None or c.topic == image_topic))
+    except Exception as exc:  # rosbags' own error classes for every kind of broken bag
+        raise BagError(f"{path}: not a readable rosbag2 bag ({exc}); a recording that was killed can be "
+                       "rebuilt with 'veg-area bag-recover'") from exc
+
+
+def cmd_record(args: argparse.Namespace) -> int:
+    from .ros.record_node import main as record_main
+
+    ros_args = ["--ros-args", "-p", f"storage:={args.storage}", "-p", f"output:={args.output or ''}"]
+    ros_args += ["-p", "topics:=[" + ",".join(f"'{t}'" for t in args.topics) + "]"]
+    return record_main(["veg-area-record", *ros_args])
+
+
+def cmd_bag_recover(args: argparse.Namespace) -> int:
+    from .bags import BagError, recover_bag
+
+    try:
+        counts = recover_bag(args.bag, args.output)
+    except BagError as exc:
+        raise CliError(str(exc)) from exc
+    for topic, count in counts.items():
+        print(f"{topic}: {count} messages recovered")
+    print(f"readable bag: {args.output}")
+    return 0
+
+
+def cmd_vogel(args: argparse.Namespace) -> int:
+    from .drag import DragError, plot_vogel, read_runs, vogel_fit
+
+    try:
+        velocity, cd_area = read_runs(args.table, args.density)
+        fit = vogel_fit(velocity, cd_area, args.confidence)
+    except DragError as exc:
+        raise CliError(str(exc)) from exc
+    plot = Path(args.plot) if args.plot else Path(args.table).with_suffix(".vogel.png")
+    plot_vogel(velocity, cd_area, fit, plot)
+    result = {"exponent": fit.exponent, "interval": list(fit.interval), "confidence": fit.confidence,
+              "coefficient_m2": fit.coefficient, "r_squared": fit.r_squared, "runs": fit.runs, "plot": str(plot)}
+    if args.json:
+        print(json.dumps(result))
+    else:
+        low, high = fit.interval
+        print(f"Vogel exponent psi = {fit.exponent:.4f}, {fit.confidence:.0%} interval [{low:.4f}, {high:.4f}] "
+              f"({fit.runs} runs, R² {fit.r_squared:.4f}); Cd·Af = {fit.coefficient:.4g} m² x U^psi")
+        print(f"plot: {plot}")
     return 0
 
 
@@ -347,9 +436,14 @@ def build_parser() -> argparse.ArgumentParser:
     cal.set_defaults(func=cmd_calibrate)
 
     mea = sub.add_parser("measure", help="projected area Af of an object in images, folders or videos")
-    mea.add_argument("inputs", nargs="+", help="images, folders of images, videos")
+    mea.add_argument("inputs", nargs="+", help="images, folders of images, videos, rosbag2 bags (folders)")
     mea.add_argument("--calibration", required=True,
-                     help="camera_info YAML from 'veg-area calibrate', or 'none' to measure the raw image")
+                     help="camera_info YAML from 'veg-area calibrate', 'none' to measure the raw image, or 'bag' "
+                          "for the camera_info recorded in the bag (as the live area node used it)")
+    mea.add_argument("--image-topic", default=None, help="image topic of a bag (default: its only Image topic)")
+    mea.add_argument("--start-time", type=float, default=-math.inf, metavar="S",
+                     help="bag frames stamped from this time on (seconds, header stamp)")
+    mea.add_argument("--end-time", type=float, default=math.inf, metavar="S", help="bag frames up to this time")
     mea.add_argument("--targets", required=True, help="targets YAML: ArUco marker ids or hand-picked points")
     mea.add_argument("--threshold", type=_threshold, default="otsu", help="0..255 or 'otsu' (default)")
     mea.add_argument("--object", default="dark", choices=["dark", "bright", "green"],
@@ -370,6 +464,28 @@ def build_parser() -> argparse.ArgumentParser:
     mea.add_argument("--video-step", type=int, default=1, help="measure every Nth video frame")
     mea.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     mea.set_defaults(func=cmd_measure)
+
+    rec = sub.add_parser("record", help="record topics into a rosbag2 bag (MCAP, or sqlite3) as they come, "
+                         "serialized (ROS 2 node; Ctrl-C closes the bag)")
+    rec.add_argument("topics", nargs="*", default=["image_raw", "camera_info", "projected_area",
+                                                   "projected_area/info"], help="topics (default: the graph's)")
+    rec.add_argument("-o", "--output", help="bag folder to create (default veg_area_<date-time>)")
+    rec.add_argument("--storage", default="mcap", choices=["mcap", "sqlite3"])
+    rec.set_defaults(func=cmd_record)
+
+    recover = sub.add_parser("bag-recover", help="rebuild a readable bag from an MCAP recording that was killed")
+    recover.add_argument("bag", help="the broken bag folder (or its .mcap file)")
+    recover.add_argument("output", help="new bag folder")
+    recover.set_defaults(func=cmd_bag_recover)
+
+    vog = sub.add_parser("vogel", help="fit the Vogel exponent (Cd·Af ∝ U^psi) to an experiment table, with "
+                         "its confidence interval and a log-log plot")
+    vog.add_argument("table", help="CSV with velocity_m_s, force_n, area_m2 (optional density) per run")
+    vog.add_argument("--density", type=_positive_float, default=998.2, help="water density, kg/m³")
+    vog.add_argument("--confidence", type=float, default=0.95)
+    vog.add_argument("--plot", help="PNG (default: TABLE.vogel.png)")
+    vog.add_argument("--json", action="store_true")
+    vog.set_defaults(func=cmd_vogel)
 
     demo = sub.add_parser("demo", help="the main job on the built-in default: synthetic underwater camera -> "
                           "calibration node -> area node, Af against the true area")

@@ -1,4 +1,5 @@
-"""Reading frames from images, folders of images and videos, with a clear reason for everything skipped.
+"""Reading frames from images, folders of images, videos and rosbag2 bags, with a clear reason for everything
+skipped.
 
 No ROS here.
 """
@@ -25,7 +26,16 @@ class Frame:
     name: str  # file name, or "video.mp4#123" for frame 123 of a video
     image: np.ndarray | None  # None where the frame could not be read
     problem: str = ""  # why image is None
-    time_s: float | None = None  # position in a video, seconds
+    time_s: float | None = None  # position in a video, seconds; a bag frame's header stamp
+    stamp: tuple[int, int] | None = None  # a bag frame's header stamp (sec, nanosec)
+    camera_info: object | None = None  # a bag frame's latest recorded CameraInfoFields
+
+
+def is_bag(path: Path) -> bool:
+    """A rosbag2 folder (metadata.yaml, or .mcap/.db3 files) or a single .mcap file."""
+    if path.is_dir():
+        return (path / "metadata.yaml").is_file() or any(path.glob("*.mcap")) or any(path.glob("*.db3"))
+    return path.suffix.lower() == ".mcap"
 
 
 def read_image(path: Path) -> tuple[np.ndarray | None, str]:
@@ -49,7 +59,9 @@ def expand_inputs(paths: Sequence[str | Path]) -> list[Path]:
     files: list[Path] = []
     for raw in paths:
         path = Path(raw)
-        if path.is_dir():
+        if is_bag(path):
+            files.append(path)
+        elif path.is_dir():
             inside = sorted(p for p in path.iterdir()
                             if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES)
             if not inside:
@@ -91,11 +103,27 @@ def iter_video(path: Path, step: int = 1) -> Iterator[Frame]:
         capture.release()
 
 
-def iter_frames(paths: Sequence[str | Path], video_step: int = 1) -> Iterator[Frame]:
+def iter_bag(path: Path, image_topic: str | None = None) -> Iterator[Frame]:
+    from .bags import iter_bag_frames
+    from .cdr import ImageMessageError
+
+    for frame in iter_bag_frames(path, image_topic):
+        header = frame.image.header
+        try:
+            image, problem = frame.image.pixels(), ""
+        except ImageMessageError as exc:
+            image, problem = None, str(exc)
+        yield Frame(f"{path.name}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
+                    frame.camera_info)
+
+
+def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: str | None = None) -> Iterator[Frame]:
     """Every frame of the inputs; unreadable ones come with image None and the reason."""
     for path in expand_inputs(paths):
         suffix = path.suffix.lower()
-        if suffix in VIDEO_SUFFIXES:
+        if is_bag(path):
+            yield from iter_bag(path, image_topic)
+        elif suffix in VIDEO_SUFFIXES:
             yield from iter_video(path, video_step)
         elif suffix in IMAGE_SUFFIXES:
             image, problem = read_image(path)

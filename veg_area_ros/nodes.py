@@ -28,3 +28,15 @@ def graph_main() -> int:
     from .ros.graph import main
 
     return main(sys.argv)
+
+
+def record_main() -> int:
+    from .ros.record_node import main
+
+    return main(sys.argv)
+
+
+def drag_main() -> int:
+    from .ros.drag_node import main
+
+    return main(sys.argv)

@@ -89,11 +89,11 @@ class CameraNode(Node):
             self.stop_requested = True
             return
         stamp = self.get_clock().now().to_msg()
-        if publish_safely(self, self.image_pub, image_bytes(image, stamp, self.frame_id)):
-            self.frames_published += 1
-        if self.camera_info is not None:
+        if self.camera_info is not None:  # first: a consumer has the frame's calibration when the frame comes
             self.camera_info.header.stamp = stamp
             publish_safely(self, self.info_pub, self.camera_info)
+        if publish_safely(self, self.image_pub, image_bytes(image, stamp, self.frame_id)):
+            self.frames_published += 1
 
     def destroy_node(self) -> None:
         self.source.release()

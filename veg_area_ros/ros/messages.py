@@ -7,7 +7,7 @@ from builtin_interfaces.msg import Time
 from sensor_msgs.msg import CameraInfo, Image
 
 from ..camera_model import BrownCamera
-from ..cdr import ImageMessageError, encode_image, frame_pixels
+from ..cdr import ImageMessageError, encode_image, frame_pixels, info_to_camera
 
 __all__ = ["ImageMessageError", "camera_to_info", "image_bytes", "image_to_msg", "info_to_camera", "msg_to_image"]
 
@@ -53,20 +53,3 @@ def camera_to_info(camera: BrownCamera, frame_id: str = "camera", stamp: Time | 
     ideal = camera.ideal().camera_matrix
     msg.p = np.hstack([ideal, np.zeros((3, 1))]).ravel()
     return msg
-
-
-def info_to_camera(msg: CameraInfo) -> BrownCamera:
-    """The calibrated camera in a CameraInfo; ValueError (with the reason) for an uncalibrated or bad one."""
-    if msg.distortion_model != "plumb_bob" and np.any(np.asarray(msg.d, float) != 0):
-        raise ValueError(f"distortion model {msg.distortion_model!r} is not supported (plumb_bob)")
-    k = np.asarray(msg.k, float).reshape(3, 3)
-    if not np.all(np.isfinite(k)) or k[0, 0] <= 0 or k[1, 1] <= 0:
-        raise ValueError("camera matrix is zero or not finite (an uncalibrated camera_info)")
-    dist = np.zeros(5)
-    d = np.asarray(msg.d, float)[:5]
-    if not np.all(np.isfinite(d)):
-        raise ValueError("distortion coefficients are not finite")
-    dist[: d.size] = d
-    if msg.width == 0 or msg.height == 0:
-        raise ValueError("camera_info has no image size")
-    return BrownCamera.from_opencv(k, dist, (msg.width, msg.height))

@@ -1,0 +1,83 @@
+"""Drag coefficients and the Vogel exponent (issue #5 core): known Cd from noisy, unsynchronised streams;
+a known exponent inside its reported interval; the `veg-area vogel` command."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from helpers import run_cli
+
+from veg_area_ros.drag import WATER_DENSITY, DragAligner, DragError, drag_coefficient, vogel_fit
+
+
+def test_drag_coefficient_and_its_uncertainty():
+    cd, std = drag_coefficient(0.5 * WATER_DENSITY * 0.04 * 0.01 * 1.2, 0.2, 0.01, force_std=0.0, velocity_std=0.002)
+    assert cd == pytest.approx(1.2, rel=1e-12)
+    assert std == pytest.approx(1.2 * 2 * 0.01, rel=1e-9)  # 1 % on U is 2 % on Cd
+    with pytest.raises(DragError):
+        drag_coefficient(1.0, 0.0, 0.01)
+
+
+def test_aligned_streams_give_the_known_cd_within_half_a_percent():
+    rng = np.random.default_rng(11)
+    true_cd, area, aligner = 0.9, 0.0105, DragAligner(tolerance_s=0.05, force_std=0.0)
+    results = []
+    for k in range(2000):  # 1 kHz force, 25 Hz velocity with its own clock offset, 10 Hz Af
+        t = k * 0.001
+        velocity = 0.25 + 0.05 * np.sin(t)  # a slowly changing flow
+        force = 0.5 * WATER_DENSITY * velocity**2 * area * true_cd
+        aligner.add_force(t, force * (1 + 0.015 * rng.standard_normal()))  # balance noise
+        if k % 40 == 7:
+            aligner.add_velocity(t, velocity)
+        if k % 100 == 50:
+            aligner.add_area(t, area, 0.001 * area)
+        results += aligner.ready()
+    assert len(results) >= 18 and aligner.unmatched == 0
+    cds = np.array([r.cd for r in results])
+    assert np.all(np.abs(cds / true_cd - 1) <= 0.005), cds
+    assert all(abs(r.cd - true_cd) <= 3 * r.cd_std for r in results)  # the stated uncertainty covers it
+    assert all(r.force_samples >= 100 and r.velocity_samples >= 2 for r in results)
+
+
+def test_an_area_without_force_in_its_window_is_counted_not_guessed():
+    aligner = DragAligner(tolerance_s=0.01, give_up_s=0.5)
+    aligner.add_area(1.0, 0.01)
+    for k in range(100):
+        aligner.add_force(2.0 + k * 0.01, 1.0)
+        aligner.add_velocity(2.0 + k * 0.01, 0.3)
+    assert aligner.ready() == [] and aligner.unmatched == 1
+
+
+def test_vogel_fit_recovers_a_known_exponent_within_its_interval():
+    rng = np.random.default_rng(3)
+    inside = 0
+    for _ in range(40):
+        velocity = np.linspace(0.1, 0.6, 8)
+        cd_area = 0.012 * velocity ** -0.7 * np.exp(0.03 * rng.standard_normal(8))
+        fit = vogel_fit(velocity, cd_area)
+        inside += fit.interval[0] <= -0.7 <= fit.interval[1]
+    assert inside >= 34  # a 95 % interval: about 38 of 40
+    exact = vogel_fit([0.1, 0.2, 0.4], [1.0, 0.5, 0.25])
+    assert exact.exponent == pytest.approx(-1.0) and exact.r_squared == pytest.approx(1.0)
+    with pytest.raises(DragError, match="at least 3 runs"):
+        vogel_fit([0.1, 0.2], [1, 2])
+
+
+def test_vogel_command_on_an_experiment_table(tmp_path):
+    velocity = np.array([0.1, 0.15, 0.2, 0.3, 0.4, 0.5])
+    area = 0.02 * velocity ** -0.3  # the plant streamlines: Af shrinks with U
+    cd = 1.1 * velocity ** -0.2
+    force = 0.5 * WATER_DENSITY * velocity**2 * area * cd
+    table = tmp_path / "runs.csv"
+    table.write_text("velocity_m_s,force_n,area_m2\n" + "".join(f"{u},{f},{a}\n" for u, f, a in
+                                                                 zip(velocity, force, area, strict=True)))
+    done = run_cli("vogel", str(table), "--json")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result["exponent"] == pytest.approx(-0.5, abs=1e-9) and result["runs"] == 6
+    assert (tmp_path / "runs.vogel.png").stat().st_size > 1000
+    table.write_text("velocity_m_s,force_n\n0.1,1\n")
+    bad = run_cli("vogel", str(table))
+    assert bad.returncode == 1 and "needs columns" in bad.stderr

@@ -1,0 +1,201 @@
+"""Drag coefficients from Af, a force and a velocity, and the Vogel exponent of a plant's reconfiguration.
+
+No ROS here. Cd = 2 F / (rho U^2 Af), its uncertainty propagated to first order. Streams are aligned on the
+Af frame's timestamp: force and velocity are averaged over +-tolerance around it (force balances sample
+far faster than cameras, and their mean is what the frame saw). Vogel: Cd Af ∝ U^psi, fitted in log-log with
+a Student-t confidence interval (psi = 0 for a rigid bluff body, about -1 for a very flexible plant).
+"""
+
+from __future__ import annotations
+
+import bisect
+import csv
+import math
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+WATER_DENSITY = 998.2  # kg/m³ at 20 °C
+
+
+class DragError(ValueError):
+    """Inputs that cannot give a drag coefficient or a fit; the message says why."""
+
+
+@dataclass(frozen=True)
+class Drag:
+    time_s: float
+    cd: float
+    cd_std: float
+    force_n: float
+    velocity_m_s: float
+    area_m2: float
+    force_samples: int
+    velocity_samples: int
+
+
+def drag_coefficient(force: float, velocity: float, area: float, density: float = WATER_DENSITY,
+                     force_std: float = 0.0, velocity_std: float = 0.0, area_std: float = 0.0,
+                     density_std: float = 0.0) -> tuple[float, float]:
+    """(Cd, its standard deviation) from F (N), U (m/s), Af (m²) and rho (kg/m³)."""
+    values = np.array([force, velocity, area, density], float)
+    if not np.all(np.isfinite(values)) or velocity == 0 or area <= 0 or density <= 0:
+        raise DragError(f"no drag coefficient from F={force}, U={velocity}, Af={area}, rho={density}")
+    cd = 2 * force / (density * velocity**2 * area)
+    relative = math.hypot(force_std / force if force else 0.0, 2 * velocity_std / velocity,
+                          area_std / area, density_std / density)
+    return cd, abs(cd) * relative
+
+
+class _Stream:
+    """Recent (time, value) samples of one instrument, in time order."""
+
+    def __init__(self, horizon_s: float):
+        self.times: deque[float] = deque()
+        self.values: deque[float] = deque()
+        self.horizon_s = horizon_s
+
+    def add(self, t: float, value: float) -> None:
+        if self.times and t < self.times[-1]:
+            return  # out of order (a replayed bag restarting): ignored rather than breaking the order
+        self.times.append(t)
+        self.values.append(value)
+        while self.times and self.times[0] < t - self.horizon_s:
+            self.times.popleft()
+            self.values.popleft()
+
+    def window(self, t: float, tolerance: float) -> np.ndarray:
+        times = list(self.times)
+        lo, hi = bisect.bisect_left(times, t - tolerance), bisect.bisect_right(times, t + tolerance)
+        return np.array(list(self.values)[lo:hi], float)
+
+    def covers(self, t: float) -> bool:
+        return bool(self.times) and self.times[-1] >= t
+
+
+class DragAligner:
+    """Feed force, velocity and Af samples as they come (any order between streams); `ready()` returns the
+    drag coefficients of the Af samples whose ±tolerance window is complete in both other streams.
+    Af samples with no force or velocity in their window are counted in `unmatched`."""
+
+    def __init__(self, tolerance_s: float = 0.05, density: float = WATER_DENSITY, force_std: float = 0.0,
+                 velocity_std: float = 0.0, give_up_s: float = 2.0):
+        if tolerance_s <= 0 or density <= 0:
+            raise DragError("tolerance and density must be positive")
+        self.tolerance_s, self.density = tolerance_s, density
+        self.force_std, self.velocity_std = force_std, velocity_std  # instrument noise of one sample
+        self.give_up_s = give_up_s
+        horizon = 4 * (tolerance_s + give_up_s)
+        self.force, self.velocity = _Stream(horizon), _Stream(horizon)
+        self.pending: deque[tuple[float, float, float]] = deque()
+        self.unmatched = 0
+
+    def add_force(self, t: float, newtons: float) -> None:
+        self.force.add(t, newtons)
+
+    def add_velocity(self, t: float, metres_per_second: float) -> None:
+        self.velocity.add(t, metres_per_second)
+
+    def add_area(self, t: float, area_m2: float, area_std_m2: float = 0.0) -> None:
+        self.pending.append((t, area_m2, area_std_m2))
+
+    def _mean(self, samples: np.ndarray, instrument_std: float) -> tuple[float, float]:
+        spread = samples.std(ddof=1) if len(samples) > 1 else 0.0
+        return float(samples.mean()), float(max(spread, instrument_std) / math.sqrt(len(samples)))
+
+    def ready(self) -> list[Drag]:
+        done = []
+        while self.pending:
+            t, area, area_std = self.pending[0]
+            end = t + self.tolerance_s
+            latest = max(self.force.times[-1] if self.force.times else -math.inf,
+                         self.velocity.times[-1] if self.velocity.times else -math.inf)
+            if not (self.force.covers(end) and self.velocity.covers(end)) and latest < end + self.give_up_s:
+                break  # the window may still fill
+            self.pending.popleft()
+            forces, velocities = self.force.window(t, self.tolerance_s), self.velocity.window(t, self.tolerance_s)
+            if len(forces) == 0 or len(velocities) == 0:
+                self.unmatched += 1
+                continue
+            force, force_std = self._mean(forces, self.force_std)
+            velocity, velocity_std = self._mean(velocities, self.velocity_std)
+            try:
+                cd, cd_std = drag_coefficient(force, velocity, area, self.density, force_std, velocity_std, area_std)
+            except DragError:
+                self.unmatched += 1
+                continue
+            done.append(Drag(t, cd, cd_std, force, velocity, area, len(forces), len(velocities)))
+        return done
+
+
+@dataclass(frozen=True)
+class VogelFit:
+    exponent: float  # psi in Cd Af ∝ U^psi
+    interval: tuple[float, float]  # confidence interval of psi
+    confidence: float
+    coefficient: float  # Cd Af at U = 1 m/s
+    r_squared: float
+    runs: int
+
+
+def vogel_fit(velocity, cd_area, confidence: float = 0.95) -> VogelFit:
+    """Least squares of log(Cd Af) = log(k) + psi log(U) over runs; Student-t interval on psi."""
+    u, y = np.asarray(velocity, float), np.asarray(cd_area, float)
+    if u.shape != y.shape or len(u) < 3:
+        raise DragError(f"the Vogel fit needs at least 3 runs, got {len(u)}")
+    if np.any(u <= 0) or np.any(y <= 0) or not np.all(np.isfinite(u) & np.isfinite(y)):
+        raise DragError("velocities and Cd·Af must be positive and finite for a log-log fit")
+    x, z = np.log(u), np.log(y)
+    if np.ptp(x) == 0:
+        raise DragError("all runs have the same velocity: no exponent can be fitted")
+    fit = stats.linregress(x, z)
+    half = stats.t.ppf(0.5 + confidence / 2, len(u) - 2) * fit.stderr
+    return VogelFit(float(fit.slope), (float(fit.slope - half), float(fit.slope + half)), confidence,
+                    float(np.exp(fit.intercept)), float(fit.rvalue**2), len(u))
+
+
+def read_runs(path: str | Path, density: float = WATER_DENSITY) -> tuple[np.ndarray, np.ndarray]:
+    """Experiment table (CSV with columns velocity_m_s, force_n, area_m2; one row per run) -> (U, Cd·Af)."""
+    path = Path(path)
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            rows = list(csv.DictReader(handle))
+    except OSError as exc:
+        raise DragError(f"{path}: cannot read ({exc.strerror})") from exc
+    needed = {"velocity_m_s", "force_n", "area_m2"}
+    if not rows or not needed <= set(rows[0]):
+        raise DragError(f"{path}: needs columns {', '.join(sorted(needed))}")
+    u, cd_area = [], []
+    for line, row in enumerate(rows, 2):
+        try:
+            cd, _ = drag_coefficient(float(row["force_n"]), float(row["velocity_m_s"]), float(row["area_m2"]),
+                                     float(row.get("density") or density))
+        except (ValueError, DragError) as exc:
+            raise DragError(f"{path}, line {line}: {exc}") from exc
+        u.append(float(row["velocity_m_s"]))
+        cd_area.append(cd * float(row["area_m2"]))
+    return np.array(u), np.array(cd_area)
+
+
+def plot_vogel(velocity, cd_area, fit: VogelFit, path: str | Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(figsize=(5, 4))
+    axes.loglog(velocity, cd_area, "o", label="runs")
+    u = np.geomspace(np.min(velocity), np.max(velocity), 50)
+    low, high = fit.interval
+    axes.loglog(u, fit.coefficient * u**fit.exponent, "-",
+                label=f"ψ = {fit.exponent:.3f} [{low:.3f}, {high:.3f}] ({fit.confidence:.0%})")
+    axes.set_xlabel("U (m/s)")
+    axes.set_ylabel("Cd·Af (m²)")
+    axes.legend()
+    axes.grid(True, which="both", alpha=0.3)
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)

@@ -1,0 +1,89 @@
+"""drag_node: Cd = 2F / (rho U² Af) for every Af frame, with force (geometry_msgs/WrenchStamped) and velocity
+(geometry_msgs/TwistStamped, linear), each one signed axis such as "+x", averaged over ±tolerance around the
+frame's stamp. Publishes `drag_coefficient` (Vector3Stamped: x = Cd, y = its standard deviation, z = U m/s; header =
+the Af frame's) and `drag_coefficient/info` (JSON with force, velocity, Af and the sample counts)."""
+
+from __future__ import annotations
+
+import json
+
+from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from ..drag import WATER_DENSITY, DragAligner
+from .common import RESULT_QOS, declare, publish_safely
+
+AXES = ("+x", "-x", "+y", "-y", "+z", "-z")  # signed: a sensor may point against the flow; and a bare
+# "y" would be read as a boolean by the ROS parameter YAML parser
+
+
+def _seconds(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def _component(vector, axis: str) -> float:
+    return (1.0 if axis[0] == "+" else -1.0) * getattr(vector, axis[1])
+
+
+class DragNode(Node):
+    def __init__(self, name: str = "drag_node", **kwargs):
+        super().__init__(name, **kwargs)
+        density = declare(self, "density", WATER_DENSITY, "Water density, kg/m³.", low=900.0, high=1100.0)
+        tolerance = declare(self, "tolerance_s", 0.05, "Half-width of the window around each frame's stamp, s.",
+                            low=0.0001, high=10.0)
+        self.force_axis = declare(self, "force_axis", "+x", "Force component along the flow.", choices=AXES,
+                                  read_only=True)
+        self.velocity_axis = declare(self, "velocity_axis", "+x", "Velocity component along the flow.",
+                                     choices=AXES, read_only=True)
+        force_std = declare(self, "force_std_n", 0.0, "Noise of one force sample, N.", low=0.0, high=1e6)
+        velocity_std = declare(self, "velocity_std_m_s", 0.0, "Noise of one velocity sample, m/s.", low=0.0, high=1e3)
+        for axis in (self.force_axis, self.velocity_axis):
+            if axis not in AXES:
+                raise ValueError(f"axes must be one of {', '.join(AXES)}, got {axis!r}")
+        self.aligner = DragAligner(tolerance, density, force_std, velocity_std)
+        self.cd_pub = self.create_publisher(Vector3Stamped, "drag_coefficient", RESULT_QOS)
+        self.info_pub = self.create_publisher(String, "drag_coefficient/info", RESULT_QOS)
+        self.frame_ids: dict[float, str] = {}
+        self.create_subscription(WrenchStamped, "force", self._on_force, RESULT_QOS)
+        self.create_subscription(TwistStamped, "velocity", self._on_velocity, RESULT_QOS)
+        self.create_subscription(Vector3Stamped, "projected_area", self._on_area, RESULT_QOS)
+
+    def _on_force(self, msg: WrenchStamped) -> None:
+        self.aligner.add_force(_seconds(msg.header.stamp), _component(msg.wrench.force, self.force_axis))
+        self._publish_ready()
+
+    def _on_velocity(self, msg: TwistStamped) -> None:
+        self.aligner.add_velocity(_seconds(msg.header.stamp), _component(msg.twist.linear, self.velocity_axis))
+        self._publish_ready()
+
+    def _on_area(self, msg: Vector3Stamped) -> None:
+        t = _seconds(msg.header.stamp)
+        self.frame_ids[t] = msg.header.frame_id
+        self.aligner.add_area(t, msg.vector.x, msg.vector.y)
+        self._publish_ready()
+
+    def _publish_ready(self) -> None:
+        for drag in self.aligner.ready():
+            out = Vector3Stamped()
+            sec = int(drag.time_s // 1)
+            out.header.stamp.sec, out.header.stamp.nanosec = sec, round((drag.time_s - sec) * 1e9) % 1_000_000_000
+            out.header.frame_id = self.frame_ids.pop(drag.time_s, "")
+            out.vector.x, out.vector.y, out.vector.z = drag.cd, drag.cd_std, drag.velocity_m_s
+            publish_safely(self, self.cd_pub, out)
+            info = {**drag.__dict__, "unmatched_frames": self.aligner.unmatched}
+            publish_safely(self, self.info_pub, String(data=json.dumps(info)))
+        if len(self.frame_ids) > 1000:  # frames that never matched
+            self.frame_ids = dict(list(self.frame_ids.items())[-100:])
+
+
+def main(args: list[str] | None = None) -> int:
+    from .common import run_nodes
+
+    return run_nodes([DragNode], args)
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main(sys.argv))
