@@ -338,7 +338,9 @@ def _bag_image_count(path: Path, image_topic: str | None) -> int:
 def cmd_record(args: argparse.Namespace) -> int:
     from .ros.record_node import main as record_main
 
-    ros_args = ["--ros-args", "-p", f"storage:={args.storage}", "-p", f"output:={args.output or ''}"]
+    ros_args = ["--ros-args", "-p", f"storage:={args.storage}"]
+    if args.output:
+        ros_args += ["-p", f"output:={args.output}"]
     ros_args += ["-p", "topics:=[" + ",".join(f"'{t}'" for t in args.topics) + "]"]
     return record_main(["veg-area-record", *ros_args])
 
