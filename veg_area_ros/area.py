@@ -178,16 +178,17 @@ class AreaMeasurer:
             ideal_u = np.empty((height, width), np.float32)
             ideal_v, area = np.empty_like(ideal_u), np.ones_like(ideal_u)
             u = np.arange(width, dtype=float)
-            if self.camera is None:
+            if self.camera is None:  # the raw frame is the idealized image
                 ideal_u[:] = u
                 ideal_v[:] = np.arange(height, dtype=np.float32)[:, None]
-            for top in range(0, height, 256) if self.camera is not None else ():
-                rows = np.arange(top, min(top + 256, height), dtype=float)
-                uv = np.column_stack([np.tile(u, len(rows)), np.repeat(rows, width)])
-                ideal, block_area = self.camera.pixels_to_ideal(uv)
-                ideal_u[top:top + len(rows)] = ideal[:, 0].reshape(len(rows), width)
-                ideal_v[top:top + len(rows)] = ideal[:, 1].reshape(len(rows), width)
-                area[top:top + len(rows)] = block_area.reshape(len(rows), width)
+            else:
+                for top in range(0, height, 256):
+                    rows = np.arange(top, min(top + 256, height), dtype=float)
+                    uv = np.column_stack([np.tile(u, len(rows)), np.repeat(rows, width)])
+                    ideal, block_area = self.camera.pixels_to_ideal(uv)
+                    ideal_u[top:top + len(rows)] = ideal[:, 0].reshape(len(rows), width)
+                    ideal_v[top:top + len(rows)] = ideal[:, 1].reshape(len(rows), width)
+                    area[top:top + len(rows)] = block_area.reshape(len(rows), width)
             self._geometry = ideal_u, ideal_v, area
         return self._geometry
 

@@ -156,31 +156,43 @@ class BagFrame:
     camera_info: CameraInfoFields | None  # the latest camera_info recorded before this frame
 
 
-def bag_topics(path: str | Path) -> dict[str, str]:
-    """topic -> message type of a bag."""
-    with Reader(path) as reader:
-        return {topic: info.msgtype for topic, info in reader.topics.items()}
+def _open_reader(path: str | Path) -> Reader:
+    try:
+        reader = Reader(path)
+        reader.open()
+    except Exception as exc:  # rosbags raises its own error classes for every kind of broken bag
+        raise BagError(f"{path}: not a readable rosbag2 bag ({exc}); a recording that was killed can be "
+                       "rebuilt with 'veg-area bag-recover'") from exc
+    return reader
+
+
+def _image_connections(reader: Reader, path: str | Path, image_topic: str | None) -> list:
+    """The connections of the bag's image topic: the named one, else the only sensor_msgs/Image topic."""
+    images = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/Image"]
+    chosen = [c for c in images if image_topic is None or c.topic == image_topic]
+    if len({c.topic for c in chosen}) != 1:
+        raise BagError(f"{path}: pick the image topic (--image-topic); Image topics in the bag: "
+                       f"{sorted({c.topic for c in images})}")
+    return chosen
+
+
+def bag_image_count(path: str | Path, image_topic: str | None = None) -> int:
+    reader = _open_reader(path)
+    try:
+        return sum(c.msgcount for c in _image_connections(reader, path, image_topic))
+    finally:
+        reader.close()
 
 
 def iter_bag_frames(path: str | Path, image_topic: str | None = None,
                     info_topic: str | None = None) -> Iterator[BagFrame]:
     """The bag's image messages in recording order, each with the camera_info last recorded before it.
     Without topic names: the only sensor_msgs/Image topic (an error if there are several)."""
+    reader = _open_reader(path)
     try:
-        reader = Reader(path)
-        reader.open()
-    except Exception as exc:  # rosbags raises its own error classes for every kind of broken bag
-        raise BagError(f"{path}: not a readable rosbag2 folder ({exc})") from exc
-    try:
-        images = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/Image"]
-        infos = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/CameraInfo"]
-        if image_topic is not None:
-            images = [c for c in images if c.topic == image_topic]
-        if info_topic is not None:
-            infos = [c for c in infos if c.topic == info_topic]
-        if len({c.topic for c in images}) != 1:
-            found = sorted({c.topic for c in reader.connections if c.msgtype == "sensor_msgs/msg/Image"})
-            raise BagError(f"{path}: pick the image topic (--image-topic); Image topics in the bag: {found}")
+        images = _image_connections(reader, path, image_topic)
+        infos = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/CameraInfo"
+                 and (info_topic is None or c.topic == info_topic)]
         camera_info = None
         index = 0
         for connection, timestamp, data in reader.messages(connections=images + infos[:1]):

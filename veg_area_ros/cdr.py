@@ -145,16 +145,21 @@ def encode_image(image: np.ndarray, sec: int, nanosec: int, frame_id: str) -> by
     return _image_writer(image, sec, nanosec, frame_id).bytes()
 
 
-def _image_writer(image: np.ndarray, sec: int, nanosec: int, frame_id: str) -> _Writer:
+def image_layout(image: np.ndarray) -> tuple[str, int]:
+    """(encoding, step) an Image of this frame carries: bgr8 for (H, W, 3) uint8, mono8 for (H, W) uint8."""
     if image.dtype != np.uint8 or image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
         raise ImageMessageError(f"cannot publish an image of shape {image.shape} and type {image.dtype}")
-    height, width = image.shape[:2]
+    return ("bgr8", 3 * image.shape[1]) if image.ndim == 3 else ("mono8", image.shape[1])
+
+
+def _image_writer(image: np.ndarray, sec: int, nanosec: int, frame_id: str) -> _Writer:
+    encoding, step = image_layout(image)
     writer = _Writer()
     writer.header(sec, nanosec, frame_id)
-    writer.pack("II", height, width)
-    writer.string("bgr8" if image.ndim == 3 else "mono8")
+    writer.pack("II", *image.shape[:2])
+    writer.string(encoding)
     writer.pack("B", 0)
-    writer.pack("I", width * (3 if image.ndim == 3 else 1))
+    writer.pack("I", step)
     writer.blob(memoryview(np.ascontiguousarray(image)).cast("B"))
     return writer
 

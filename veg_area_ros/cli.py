@@ -196,7 +196,7 @@ def cmd_measure(args: argparse.Namespace) -> int:
     import cv2
 
     from .area import AreaMeasurer, draw_overlay
-    from .bags import BagError
+    from .bags import BagError, bag_image_count
     from .calib_io import CalibrationFileError, read_calibration, write_calibration
     from .cdr import info_to_camera
     from .classify import Classifier, ClassifyError
@@ -239,7 +239,7 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if from_bag and len(bags) != len(files):
         raise CliError("--calibration bag needs rosbag2 inputs (their recorded camera_info)", 2)
     try:
-        bag_frames = sum(_bag_image_count(b, args.image_topic) for b in bags)
+        bag_frames = sum(bag_image_count(b, args.image_topic) for b in bags)
     except BagError as exc:
         raise CliError(str(exc)) from exc
     total = (sum(video_frame_count(v) // args.video_step for v in videos) + bag_frames
@@ -319,20 +319,6 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if measured < len(rows):
         say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
     return 0
-
-
-def _bag_image_count(path: Path, image_topic: str | None) -> int:
-    from rosbags.rosbag2 import Reader
-
-    from .bags import BagError
-
-    try:
-        with Reader(path) as reader:
-            return sum(c.msgcount for c in reader.connections if c.msgtype == "sensor_msgs/msg/Image"
-                       and (image_topic is None or c.topic == image_topic))
-    except Exception as exc:  # rosbags' own error classes for every kind of broken bag
-        raise BagError(f"{path}: not a readable rosbag2 bag ({exc}); a recording that was killed can be "
-                       "rebuilt with 'veg-area bag-recover'") from exc
 
 
 def cmd_record(args: argparse.Namespace) -> int:

@@ -6,37 +6,31 @@ from __future__ import annotations
 import sys
 
 
-def camera_main() -> int:
-    from .ros.camera_node import main
+def _run(module: str) -> int:
+    from importlib import import_module
 
-    return main(sys.argv)
+    return import_module(f"{__package__}.ros.{module}").main(sys.argv)
+
+
+def camera_main() -> int:
+    return _run("camera_node")
 
 
 def calibration_main() -> int:
-    from .ros.calibration_node import main
-
-    return main(sys.argv)
+    return _run("calibration_node")
 
 
 def area_main() -> int:
-    from .ros.area_node import main
-
-    return main(sys.argv)
+    return _run("area_node")
 
 
 def graph_main() -> int:
-    from .ros.graph import main
-
-    return main(sys.argv)
+    return _run("graph")
 
 
 def record_main() -> int:
-    from .ros.record_node import main
-
-    return main(sys.argv)
+    return _run("record_node")
 
 
 def drag_main() -> int:
-    from .ros.drag_node import main
-
-    return main(sys.argv)
+    return _run("drag_node")

@@ -7,7 +7,7 @@ from builtin_interfaces.msg import Time
 from sensor_msgs.msg import CameraInfo, Image
 
 from ..camera_model import BrownCamera
-from ..cdr import ImageMessageError, encode_image, frame_pixels, info_to_camera
+from ..cdr import ImageMessageError, encode_image, frame_pixels, image_layout, info_to_camera
 
 __all__ = ["ImageMessageError", "camera_to_info", "image_bytes", "image_to_msg", "info_to_camera", "msg_to_image"]
 
@@ -18,18 +18,14 @@ def image_bytes(image: np.ndarray, stamp: Time, frame_id: str) -> bytes:
     return encode_image(image, stamp.sec, stamp.nanosec, frame_id)
 
 
-
 def image_to_msg(image: np.ndarray, stamp: Time, frame_id: str) -> Image:
     """bgr8 for (H, W, 3) uint8, mono8 for (H, W) uint8."""
-    if image.dtype != np.uint8 or image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
-        raise ImageMessageError(f"cannot publish an image of shape {image.shape} and type {image.dtype}")
+    encoding, step = image_layout(image)
     msg = Image()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
     msg.height, msg.width = image.shape[:2]
-    msg.encoding = "bgr8" if image.ndim == 3 else "mono8"
-    msg.is_bigendian = 0
-    msg.step = msg.width * (3 if image.ndim == 3 else 1)
+    msg.encoding, msg.is_bigendian, msg.step = encoding, 0, step
     msg.data = np.ascontiguousarray(image).tobytes()  # bytes: the fast path into the message (see issue #6)
     return msg
 
