@@ -32,24 +32,42 @@ def netns_available() -> bool:
         return False
 
 
+def ros_environment(home: Path, domain: int) -> dict[str, str]:
+    """This environment without the caller's ROS/DDS settings, plus a log home, a domain, Fast DDS with the
+    shipped shared-memory profile, and this source tree on PYTHONPATH."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_"))}
+    env.update(HOME=str(home), ROS_LOG_DIR=str(home / "ros_log"), PYTHONPATH=str(REPO), ROS_DOMAIN_ID=str(domain),
+               RMW_IMPLEMENTATION="rmw_fastrtps_cpp", FASTDDS_DEFAULT_PROFILES_FILE=str(PROFILE),
+               PYTHONUNBUFFERED="1")
+    return env
+
+
+def confined(command: list[str]) -> list[str]:
+    """`command` inside a private network namespace (loopback only) with a private /dev/shm, when allowed."""
+    if not netns_available():
+        return command
+    script = 'ip link set lo up && mount -t tmpfs -o size=4g tmpfs /dev/shm && exec "$@"'
+    return ["unshare", "--net", "--mount", "--kill-child", "--fork", "sh", "-c", script, "sh", *command]
+
+
+def remove_new_shm(before: set[str]) -> None:
+    """Fast DDS files a killed node left in the host's /dev/shm (the fallback without a private one)."""
+    if netns_available():
+        return
+    for leftover in set(os.listdir("/dev/shm")) - before:
+        if "fast" in leftover.lower():
+            Path("/dev/shm", leftover).unlink(missing_ok=True)
+
+
 def run_scenario(name: str, tmp_path: Path, timeout: float = 240.0, **options) -> dict:
     """Run scenario `name` with `options` (JSON); returns its JSON result. A unique ROS_DOMAIN_ID per call."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_"))}
-    env.update(HOME=str(tmp_path), ROS_LOG_DIR=str(tmp_path / "ros_log"), PYTHONPATH=str(REPO),
-               ROS_DOMAIN_ID=str(next(_domains) % 230), RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
-               FASTDDS_DEFAULT_PROFILES_FILE=str(PROFILE), PYTHONUNBUFFERED="1")
-    command = [sys.executable, str(REPO / "test" / "ros_scenarios.py"), name, json.dumps(options)]
+    env = ros_environment(tmp_path, next(_domains) % 230)
+    command = confined([sys.executable, str(REPO / "test" / "ros_scenarios.py"), name, json.dumps(options)])
     before = set(os.listdir("/dev/shm"))
-    if netns_available():
-        script = ('ip link set lo up && mount -t tmpfs -o size=4g tmpfs /dev/shm && exec "$@"')
-        command = ["unshare", "--net", "--mount", "--kill-child", "--fork", "sh", "-c", script, "sh", *command]
     try:
         done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=timeout, cwd=tmp_path)
     finally:
-        if not netns_available():
-            for leftover in set(os.listdir("/dev/shm")) - before:
-                if "fast" in leftover.lower():
-                    Path("/dev/shm", leftover).unlink(missing_ok=True)
+        remove_new_shm(before)
     lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
     if done.returncode != 0 or not lines:
         raise AssertionError(f"scenario {name} failed (exit {done.returncode}):\n{done.stdout[-3000:]}\n"

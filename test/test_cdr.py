@@ -20,6 +20,8 @@ from veg_area_ros.cdr import (
     decode_camera_info,
     decode_image,
     encode_image,
+    restamp,
+    unstamped,
 )
 from veg_area_ros.ros.messages import camera_to_info, image_to_msg, msg_to_image
 from veg_area_ros.synthetic import DSLR, ENDOSCOPE
@@ -82,6 +84,23 @@ def test_camera_info_bytes_are_rclpys(camera, frame_id):
     same_except_padding(writer.bytes(), writer, theirs)
     empty = CameraInfo()
     assert decode_camera_info(serialize_message(empty)).d == []
+
+
+def test_restamping_and_comparing_without_the_stamp():
+    """The camera node serializes camera_info once and restamps it per frame; the area node skips a
+    camera_info whose content (all but the stamp) it has seen."""
+    msg = camera_to_info(ENDOSCOPE, "cam", Time(sec=1, nanosec=2))
+    serialized = serialize_message(msg)
+    msg.header.stamp = Time(sec=-3, nanosec=999_999_999)
+    assert restamp(serialized, -3, 999_999_999) == serialize_message(msg)
+    assert unstamped(serialized) == unstamped(serialize_message(msg))
+    msg.k[0] += 1e-9
+    assert unstamped(serialized) != unstamped(serialize_message(msg))
+    msg.header.frame_id = "other"
+    msg.k[0] -= 1e-9
+    assert unstamped(serialized) != unstamped(serialize_message(msg))
+    with pytest.raises(ImageMessageError, match="too short"):
+        restamp(b"\x00\x01\x00\x00\x01", 0, 0)
 
 
 @pytest.mark.parametrize("mangle, problem", [

@@ -1,37 +1,59 @@
-"""The newest-frame slot between the area node's subscription and its worker (issue #7)."""
+"""Counting the frames the area node skipped while measuring (issue #7), from per-frame camera_info stamps."""
 
-import threading
-import time
+from __future__ import annotations
 
-from veg_area_ros.latest import LatestSlot
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-
-def test_newest_frame_wins_and_replaced_frames_are_counted():
-    slot = LatestSlot[int]()
-    for k in range(5):
-        slot.put(k)
-    assert slot.take(0.1) == 4
-    assert (slot.received, slot.dropped) == (5, 4)
-    assert slot.take(0.05) is None  # nothing new: waits, then gives up
+from veg_area_ros.latest import FrameTally
 
 
-def test_a_slow_consumer_holds_one_frame_and_sees_the_latest():
-    slot = LatestSlot[int]()
-    seen: list[int] = []
+def test_frames_skipped_while_measuring_are_counted():
+    tally = FrameTally()
+    for stamp in range(1, 11):  # ten frames, each announced by its camera_info first (camera_node's order)
+        tally.announce(stamp)
+        if stamp in (1, 4, 10):  # the node was free for these
+            tally.took(stamp)
+    assert (tally.received, tally.skipped) == (3, 7)  # 2, 3 and 5..9 skipped
 
-    def consume() -> None:
-        while (item := slot.take(2.0)) is not None:
-            seen.append(item)
-            time.sleep(0.01)  # slower than the producer
 
-    worker = threading.Thread(target=consume)
-    worker.start()
-    for k in range(300):
-        slot.put(k)
-        time.sleep(0.0005)
-    time.sleep(0.05)
-    slot.close()
-    worker.join(5)
-    assert not worker.is_alive()
-    assert seen == sorted(seen) and seen[-1] == 299  # in order, and the last frame was measured
-    assert slot.received == 300 and slot.dropped == 300 - len(seen) > 0
+def test_frames_before_their_camera_info_and_latched_calibrations():
+    tally = FrameTally()
+    tally.announce(0)  # a latched calibration with an old stamp: not a frame
+    tally.took(5)
+    assert tally.skipped is None  # nothing shows camera_info comes per frame yet
+    tally.announce(5)  # ... now it does (its frame came first)
+    for stamp in (6, 7, 8):
+        tally.announce(stamp)
+    tally.announce(8)  # a repeat of the same stamp is not another frame
+    tally.took(9)  # image 9 before its camera_info: 6, 7, 8 were skipped
+    tally.announce(9)
+    tally.took(10)
+    tally.announce(10)
+    assert (tally.received, tally.skipped) == (3, 3)
+
+
+def test_without_per_frame_camera_info_the_count_is_unknown():
+    tally = FrameTally()
+    tally.announce(1)
+    for stamp in range(2, 50):
+        tally.took(stamp)
+    assert tally.received == 48 and tally.skipped is None
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.booleans(), min_size=1, max_size=300), st.booleans())
+def test_skipped_plus_taken_is_every_frame_up_to_the_last_taken(taken_mask, image_first):
+    """Whatever the pattern and the order of the two topics: frames from the first taken to the last taken
+    are either taken or counted skipped, exactly."""
+    tally = FrameTally()
+    for stamp, taken in enumerate(taken_mask, 1):
+        if taken and image_first:
+            tally.took(stamp)
+        tally.announce(stamp)
+        if taken and not image_first:
+            tally.took(stamp)
+    if any(taken_mask):
+        taken = [k for k, t in enumerate(taken_mask, 1) if t]
+        assert tally.skipped == taken[-1] - taken[0] + 1 - len(taken)
+    assert tally.received == sum(taken_mask)

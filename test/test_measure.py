@@ -76,6 +76,41 @@ def test_video_gives_progress_csv_and_plot(workspace, tmp_path):
     assert cv2.imread(str(tmp_path / "run_area.png")) is not None
 
 
+def test_batch_over_several_videos_on_all_cores(workspace, tmp_path):
+    """--jobs 0: each video in its own worker; per-video CSVs equal measuring each alone, progress on stderr,
+    a summary, and a broken input reported (exit 1) without losing the others."""
+    videos = []
+    for run, distance in (("a", 0.70), ("b", 0.72), ("c", 0.68)):
+        folder = tmp_path / run
+        folder.mkdir()
+        videos.append(folder / "run.avi")  # the same stem in each folder: the CSVs must not collide
+        writer = cv2.VideoWriter(str(videos[-1]), cv2.VideoWriter_fourcc(*"MJPG"), 10, ENDOSCOPE.image_size)
+        for k in range(3):
+            writer.write(render_scene(ENDOSCOPE, SCENE, distance, FlatPort(), seed=k))
+        writer.release()
+    broken = tmp_path / "broken.avi"
+    broken.write_bytes(b"not a video")
+    common = ("--calibration", str(workspace / "water.yaml"), "--targets", str(workspace / "targets.yaml"),
+              "--threshold", "120")
+    done = run_cli("measure", *map(str, videos), str(broken), *common, "--jobs", "0", "--output-dir",
+                   str(tmp_path / "out"), cwd=tmp_path)
+    assert done.returncode == 1 and "broken.avi" in done.stderr.splitlines()[-1], done.stderr
+    assert "batch: 4 inputs" in done.stderr and "done" in done.stderr
+    summary = list(csv.DictReader((tmp_path / "out" / "batch_summary.csv").open()))
+    assert [r["input"] for r in summary] == [*map(str, videos), str(broken)]
+    assert [r["measured"] for r in summary] == ["3", "3", "3", "0"] and summary[3]["error"]
+    for k, (video, row) in enumerate(zip(videos, summary, strict=False)):
+        alone = run_cli("measure", str(video), *common, "--csv", str(tmp_path / f"alone{k}.csv"), cwd=tmp_path)
+        assert alone.returncode == 0, alone.stderr
+        expected = [float(r["area_m2"]) for r in csv.DictReader((tmp_path / f"alone{k}.csv").open())]
+        batch_csv = tmp_path / "out" / f"{k + 1:02d}_run_area.csv"
+        assert row["csv"] == str(batch_csv)
+        assert [float(r["area_m2"]) for r in csv.DictReader(batch_csv.open())] == expected
+        assert float(row["mean_area_m2"]) == pytest.approx(np.mean(expected), rel=1e-12)
+        assert cv2.imread(str(batch_csv.with_suffix(".png"))) is not None
+        assert abs(float(row["mean_area_m2"]) / SCENE.true_area_m2 - 1) <= 0.01  # every distance: the true Af
+
+
 def test_calibration_of_another_image_size(workspace, tmp_path):
     small = tmp_path / "small.yaml"
     write_calibration(small, calibrated_endoscope("water").__class__(320, 240, c=260, xp=160, yp=120))

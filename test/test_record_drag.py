@@ -48,6 +48,27 @@ def test_recorded_bag_is_complete_and_valid(recorded):
     assert counts["/image_raw"] >= 20 and counts["/projected_area"] >= 15
 
 
+def test_frames_the_area_node_skipped_are_counted(recorded):
+    """camera_node publishes camera_info with every frame: every frame recorded from the area node's first to
+    its last is either taken by it or counted skipped."""
+    folder, _ = recorded
+    image_stamps, infos = [], []
+    store = get_typestore(Stores.ROS2_KILTED)
+    with Reader(folder / "closed_bag") as reader:
+        for connection, _, data in reader.messages():
+            if connection.topic == "/image_raw":
+                header = decode_image(data).header
+                image_stamps.append((header.sec, header.nanosec))
+            elif connection.topic == "/projected_area/info":
+                infos.append(json.loads(store.deserialize_cdr(data, connection.msgtype).data))
+    first, last = infos[0], infos[-1]
+    assert first["frames_received"] == 1 and last["frames_measured"] == last["frames_received"]  # none refused
+    span = [s for s in image_stamps if (first["stamp"]["sec"], first["stamp"]["nanosec"]) <= s
+            <= (last["stamp"]["sec"], last["stamp"]["nanosec"])]
+    assert isinstance(last["frames_dropped"], int)
+    assert last["frames_received"] + last["frames_dropped"] == len(span)
+
+
 def test_killed_recording_is_recovered_but_for_the_last_chunk(recorded, tmp_path):
     folder, _ = recorded
     with pytest.raises(Exception):  # noqa: B017 - rosbags' error for a bag without metadata

@@ -43,11 +43,12 @@ def test_mask_is_published_with_the_frames_stamp(graph):
         assert mask["stamp"] in graph["info_stamps"]
 
 
-def test_frames_are_counted_and_hardly_any_dropped_at_ten_hertz(graph):
-    """At 10 Hz only the frames that arrive while a new calibration's pixel geometry is built (~0.1 s, twice:
-    the fit and set_camera_info) may be skipped: the newest frame is measured, the others counted."""
+def test_frames_are_counted(graph):
+    """Here camera_info is the calibration node's one latched message, not one per frame: frames skipped while
+    measuring cannot be known and are reported as unknown (null), not as a guess. (test_record_drag counts them
+    with a camera that publishes camera_info per frame.)"""
     counts = graph["frame_counts"]
-    assert counts["frames_dropped"] <= 4 and counts["frames_measured"] >= 5
+    assert counts["frames_dropped"] is None and counts["frames_measured"] >= 5
     assert counts["frames_received"] >= counts["frames_measured"]
 
 

@@ -24,6 +24,18 @@ def test_folder_ends_loops_and_reports_unreadable_frames(tmp_path):
     assert looping.read() is not None  # started over
 
 
+def test_a_looped_still_is_decoded_once(tmp_path):
+    still = tmp_path / "still.png"
+    cv2.imwrite(str(still), np.full((4, 6, 3), 7, np.uint8))
+    source = open_source(str(still), loop=True)
+    first = source.read()
+    still.write_bytes(b"replaced by something unreadable")  # not read again: the decoded frame is replayed
+    assert all(np.array_equal(source.read(), first) for _ in range(3))
+    once = open_source(str(tmp_path / "still.png"))
+    with pytest.raises(SourceError):  # not looped: read as it is now
+        once.read()
+
+
 def test_video_end_and_loop(tmp_path):
     path = tmp_path / "v.avi"
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 5, (32, 24))

@@ -35,6 +35,30 @@ class Header:
         return self.sec + self.nanosec * 1e-9
 
 
+STAMP = struct.Struct("<iI")  # header.stamp (sec, nanosec): the first field of every stamped message
+STAMP_END = len(ENCAPSULATION) + STAMP.size
+
+
+def restamp(buffer, sec: int, nanosec: int) -> bytes:
+    """A serialized stamped message (Image, CameraInfo, ...) with another header stamp, nothing else changed."""
+    if len(buffer) < STAMP_END:
+        raise ImageMessageError("CDR data too short for a header stamp")
+    return bytes(buffer[:len(ENCAPSULATION)]) + STAMP.pack(sec, nanosec) + bytes(buffer[STAMP_END:])
+
+
+def stamp_ns(buffer) -> int:
+    """The header stamp of a serialized stamped message, in nanoseconds."""
+    if len(buffer) < STAMP_END:
+        raise ImageMessageError("CDR data too short for a header stamp")
+    sec, nanosec = STAMP.unpack_from(buffer, len(ENCAPSULATION))
+    return sec * 1_000_000_000 + nanosec
+
+
+def unstamped(buffer) -> bytes:
+    """A serialized stamped message without its stamp: equal for the same content sent at other times."""
+    return bytes(buffer[STAMP_END:])
+
+
 def frame_pixels(data, height: int, width: int, encoding: str, step: int) -> np.ndarray:
     """A BGR (H, W, 3) or grey (H, W) uint8 frame from an Image's fields: a view of `data` when the rows are
     packed bgr8/mono8 (no copy), a copy for rgb8 or padded rows. ImageMessageError says what is wrong."""

@@ -11,6 +11,7 @@ better calibration.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime as dt
 import json
 import math
@@ -193,6 +194,16 @@ CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area
 
 
 def cmd_measure(args: argparse.Namespace) -> int:
+    if args.jobs < 0:
+        raise CliError("--jobs must be 0 (every core) or more", 2)
+    if args.jobs != 1 and len(args.inputs) > 1:
+        return _measure_batch(args)
+    return _measure(args)[0]
+
+
+def _measure(args: argparse.Namespace, on_frame=None) -> tuple[int, list[dict]]:
+    """Measure every frame of args.inputs; (exit code, CSV rows). `on_frame(index, total)` (a batch worker)
+    replaces the per-frame lines on stdout."""
     import cv2
 
     from .area import AreaMeasurer, draw_overlay
@@ -285,7 +296,7 @@ def cmd_measure(args: argparse.Namespace) -> int:
             row.update(summary)
             if result.missing_targets:
                 say(f"[{index}/{total}] {frame.name}: targets not found: markers {result.missing_targets}")
-            if not args.json or index % 25 == 0 or index == total:
+            if on_frame is None and (not args.json or index % 25 == 0 or index == total):
                 line = (f"[{index}/{total}] {frame.name}: Af = {result.area_m2:.6g} ± {result.area_std_m2:.2g} m² "
                         f"({result.pixel_count} px, threshold {result.threshold:g}, {result.scale.kind} scale"
                         f"{'' if result.calibrated else ', UNCALIBRATED'})")
@@ -299,6 +310,8 @@ def cmd_measure(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps({k: v for k, v in row.items() if k != "error" or v}), flush=True)
         rows.append(row)
+        if on_frame is not None:
+            on_frame(index, total)
 
     if csv_path is not None:
         _write_area_csv(csv_path, rows)
@@ -318,6 +331,99 @@ def cmd_measure(args: argparse.Namespace) -> int:
         raise CliError(f"no frame measured: {'; '.join(reasons)[:500]}")
     if measured < len(rows):
         say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
+    return 0, rows
+
+
+BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "std_area_m2", "csv", "error")
+
+
+def _batch_csv_paths(inputs: list[str], folder: Path) -> list[Path]:
+    """<stem>_area.csv per input; inputs sharing a stem are told apart by their position."""
+    stems = [Path(i.rstrip("/")).stem or "input" for i in inputs]
+    return [folder / (f"{k + 1:02d}_{stem}_area.csv" if stems.count(stem) > 1 else f"{stem}_area.csv")
+            for k, stem in enumerate(stems)]
+
+
+def _measure_batch_job(options: dict, source: str, csv_path: str, progress) -> dict:
+    """One input of a batch, in a worker process: its CSV and plot, and a one-line summary."""
+    import statistics
+
+    args = argparse.Namespace(**dict(options, inputs=[source], csv=csv_path, json=False, quiet=True))
+    if options["overlay"]:
+        args.overlay = str(Path(options["overlay"]) / Path(csv_path).stem)
+    summary = {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "std_area_m2": "",
+               "csv": csv_path, "error": ""}
+    try:
+        _, rows = _measure(args, on_frame=lambda index, total: progress.put((source, index, total)))
+    except CliError as exc:
+        summary["error"] = str(exc)
+        return summary
+    areas = [r["area_m2"] for r in rows if not r["error"] and "area_m2" in r]
+    summary.update(frames=len(rows), measured=len(areas))
+    if areas:
+        summary["mean_area_m2"] = statistics.fmean(areas)
+        summary["std_area_m2"] = statistics.stdev(areas) if len(areas) > 1 else 0.0
+    return summary
+
+
+def _measure_batch(args: argparse.Namespace) -> int:
+    """Each input (video, bag, image or folder) measured by its own worker process, --jobs at a time, with
+    one progress line; a CSV + plot per input and batch_summary.csv in --output-dir."""
+    import multiprocessing
+    import os
+    import queue
+    import time
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    if args.csv:
+        raise CliError("--csv names one file; a batch writes <input>_area.csv per input into --output-dir", 2)
+    if args.idealized:
+        raise CliError("--idealized is for one input at a time (frames of several inputs would mix)", 2)
+    if args.overlay and Path(args.overlay).suffix.lower() in (".png", ".jpg", ".jpeg"):
+        raise CliError(f"--overlay {args.overlay} names one image; give a folder for a batch", 2)
+    folder = Path(args.output_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    jobs = args.jobs or os.cpu_count() or 1
+    context = multiprocessing.get_context("spawn")  # workers start clean (OpenCV threads, no forked state)
+    options = {k: v for k, v in vars(args).items() if k != "func"}
+    csv_paths = _batch_csv_paths(args.inputs, folder)
+    say = _progress(args.quiet)
+    say(f"batch: {len(args.inputs)} inputs, {min(jobs, len(args.inputs))} at a time")
+    with context.Manager() as manager, ProcessPoolExecutor(min(jobs, len(args.inputs)), mp_context=context) as pool:
+        progress = manager.Queue()
+        pending = {pool.submit(_measure_batch_job, options, source, str(path), progress): source
+                   for source, path in zip(args.inputs, csv_paths, strict=True)}
+        done_frames: dict[str, tuple[int, int]] = {}
+        summaries: dict[str, dict] = {}
+        last_line = 0.0
+        while pending:
+            finished, _ = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+            for future in finished:
+                source = pending.pop(future)
+                summaries[source] = future.result()
+                state = summaries[source]["error"] or f"{summaries[source]['measured']} frames measured"
+                say(f"batch: {source} done: {state}")
+            with contextlib.suppress(queue.Empty):
+                while True:
+                    source, index, total = progress.get_nowait()
+                    done_frames[source] = (index, total)
+            if time.monotonic() - last_line > 2.0 and pending and done_frames:
+                frames = sum(i for i, _ in done_frames.values())
+                total = sum(t for _, t in done_frames.values())
+                say(f"batch: {len(summaries)}/{len(args.inputs)} inputs done; {frames} of {total} frames measured "
+                    "in the inputs begun")
+                last_line = time.monotonic()
+    rows = [summaries[source] for source in args.inputs]
+    summary_path = folder / "batch_summary.csv"
+    _write_csv(summary_path, BATCH_COLUMNS, rows)
+    for row in rows:
+        mean = f"Af = {row['mean_area_m2']:.6g} m² (sd {row['std_area_m2']:.2g}) over {row['measured']} frames" \
+            if row["measured"] else f"not measured: {row['error'] or 'no frame measured'}"
+        print(f"{row['input']}: {mean}", flush=True)
+    say(f"batch summary: {summary_path}")
+    failed = [row["input"] for row in rows if not row["measured"]]
+    if failed:
+        raise CliError(f"{len(failed)} of {len(rows)} inputs gave no measurement: {', '.join(failed)}")
     return 0
 
 
@@ -367,16 +473,20 @@ def cmd_vogel(args: argparse.Namespace) -> int:
 
 
 def _write_area_csv(path: Path, rows: list[dict]) -> None:
+    _write_csv(path, CSV_COLUMNS,
+               [{**row, "missing_targets": " ".join(map(str, row.get("missing_targets", [])))} for row in rows])
+
+
+def _write_csv(path: Path, columns: Sequence[str], rows: list[dict]) -> None:
     import csv
     import io
 
     from .calib_io import write_atomic
 
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, CSV_COLUMNS, extrasaction="ignore")
+    writer = csv.DictWriter(buffer, columns, extrasaction="ignore")
     writer.writeheader()
-    for row in rows:
-        writer.writerow({**row, "missing_targets": " ".join(map(str, row.get("missing_targets", [])))})
+    writer.writerows(rows)
     write_atomic(path, buffer.getvalue())
 
 
@@ -450,6 +560,10 @@ def build_parser() -> argparse.ArgumentParser:
                      "default for a video: VIDEO_area.csv here")
     mea.add_argument("--idealized", metavar="DIR", help="write the idealized frames and their camera here")
     mea.add_argument("--video-step", type=int, default=1, help="measure every Nth video frame")
+    mea.add_argument("--jobs", type=int, default=1, metavar="N",
+                     help="batch: measure the inputs N at a time in worker processes, 0 = every core; a CSV and "
+                          "plot per input and batch_summary.csv go to --output-dir")
+    mea.add_argument("--output-dir", default=".", metavar="DIR", help="where a batch writes (default: here)")
     mea.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     mea.set_defaults(func=cmd_measure)
 

@@ -1,39 +1,53 @@
-"""The newest-frame hand-over between a fast producer (a subscription callback) and a slower consumer (the
-area computation): one slot, a new frame replaces one not yet taken, and every replaced frame is counted.
-Memory is bounded by one frame whatever the rates. No ROS here."""
+"""Which camera frames the area node measured and which it skipped. No ROS here.
+
+The node measures in its image callback on a depth-1 best-effort subscription: while it measures, DDS keeps
+only the newest frame and discards older ones inside the middleware, without a copy into Python (taking
+every frame into Python and dropping it there cost half the throughput, bench/ros_pipeline.py). Frames
+skipped that way never reach the node; they are counted from `camera_info`, which ROS camera drivers (and
+camera_node) publish with every frame under that frame's stamp, from the first frame the node takes on. A
+camera_info that is not per frame (one latched calibration) leaves the count unknown (None), never a wrong
+number.
+"""
 
 from __future__ import annotations
 
-import threading
-from typing import Generic, TypeVar
+from collections import deque
 
-T = TypeVar("T")
+REMEMBERED = 256  # stamps kept on each side: far more than frames in flight between the two topics
 
 
-class LatestSlot(Generic[T]):
+class FrameTally:
     def __init__(self) -> None:
-        self._ready = threading.Condition()
-        self._item: T | None = None
-        self._closed = False
-        self.received = 0  # frames put
-        self.dropped = 0  # frames replaced before anybody took them
+        self._announced: deque[int] = deque(maxlen=REMEMBERED)  # camera_info stamps not yet accounted for
+        self._taken: deque[int] = deque(maxlen=REMEMBERED)  # frames whose camera_info may still come
+        self._per_frame = False  # a taken frame's stamp was announced: camera_info comes with every frame
+        self.received = 0  # frames taken
+        self._skipped = 0  # frames announced after the first frame taken, never taken
 
-    def put(self, item: T) -> None:
-        with self._ready:
-            if self._item is not None:
-                self.dropped += 1
-            self._item = item
-            self.received += 1
-            self._ready.notify()
+    def announce(self, stamp_ns: int) -> None:
+        """A camera_info with this stamp: a frame the camera published."""
+        if stamp_ns in self._taken:  # its frame came first (two topics are not ordered)
+            self._per_frame = True
+            self._taken.remove(stamp_ns)
+        elif not self._announced or stamp_ns > self._announced[-1]:  # a latched re-send is not a new frame
+            self._announced.append(stamp_ns)
 
-    def take(self, timeout: float | None = None) -> T | None:
-        """The newest frame, waiting up to `timeout` s for one; None on timeout or once closed."""
-        with self._ready:
-            self._ready.wait_for(lambda: self._item is not None or self._closed, timeout)
-            item, self._item = self._item, None
-            return item
+    def took(self, stamp_ns: int) -> None:
+        """A frame with this stamp reached the node; announced frames older than it were skipped."""
+        self.received += 1
+        older = 0
+        while self._announced and self._announced[0] < stamp_ns:
+            self._announced.popleft()
+            older += 1
+        if self._announced and self._announced[0] == stamp_ns:
+            self._announced.popleft()
+            self._per_frame = True
+        else:
+            self._taken.append(stamp_ns)
+        if self.received > 1:  # before the first frame the node was not listening: nothing was skipped
+            self._skipped += older
 
-    def close(self) -> None:
-        with self._ready:
-            self._closed = True
-            self._ready.notify_all()
+    @property
+    def skipped(self) -> int | None:
+        """Frames the camera announced that never reached the node; None while that cannot be known."""
+        return self._skipped if self._per_frame else None

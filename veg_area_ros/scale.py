@@ -162,7 +162,7 @@ def track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, Detect
         found = {}
         for marker_id, marker in previous.items():
             (x0, y0), (x1, y1) = marker.corners.min(axis=0), marker.corners.max(axis=0)
-            margin = max(0.5 * max(x1 - x0, y1 - y0), 8.0)  # room for the quiet zone and a small move
+            margin = max(max(x1 - x0, y1 - y0), 8.0)  # the quiet zone, a move, and context the detector needs
             left, top = max(int(x0 - margin), 0), max(int(y0 - margin), 0)
             right, bottom = min(int(np.ceil(x1 + margin)), width), min(int(np.ceil(y1 + margin)), height)
             window = detect_markers(frame[top:bottom, left:right], dictionary, (left, top))

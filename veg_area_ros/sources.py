@@ -123,17 +123,22 @@ class FolderSource:
         self.files = files
         self.loop = loop
         self.index = 0
+        self._still: np.ndarray | None = None  # one looped image is decoded once (a test pattern at any rate)
 
     def read(self) -> np.ndarray | None:
         if self.index >= len(self.files):
             if not self.loop:
                 return None
             self.index = 0
+        if self._still is not None:
+            return self._still
         path = self.files[self.index]
         self.index += 1
         image, problem = read_image(path)
         if image is None:
             raise SourceError(f"{path.name} {problem}")
+        if self.loop and len(self.files) == 1:
+            self._still = image
         return image
 
     def release(self) -> None:

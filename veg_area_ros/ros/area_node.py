@@ -3,15 +3,16 @@ publishes Af (`projected_area`, geometry_msgs/Vector3Stamped: x = Af m², y = it
 z = object pixels; header = the source frame's), `projected_area/info` (JSON with everything else), the
 binary `mask` (mono8, same header), and on demand (when subscribed) `image_rect` and `overlay`.
 
-Frames arrive as raw CDR bytes (`raw=True`: the pixels are a view, never copied in Python) into a one-frame
-slot; a worker thread measures the newest frame, so a camera faster than the measurement costs dropped
-frames (counted, reported in `projected_area/info` and the log), never a growing queue or stale results."""
+Frames arrive as raw CDR bytes (`raw=True`: the pixels are a view, never copied in Python) on a depth-1
+best-effort subscription and are measured in its callback: while a frame is measured the middleware keeps
+only the newest one, so a camera faster than the measurement costs skipped frames (counted from the
+per-frame camera_info, reported in `projected_area/info` and the log), never a queue or stale results."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
-import threading
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped
@@ -22,14 +23,14 @@ from std_msgs.msg import String
 
 from ..area import AreaMeasurer, draw_overlay
 from ..calib_io import CalibrationFileError, read_calibration
-from ..cdr import decode_image
+from ..cdr import decode_camera_info, decode_image, info_to_camera, stamp_ns, unstamped
 from ..classify import CHANNELS, OBJECTS, Classifier, ClassifyError
 from ..idealize import FrameSizeError
-from ..latest import LatestSlot
+from ..latest import FrameTally
 from ..scale import TargetsError, TargetsSpec
 from ..synthetic import SCENE_DICTIONARY, SCENE_MARKERS
 from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, declare, publish_safely
-from .messages import ImageMessageError, image_bytes, info_to_camera
+from .messages import ImageMessageError, image_bytes
 
 TUNABLE = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "targets_file")
 
@@ -60,9 +61,9 @@ class AreaNode(Node):
         calibration_file = declare(self, "calibration_file", "", "Calibration YAML to start with ('' = wait for "
                                    "camera_info).", read_only=True)
         self.camera = None
-        self.frames = LatestSlot[bytes]()
+        self.frames = FrameTally()
         self.frames_measured = 0
-        self._dropped_logged = 0
+        self._skipped_logged = 0
         self.area_pub = self.create_publisher(Vector3Stamped, "projected_area", RESULT_QOS)
         self.info_pub = self.create_publisher(String, "projected_area/info", RESULT_QOS)
         self.mask_pub = self.create_publisher(Image, "mask", IMAGE_QOS)
@@ -77,10 +78,9 @@ class AreaNode(Node):
         self.settings = {p: self.get_parameter(p).value for p in TUNABLE}
         self.measurer = self._build(self.settings, self.camera)  # invalid start parameters: the node fails
         self.add_on_set_parameters_callback(self._on_parameters)
-        self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, LATCHED_QOS)
-        self.create_subscription(Image, "image_raw", self.frames.put, IMAGE_QOS, raw=True)
-        self._worker = threading.Thread(target=self._measure_frames, name="area_worker", daemon=True)
-        self._worker.start()
+        self._info_seen = b""  # the last camera_info without its stamp
+        self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, LATCHED_QOS, raw=True)
+        self.create_subscription(Image, "image_raw", self._on_frame, IMAGE_QOS, raw=True)
 
     def _build(self, settings: dict, camera) -> AreaMeasurer:
         """A measurer for these settings; raises ValueError (TargetsError, ClassifyError) with the reason."""
@@ -114,9 +114,15 @@ class AreaNode(Node):
                 self.uncalibrated = parameter.value
         return SetParametersResult(successful=True)
 
-    def _on_camera_info(self, msg: CameraInfo) -> None:
+    def _on_camera_info(self, data: bytes) -> None:
+        with contextlib.suppress(ImageMessageError):
+            self.frames.announce(stamp_ns(data))
+        content = unstamped(data)
+        if content == self._info_seen:  # a camera republishing its calibration with every frame: nothing new
+            return
+        self._info_seen = content
         try:
-            camera = info_to_camera(msg)
+            camera = info_to_camera(decode_camera_info(data))
         except ValueError as exc:
             self.get_logger().warning(f"camera_info ignored: {exc}", throttle_duration_sec=10.0)
             return
@@ -125,18 +131,17 @@ class AreaNode(Node):
             self.measurer = self._build(self.settings, camera)
             self.get_logger().info(f"calibration received: {camera.width}x{camera.height}, fx {camera.fx:.2f}")
 
-    def _measure_frames(self) -> None:
-        while (data := self.frames.take()) is not None:
-            try:
-                self._on_image(data)
-            except Exception as exc:  # one bad frame must not end the node's measuring
-                self.get_logger().error(f"frame not measured: {exc.__class__.__name__}: {exc}",
-                                        throttle_duration_sec=5.0)
-            if self.frames.dropped > self._dropped_logged:
-                self.get_logger().warning(f"{self.frames.dropped} of {self.frames.received} frames dropped: the "
-                                          "camera is faster than the measurement (the newest frame is measured)",
-                                          throttle_duration_sec=10.0)
-                self._dropped_logged = self.frames.dropped
+    def _on_frame(self, data: bytes) -> None:
+        try:
+            self._on_image(data)
+        except Exception as exc:  # one bad frame must not end the node's measuring
+            self.get_logger().error(f"frame not measured: {exc.__class__.__name__}: {exc}", throttle_duration_sec=5.0)
+        skipped = self.frames.skipped
+        if skipped is not None and skipped > self._skipped_logged:
+            self.get_logger().warning(f"{skipped} frames skipped, {self.frames.received} measured or refused: the "
+                                      "camera is faster than the measurement (the newest frame is measured)",
+                                      throttle_duration_sec=10.0)
+            self._skipped_logged = skipped
 
     def _on_image(self, data: bytes) -> None:
         log = self.get_logger()
@@ -146,12 +151,14 @@ class AreaNode(Node):
         except ImageMessageError as exc:
             log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
             return
+        header = fields.header
+        self.frames.took(header.sec * 1_000_000_000 + header.nanosec)
         if self.camera is None and self.uncalibrated == "drop":
             log.warning("no calibration yet (camera_info or calibration_file): frames dropped; set "
                         "uncalibrated_frames:=measure to measure them uncalibrated", throttle_duration_sec=10.0)
             return
         wanted = [pub.get_subscription_count() > 0 for pub in (self.mask_pub, self.rect_pub, self.overlay_pub)]
-        measurer = self.measurer  # parameters may swap it meanwhile: this frame uses one
+        measurer = self.measurer
         try:
             result = measurer.measure(frame, keep_images=any(wanted))
         except FrameSizeError as exc:
@@ -161,7 +168,6 @@ class AreaNode(Node):
             log.warning(f"frame not measured: {exc}", throttle_duration_sec=5.0)
             return
         self.frames_measured += 1
-        header = fields.header
         stamp = Time(sec=header.sec, nanosec=header.nanosec)
         area = Vector3Stamped()
         area.header.stamp, area.header.frame_id = stamp, header.frame_id
@@ -169,7 +175,7 @@ class AreaNode(Node):
         publish_safely(self, self.area_pub, area)
         summary = result.summary()
         summary.update(stamp={"sec": header.sec, "nanosec": header.nanosec}, frame_id=header.frame_id,
-                       frames_received=self.frames.received, frames_dropped=self.frames.dropped,
+                       frames_received=self.frames.received, frames_dropped=self.frames.skipped,
                        frames_measured=self.frames_measured)
         publish_safely(self, self.info_pub, String(data=json.dumps(summary)))
         # the images cost a remap each: made only for topics somebody listens to (rosbag2 counts)
@@ -178,11 +184,6 @@ class AreaNode(Node):
                                        (self.overlay_pub, wanted[2] and draw_overlay(result), wanted[2])):
             if want:
                 publish_safely(self, publisher, image_bytes(image, stamp, header.frame_id))
-
-    def destroy_node(self) -> None:
-        self.frames.close()
-        self._worker.join(timeout=5.0)
-        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

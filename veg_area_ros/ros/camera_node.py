@@ -9,9 +9,11 @@ from pathlib import Path
 from urllib.parse import urlparse
 
 from rclpy.node import Node
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 
 from ..calib_io import CalibrationFileError, read_calibration
+from ..cdr import restamp
 from ..sources import SYNTHETIC_SCENES, DeviceSource, SourceError, open_source
 from .common import IMAGE_QOS, LATCHED_QOS, declare, publish_safely
 from .messages import camera_to_info, image_bytes
@@ -57,7 +59,8 @@ class CameraNode(Node):
             except CalibrationFileError as exc:
                 self.get_logger().error(f"camera_info not published: {exc}")
             else:
-                self.camera_info = camera_to_info(calibration.camera, self.frame_id)
+                # serialized once; each frame only changes its stamp
+                self.camera_info = serialize_message(camera_to_info(calibration.camera, self.frame_id))
                 self.get_logger().info(f"camera_info from {path}")
         self.source = open_source(source, loop, width, height, scene, medium)
         self.source_name = source
@@ -90,8 +93,7 @@ class CameraNode(Node):
             return
         stamp = self.get_clock().now().to_msg()
         if self.camera_info is not None:  # first: a consumer has the frame's calibration when the frame comes
-            self.camera_info.header.stamp = stamp
-            publish_safely(self, self.info_pub, self.camera_info)
+            publish_safely(self, self.info_pub, restamp(self.camera_info, stamp.sec, stamp.nanosec))
         if publish_safely(self, self.image_pub, image_bytes(image, stamp, self.frame_id)):
             self.frames_published += 1
 

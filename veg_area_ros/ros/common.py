@@ -37,7 +37,10 @@ def declare(node: Node, name: str, default, description: str, *, low: float | No
 
 
 def publish_safely(node: Node, publisher, msg) -> bool:
-    """Publish; a transport under back-pressure raises RCLError: log it (throttled) and go on."""
+    """Publish; a transport under back-pressure raises RCLError: log it (throttled) and go on. After Ctrl-C
+    (the context is shut down) there is nobody to tell: nothing is sent, nothing logged."""
+    if not node.context.ok():
+        return False
     try:
         publisher.publish(msg)
         return True

@@ -1,0 +1,248 @@
+"""Camera -> Af over ROS 2, end to end (issue #7): the package's camera_node and area_node as separate
+processes (pre-serialized frames, raw subscription, newest-frame worker) next to the same pipeline written
+with plain rclpy Image messages (message objects both ways, measuring in the subscription callback), at
+640x480 and 3872x2592, in one run, confined to this machine like the tests. Prints Af results per second
+reaching a third process, mean/p99 latency from the camera's stamp to that arrival, frames the area node
+dropped, and the memory each node holds (RSS, and PSS: shared pages split among the processes using them).
+
+    .venv/bin/python bench/ros_pipeline.py [--seconds 5] [--transports shm,default]
+
+The camera publishes as fast as it can (timer at 1000 Hz for 640x480, 30 Hz for 3872x2592) a still frame of
+the synthetic cube in air with the true calibration, so every frame is measurable.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from rosbench import (
+    INSIDE,
+    Children,
+    figure,
+    latency_ms,
+    memory_mb,
+    run_confined,
+    shm_mb,
+    transport_environment,
+)
+
+LOADS = ((640, 480, 1000.0), (3872, 2592, 30.0))
+PIPELINES = ("veg_area_ros", "plain rclpy")
+FIRST_RESULT_TIMEOUT_S = 60.0
+
+
+def plain_camera(spec: dict):
+    """A camera node as one would write it with plain rclpy: an Image message filled from numpy each tick."""
+    from rclpy.node import Node
+    from sensor_msgs.msg import Image
+
+    from veg_area_ros.frames import read_image
+    from veg_area_ros.ros.common import IMAGE_QOS
+    from veg_area_ros.ros.messages import image_to_msg
+
+    class PlainCamera(Node):
+        def __init__(self) -> None:
+            super().__init__("plain_camera")
+            self.frame, _ = read_image(Path(spec["still"]))
+            self.images = self.create_publisher(Image, "image_raw", IMAGE_QOS)
+            self.create_timer(1.0 / spec["rate"], self.tick)
+
+        def tick(self) -> None:
+            self.images.publish(image_to_msg(self.frame, self.get_clock().now().to_msg(), "camera"))
+
+    return PlainCamera()
+
+
+def plain_area(spec: dict):
+    """An area node as one would write it with plain rclpy: deserialized Image, measured in the callback."""
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.node import Node
+    from sensor_msgs.msg import Image
+
+    from veg_area_ros.area import AreaMeasurer
+    from veg_area_ros.calib_io import read_calibration
+    from veg_area_ros.classify import Classifier
+    from veg_area_ros.ros.area_node import default_targets
+    from veg_area_ros.ros.common import IMAGE_QOS, RESULT_QOS
+    from veg_area_ros.ros.messages import msg_to_image
+
+    class PlainArea(Node):
+        def __init__(self) -> None:
+            super().__init__("plain_area")
+            camera = read_calibration(Path(spec["calibration"])).camera
+            self.measurer = AreaMeasurer(camera, default_targets(), Classifier(threshold=120.0))
+            self.areas = self.create_publisher(Vector3Stamped, "projected_area", RESULT_QOS)
+            self.create_subscription(Image, "image_raw", self.on_image, IMAGE_QOS)
+
+        def on_image(self, msg: Image) -> None:
+            result = self.measurer.measure(msg_to_image(msg))
+            area = Vector3Stamped()
+            area.header = msg.header
+            area.vector.x, area.vector.y, area.vector.z = result.area_m2, result.area_std_m2, float(result.pixel_count)
+            self.areas.publish(area)
+
+    return PlainArea()
+
+
+def probe(spec: dict) -> dict:
+    """Af results arriving in a third process over spec['seconds'] after the first: rate, latency, drops."""
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from std_msgs.msg import String
+
+    from veg_area_ros.ros.common import RESULT_QOS
+
+    node = Node("bench_probe")
+    latencies: list[float] = []
+    infos: list[dict] = []
+
+    def on_area(msg: Vector3Stamped) -> None:
+        latencies.append(time.time() - (msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9))
+
+    node.create_subscription(Vector3Stamped, "projected_area", on_area, RESULT_QOS)
+    node.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)), RESULT_QOS)
+    executor = SingleThreadedExecutor()  # one executor: rclpy.spin_once(node) makes one per call (~ms each)
+    executor.add_node(node)
+    deadline = time.monotonic() + FIRST_RESULT_TIMEOUT_S
+    while not latencies and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.1)
+    if not latencies:
+        return {"results": 0}
+    settle = time.monotonic() + 1.0  # past the start-up (pixel weights built on the first frame)
+    while time.monotonic() < settle:
+        executor.spin_once(timeout_sec=0.05)
+    latencies.clear()
+    started = time.monotonic()
+    first_info = infos[-1] if infos else None
+    while time.monotonic() - started < spec["seconds"]:
+        executor.spin_once(timeout_sec=0.05)
+    elapsed = time.monotonic() - started
+    out = {"results": len(latencies), "per_s": len(latencies) / elapsed, "latency_ms": latency_ms(latencies)}
+    if first_info and infos:
+        received = infos[-1]["frames_received"] - first_info["frames_received"]
+        skipped = infos[-1]["frames_dropped"] - first_info["frames_dropped"]
+        out.update(frames_in_per_s=received / elapsed, dropped_share=skipped / max(received + skipped, 1))
+    return out
+
+
+def role_main(role: str, spec: dict) -> int:
+    import rclpy
+
+    from veg_area_ros.ros.common import ensure_ros_environment, run_nodes
+
+    if role == "plain_camera":
+        return run_nodes([lambda: plain_camera(spec)], [])
+    if role == "plain_area":
+        return run_nodes([lambda: plain_area(spec)], [])
+    ensure_ros_environment()
+    rclpy.init()
+    try:
+        print(json.dumps(probe(spec)), flush=True)
+    finally:
+        rclpy.try_shutdown()
+    return 0
+
+
+def prepare_inputs(folder: Path) -> dict[str, dict[str, str]]:
+    """A still frame of the cube in air and the camera's true calibration, per size."""
+    import cv2
+
+    from veg_area_ros.calib_io import write_calibration
+    from veg_area_ros.synthetic import DSLR, ENDOSCOPE, cube_scene, render_scene
+
+    inputs = {}
+    for camera in (ENDOSCOPE, DSLR):
+        size = f"{camera.width}x{camera.height}"
+        still, calibration = folder / f"cube_{size}.png", folder / f"camera_{size}.yaml"
+        cv2.imwrite(str(still), render_scene(camera, cube_scene(), 0.7, None, supersample=1 if camera is DSLR else 3))
+        write_calibration(calibration, camera, f"bench_{size}", {"medium": "air"})
+        inputs[size] = {"still": str(still), "calibration": str(calibration)}
+    return inputs
+
+
+def node_command(module: str, **parameters) -> list[str]:
+    command = [sys.executable, "-m", f"veg_area_ros.ros.{module}", "--ros-args"]
+    for key, value in parameters.items():
+        command += ["-p", f"{key}:={value}"]
+    return command
+
+
+def run_case(pipeline: str, transport: str, spec: dict, domain: int) -> tuple[dict | None, dict]:
+    env = transport_environment(transport, domain)
+    me = [sys.executable, str(Path(__file__).resolve())]
+    children = Children()
+    memory: dict[str, dict] = {}
+    try:
+        probe_process = children.start([*me, "probe", json.dumps(spec)], env)
+        if pipeline == "veg_area_ros":
+            camera = children.start(node_command("camera_node", source=spec["still"], loop="true", rate_hz=spec["rate"],
+                                                 camera_info_url=f"file://{spec['calibration']}"), env)
+            area = children.start(node_command("area_node"), env)
+        else:
+            camera = children.start([*me, "plain_camera", json.dumps(spec)], env)
+            area = children.start([*me, "plain_area", json.dumps(spec)], env)
+        deadline = time.monotonic() + FIRST_RESULT_TIMEOUT_S + spec["seconds"] + 30
+        while probe_process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.25)
+            for name, process in (("camera", camera), ("area", area)):  # the last sample before the probe ends
+                if process.poll() is None:
+                    memory[name] = memory_mb(process.pid)
+            memory["/dev/shm"] = {"rss": shm_mb(), "pss": shm_mb()}
+        return children.result(probe_process, 5.0), memory
+    finally:
+        children.reap()
+
+
+def inside(args) -> int:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        print("rendering the still frames ...", flush=True)
+        inputs = prepare_inputs(Path(folder))
+        print(f"{'pipeline':12} {'transport':9} {'size':9} {'cam Hz':>6} {'Af/s':>6} {'in/s':>6} {'drop':>5} "
+              f"{'mean ms':>8} {'p99 ms':>8}  memory MB (RSS / PSS)", flush=True)
+        domain = 100
+        for transport in args.transports.split(","):
+            for width, height, rate in LOADS:
+                for pipeline in PIPELINES:
+                    domain += 1
+                    spec = dict(inputs[f"{width}x{height}"], rate=rate, seconds=args.seconds)
+                    result, memory = run_case(pipeline, transport, spec, domain)
+                    row = f"{pipeline:12} {transport:9} {f'{width}x{height}':9} {rate:6g}"
+                    if not result or not result["results"]:
+                        print(f"{row}  no Af arrived within {FIRST_RESULT_TIMEOUT_S:g} s", flush=True)
+                        continue
+                    latency = result["latency_ms"]
+                    dropped = result.get("dropped_share")
+                    held = "  ".join(f"{name} {m['rss']:.0f}/{m['pss']:.0f}" if name != "/dev/shm"
+                                     else f"{name} {m['rss']:.0f}" for name, m in memory.items())
+                    print(f"{row} {result['per_s']:6.1f} {figure(result.get('frames_in_per_s')):>6} "
+                          f"{'-' if dropped is None else f'{dropped:.0%}':>5} {figure(latency['mean']):>8} "
+                          f"{figure(latency['p99']):>8}  {held}", flush=True)
+    print("Af/s: results reaching a third process; in/s: frames the area node took (ours reports it); drop: share\n"
+          "of the camera's frames skipped while measuring (ours counts them); latency: camera stamp -> Af arrival.")
+    return 0
+
+
+def main() -> int:
+    if len(sys.argv) > 2 and sys.argv[1] in ("probe", "plain_camera", "plain_area"):
+        return role_main(sys.argv[1], json.loads(sys.argv[2]))
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument(INSIDE, action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--seconds", type=float, default=5.0, help="measuring window per case")
+    parser.add_argument("--transports", default="shm,default")
+    args = parser.parse_args()
+    if args.inside:
+        return inside(args)
+    return run_confined(Path(__file__).resolve(), sys.argv[1:])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""What the ROS 2 benchmarks share: running confined to this machine exactly as the tests do (a private
+network namespace with only loopback and a private /dev/shm, test/ros_harness.py), child processes that are
+always reaped, the two transport configurations, latency figures and memory per process."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(1, str(REPO / "test"))
+
+from ros_harness import confined, netns_available, remove_new_shm, ros_environment  # noqa: E402
+
+INSIDE = "--inside"
+TRANSPORTS = ("shm", "default")
+
+
+def run_confined(script: Path, argv: list[str]) -> int:
+    """Run `script --inside argv...` confined to this machine and stream what it prints; returns its exit code."""
+    print("confinement:", "private network namespace (loopback only) and private /dev/shm" if netns_available()
+          else "none available: shared-memory profile only, /dev/shm cleaned afterwards", flush=True)
+    before = set(os.listdir("/dev/shm"))
+    with tempfile.TemporaryDirectory(prefix="veg_area_bench_") as home:
+        env = ros_environment(Path(home), 1)
+        command = confined([sys.executable, str(script), INSIDE, *argv])
+        try:
+            return subprocess.run(command, env=env, cwd=home).returncode
+        finally:
+            remove_new_shm(before)
+
+
+def transport_environment(transport: str, domain: int) -> dict[str, str]:
+    """`shm`: the shipped shared-memory profile (what the nodes use by default); `default`: Fast DDS as it comes,
+    discovery limited to this host (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, as the issue measured it)."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    if transport == "default":
+        env.pop("FASTDDS_DEFAULT_PROFILES_FILE", None)
+        env.update(VEG_AREA_TRANSPORT="default", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+    return env
+
+
+class Children:
+    """Child processes (spawned, never forked) whose last stdout line is a JSON result; always reaped."""
+
+    def __init__(self) -> None:
+        self.processes: list[subprocess.Popen] = []
+
+    def start(self, args: list[str], env: dict[str, str]) -> subprocess.Popen:
+        process = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        self.processes.append(process)
+        return process
+
+    @staticmethod
+    def result(process: subprocess.Popen, timeout: float) -> dict | None:
+        try:
+            out, _ = process.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return None
+        lines = [line for line in out.splitlines() if line.startswith("{")]
+        return json.loads(lines[-1]) if lines else None
+
+    def reap(self) -> None:
+        for process in self.processes:
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        for process in self.processes:
+            try:
+                process.wait(10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+        self.processes.clear()
+
+
+def latency_ms(latencies_s: list[float]) -> dict[str, float | None]:
+    if not latencies_s:
+        return {"mean": None, "p99": None, "max": None}
+    values = 1000 * np.asarray(latencies_s)
+    return {"mean": float(values.mean()), "p99": float(np.percentile(values, 99)), "max": float(values.max())}
+
+
+def memory_mb(pid: int) -> dict[str, float]:
+    """Resident (RSS) and proportional (PSS: shared pages split among their users) memory of a process."""
+    fields = {}
+    for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines()[1:]:
+        key, value = line.split(":", 1)
+        fields[key] = int(value.split()[0]) / 1024
+    return {"rss": fields.get("Rss", 0.0), "pss": fields.get("Pss", 0.0)}
+
+
+def shm_mb() -> float:
+    """What the transport holds in /dev/shm (this confinement's own when private)."""
+    return sum(p.stat().st_size for p in Path("/dev/shm").iterdir() if p.is_file()) / 2**20
+
+
+def figure(value: float | None, digits: int = 1) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
