@@ -37,6 +37,8 @@ lint: install
 bench: install
 	$(PY) bench/calibration_speed.py
 	$(PY) bench/area_speed.py
+	$(PY) bench/ros_transport.py
+	$(PY) bench/ros_pipeline.py
 
 clean:
 	rm -rf $(VENV) build .pytest_cache

@@ -4,6 +4,7 @@ always reaped, the two transport configurations, latency figures and memory per 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -91,7 +92,11 @@ def latency_ms(latencies_s: list[float]) -> dict[str, float | None]:
 def memory_mb(pid: int) -> dict[str, float]:
     """Resident (RSS) and proportional (PSS: shared pages split among their users) memory of a process."""
     fields = {}
-    for line in Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines()[1:]:
+    try:
+        lines = Path(f"/proc/{pid}/smaps_rollup").read_text().splitlines()[1:]
+    except OSError:  # it ended meanwhile
+        return {"rss": 0.0, "pss": 0.0}
+    for line in lines:
         key, value = line.split(":", 1)
         fields[key] = int(value.split()[0]) / 1024
     return {"rss": fields.get("Rss", 0.0), "pss": fields.get("Pss", 0.0)}
@@ -99,7 +104,11 @@ def memory_mb(pid: int) -> dict[str, float]:
 
 def shm_mb() -> float:
     """What the transport holds in /dev/shm (this confinement's own when private)."""
-    return sum(p.stat().st_size for p in Path("/dev/shm").iterdir() if p.is_file()) / 2**20
+    total = 0
+    for path in Path("/dev/shm").iterdir():
+        with contextlib.suppress(OSError):  # a participant going away meanwhile
+            total += path.stat().st_size
+    return total / 2**20
 
 
 def figure(value: float | None, digits: int = 1) -> str:

@@ -81,3 +81,51 @@ def test_vogel_command_on_an_experiment_table(tmp_path):
     table.write_text("velocity_m_s,force_n\n0.1,1\n")
     bad = run_cli("vogel", str(table))
     assert bad.returncode == 1 and "needs columns" in bad.stderr
+
+
+def test_vogel_command_on_bags_one_run_each(tmp_path):
+    """Bags recorded in the flume (force, velocity, Af topics), one per run: the exponent of the runs' means,
+    with the balance pointing upstream (-y) and the probe along +x."""
+    from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
+    from rclpy.serialization import serialize_message
+
+    from veg_area_ros.bags import BagRecorder
+
+    rng = np.random.default_rng(2)
+    velocities = [0.1, 0.2, 0.3, 0.45]
+    bags = []
+    for run, velocity in enumerate(velocities):
+        area = 0.02 * velocity ** -0.3
+        force = 0.5 * WATER_DENSITY * velocity**2 * area * 1.1 * velocity ** -0.2
+        bags.append(tmp_path / f"run{run}")
+        recorder = BagRecorder(bags[-1])
+        for topic, msgtype in (("/force", "geometry_msgs/msg/WrenchStamped"),
+                               ("/velocity", "geometry_msgs/msg/TwistStamped"),
+                               ("/projected_area", "geometry_msgs/msg/Vector3Stamped")):
+            recorder.add_topic(topic, msgtype)
+        for k in range(200):  # symmetric noise: the means are the true values to ~1e-3
+            noise = 1 + 0.01 * (1 if k % 2 else -1)
+            wrench = WrenchStamped()
+            wrench.wrench.force.y = -force * noise
+            wrench.wrench.force.x = rng.normal()  # across the flow: must be ignored
+            recorder.write("/force", k * 5_000_000, serialize_message(wrench))
+            if k % 4 == 0:
+                twist = TwistStamped()
+                twist.twist.linear.x = velocity
+                recorder.write("/velocity", k * 5_000_000, serialize_message(twist))
+            if k % 20 == 0:
+                af = Vector3Stamped()
+                af.vector.x = area
+                recorder.write("/projected_area", k * 5_000_000, serialize_message(af))
+        recorder.close()
+    done = run_cli("vogel", *map(str, bags), "--force-axis=-y", "--json", "--plot", str(tmp_path / "v.png"))
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout)
+    assert result["runs"] == 4 and result["exponent"] == pytest.approx(-0.5, abs=1e-6)
+    assert "U = 0.1 m/s" in done.stderr and (tmp_path / "v.png").stat().st_size > 1000
+    wrong_axis = run_cli("vogel", *map(str, bags), "--force-axis", "y")
+    assert wrong_axis.returncode == 1 and "axes must be one of" in wrong_axis.stderr
+    empty = run_cli("vogel", *map(str, bags), "--velocity-topic", "/nothing")
+    assert empty.returncode == 1 and "no messages on /nothing" in empty.stderr
+    mixed = run_cli("vogel", str(bags[0]), str(tmp_path / "v.png"))
+    assert mixed.returncode == 2

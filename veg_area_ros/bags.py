@@ -203,3 +203,41 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None,
             index += 1
     finally:
         reader.close()
+
+
+def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x", force_topic: str = "/force",
+            velocity_topic: str = "/velocity", area_topic: str = "/projected_area") -> dict:
+    """One flume run recorded in a bag: the means of the force along its axis (geometry_msgs/WrenchStamped),
+    the velocity (TwistStamped, linear) and Af (projected_area, Vector3Stamped x), with their sample counts."""
+    from .drag import DragError, component
+
+    wanted = {"/" + t.lstrip("/"): name for t, name in ((force_topic, "force"), (velocity_topic, "velocity"),
+                                                         (area_topic, "area"))}
+    reader = _open_reader(path)
+    store = typestore()
+    samples: dict[str, list[float]] = {"force": [], "velocity": [], "area": []}
+    try:
+        present = sorted({c.topic for c in reader.connections})
+        connections = [c for c in reader.connections if c.topic in wanted]
+        for connection, _, data in reader.messages(connections=connections):
+            message = store.deserialize_cdr(data, connection.msgtype)
+            name = wanted[connection.topic]
+            if name == "force":
+                samples[name].append(component(message.wrench.force, force_axis))
+            elif name == "velocity":
+                samples[name].append(component(message.twist.linear, velocity_axis))
+            else:
+                samples[name].append(message.vector.x)
+    except (AttributeError, KeyError) as exc:
+        raise BagError(f"{path}: a topic has another message type than expected ({exc})") from exc
+    except DragError as exc:
+        raise BagError(str(exc)) from exc
+    finally:
+        reader.close()
+    missing = [topic for topic, name in wanted.items() if not samples[name]]
+    if missing:
+        raise BagError(f"{path}: no messages on {', '.join(missing)} (topics in the bag: {present})")
+    return {"run": str(path), "velocity_m_s": sum(samples["velocity"]) / len(samples["velocity"]),
+            "force_n": sum(samples["force"]) / len(samples["force"]),
+            "area_m2": sum(samples["area"]) / len(samples["area"]),
+            "samples": {name: len(values) for name, values in samples.items()}}

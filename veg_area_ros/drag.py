@@ -19,6 +19,15 @@ import numpy as np
 from scipy import stats
 
 WATER_DENSITY = 998.2  # kg/m³ at 20 °C
+AXES = ("+x", "-x", "+y", "-y", "+z", "-z")  # signed: a sensor may point against the flow; and a bare
+# "y" would be read as a boolean by the ROS parameter YAML parser
+
+
+def component(vector, axis: str) -> float:
+    """The signed component ("+x" .. "-z") of anything with x, y, z attributes (geometry_msgs/Vector3)."""
+    if axis not in AXES:
+        raise DragError(f"axes must be one of {', '.join(AXES)}, got {axis!r}")
+    return (1.0 if axis[0] == "+" else -1.0) * getattr(vector, axis[1])
 
 
 class DragError(ValueError):
@@ -168,13 +177,19 @@ def read_runs(path: str | Path, density: float = WATER_DENSITY) -> tuple[np.ndar
     needed = {"velocity_m_s", "force_n", "area_m2"}
     if not rows or not needed <= set(rows[0]):
         raise DragError(f"{path}: needs columns {', '.join(sorted(needed))}")
+    return runs_to_vogel(rows, density, str(path))
+
+
+def runs_to_vogel(rows: list[dict], density: float = WATER_DENSITY, source: str = "runs") -> tuple[np.ndarray,
+                                                                                                      np.ndarray]:
+    """Runs (velocity_m_s, force_n, area_m2 and optionally density each) -> (U, Cd·Af)."""
     u, cd_area = [], []
     for line, row in enumerate(rows, 2):
         try:
             cd, _ = drag_coefficient(float(row["force_n"]), float(row["velocity_m_s"]), float(row["area_m2"]),
                                      float(row.get("density") or density))
         except (ValueError, DragError) as exc:
-            raise DragError(f"{path}, line {line}: {exc}") from exc
+            raise DragError(f"{source}, line {line}: {exc}") from exc
         u.append(float(row["velocity_m_s"]))
         cd_area.append(cd * float(row["area_m2"]))
     return np.array(u), np.array(cd_area)

@@ -2,7 +2,7 @@
 
 The node measures in its image callback on a depth-1 best-effort subscription: while it measures, DDS keeps
 only the newest frame and discards older ones inside the middleware, without a copy into Python (taking
-every frame into Python and dropping it there cost half the throughput, bench/ros_pipeline.py). Frames
+every frame into Python and dropping it there fell well behind, bench/ros_pipeline.py). Frames
 skipped that way never reach the node; they are counted from `camera_info`, which ROS camera drivers (and
 camera_node) publish with every frame under that frame's stamp, from the first frame the node takes on. A
 camera_info that is not per frame (one latched calibration) leaves the count unknown (None), never a wrong

@@ -155,20 +155,24 @@ def detect_markers(image: np.ndarray, dictionary: str, offset: tuple[int, int] =
 
 def track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, DetectedMarker]) -> dict[int, DetectedMarker]:
     """Markers of a video frame: each one looked for in a window around where it was in the previous frame
-    (a few small detections instead of one over the whole frame), the whole frame searched again as soon as
-    one of them is not where it was. With no previous markers, the whole frame."""
+    (a few small detections instead of one over the whole frame; a wider window if the detector misses it
+    in the small one), the whole frame searched again as soon as one of them is not where it was. With no
+    previous markers, the whole frame."""
     if previous:
         height, width = frame.shape[:2]
         found = {}
         for marker_id, marker in previous.items():
             (x0, y0), (x1, y1) = marker.corners.min(axis=0), marker.corners.max(axis=0)
-            margin = max(max(x1 - x0, y1 - y0), 8.0)  # the quiet zone, a move, and context the detector needs
-            left, top = max(int(x0 - margin), 0), max(int(y0 - margin), 0)
-            right, bottom = min(int(np.ceil(x1 + margin)), width), min(int(np.ceil(y1 + margin)), height)
-            window = detect_markers(frame[top:bottom, left:right], dictionary, (left, top))
-            if marker_id not in window:
-                break
-            found[marker_id] = window[marker_id]
+            side = max(x1 - x0, y1 - y0)
+            for margin in (max(0.5 * side, 8.0), 1.5 * side):  # a wider window when the detector needs context
+                left, top = max(int(x0 - margin), 0), max(int(y0 - margin), 0)
+                right, bottom = min(int(np.ceil(x1 + margin)), width), min(int(np.ceil(y1 + margin)), height)
+                window = detect_markers(frame[top:bottom, left:right], dictionary, (left, top))
+                if marker_id in window:
+                    found[marker_id] = window[marker_id]
+                    break
+            else:
+                break  # lost: search the whole frame
         else:
             return found
     return detect_markers(frame, dictionary)

@@ -11,19 +11,12 @@ from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from ..drag import WATER_DENSITY, DragAligner
+from ..drag import AXES, WATER_DENSITY, DragAligner, component
 from .common import RESULT_QOS, declare, publish_safely
-
-AXES = ("+x", "-x", "+y", "-y", "+z", "-z")  # signed: a sensor may point against the flow; and a bare
-# "y" would be read as a boolean by the ROS parameter YAML parser
 
 
 def _seconds(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
-
-
-def _component(vector, axis: str) -> float:
-    return (1.0 if axis[0] == "+" else -1.0) * getattr(vector, axis[1])
 
 
 class DragNode(Node):
@@ -50,11 +43,11 @@ class DragNode(Node):
         self.create_subscription(Vector3Stamped, "projected_area", self._on_area, RESULT_QOS)
 
     def _on_force(self, msg: WrenchStamped) -> None:
-        self.aligner.add_force(_seconds(msg.header.stamp), _component(msg.wrench.force, self.force_axis))
+        self.aligner.add_force(_seconds(msg.header.stamp), component(msg.wrench.force, self.force_axis))
         self._publish_ready()
 
     def _on_velocity(self, msg: TwistStamped) -> None:
-        self.aligner.add_velocity(_seconds(msg.header.stamp), _component(msg.twist.linear, self.velocity_axis))
+        self.aligner.add_velocity(_seconds(msg.header.stamp), component(msg.twist.linear, self.velocity_axis))
         self._publish_ready()
 
     def _on_area(self, msg: Vector3Stamped) -> None:
