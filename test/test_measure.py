@@ -99,6 +99,7 @@ def test_batch_over_several_videos_on_all_cores(workspace, tmp_path):
     summary = list(csv.DictReader((tmp_path / "out" / "batch_summary.csv").open()))
     assert [r["input"] for r in summary] == [*map(str, videos), str(broken)]
     assert [r["measured"] for r in summary] == ["3", "3", "3", "0"] and summary[3]["error"]
+    assert [line.split(":")[0] for line in done.stdout.splitlines()] == [*map(str, videos), str(broken)]
     for k, (video, row) in enumerate(zip(videos, summary, strict=False)):
         alone = run_cli("measure", str(video), *common, "--csv", str(tmp_path / f"alone{k}.csv"), cwd=tmp_path)
         assert alone.returncode == 0, alone.stderr
@@ -109,6 +110,11 @@ def test_batch_over_several_videos_on_all_cores(workspace, tmp_path):
         assert float(row["mean_area_m2"]) == pytest.approx(np.mean(expected), rel=1e-12)
         assert cv2.imread(str(batch_csv.with_suffix(".png"))) is not None
         assert abs(float(row["mean_area_m2"]) / SCENE.true_area_m2 - 1) <= 0.01  # every distance: the true Af
+    as_json = run_cli("measure", *map(str, videos[:2]), *common, "--jobs", "2", "--json", "--output-dir",
+                      str(tmp_path / "json"), cwd=tmp_path)
+    assert as_json.returncode == 0, as_json.stderr
+    objects = [json.loads(line) for line in as_json.stdout.splitlines()]
+    assert [o["input"] for o in objects] == [*map(str, videos[:2])] and [o["measured"] for o in objects] == [3, 3]
 
 
 def test_calibration_of_another_image_size(workspace, tmp_path):

@@ -417,6 +417,9 @@ def _measure_batch(args: argparse.Namespace) -> int:
     summary_path = folder / "batch_summary.csv"
     _write_csv(summary_path, BATCH_COLUMNS, rows)
     for row in rows:
+        if args.json:  # one object per input (the frames are in its CSV)
+            print(json.dumps(row), flush=True)
+            continue
         mean = f"Af = {row['mean_area_m2']:.6g} m² (sd {row['std_area_m2']:.2g}) over {row['measured']} frames" \
             if row["measured"] else f"not measured: {row['error'] or 'no frame measured'}"
         print(f"{row['input']}: {mean}", flush=True)
@@ -569,7 +572,7 @@ def build_parser() -> argparse.ArgumentParser:
     mea.add_argument("--close", type=int, default=0, metavar="PX", help="morphological closing radius")
     mea.add_argument("--sweep-step", type=_positive_float, default=5.0,
                      help="threshold step of the sweep and of the threshold uncertainty (grey levels)")
-    mea.add_argument("--json", action="store_true", help="one JSON object per frame on stdout")
+    mea.add_argument("--json", action="store_true", help="one JSON object per frame on stdout (a batch: per input)")
     mea.add_argument("--overlay", metavar="PNG_OR_DIR", help="draw mask, ROI and targets (a file, or a folder)")
     mea.add_argument("--csv", metavar="FILE", help="time series CSV (+ PNG plot beside it); "
                      "default for a video: VIDEO_area.csv here")

@@ -158,9 +158,8 @@ class AreaNode(Node):
                         "uncalibrated_frames:=measure to measure them uncalibrated", throttle_duration_sec=10.0)
             return
         wanted = [pub.get_subscription_count() > 0 for pub in (self.mask_pub, self.rect_pub, self.overlay_pub)]
-        measurer = self.measurer
         try:
-            result = measurer.measure(frame, keep_images=any(wanted))
+            result = self.measurer.measure(frame, keep_images=any(wanted))
         except FrameSizeError as exc:
             log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
             return
