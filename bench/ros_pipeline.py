@@ -22,15 +22,17 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from rosbench import (
-    INSIDE,
     Children,
+    bench_main,
     figure,
     latency_ms,
     memory_mb,
-    run_confined,
+    role_command,
     shm_mb,
     transport_environment,
 )
+
+SCRIPT = Path(__file__).resolve()
 
 LOADS = ((640, 480, 1000.0), (3872, 2592, 30.0))
 PIPELINES = ("veg_area_ros", "plain rclpy")
@@ -176,18 +178,17 @@ def node_command(module: str, **parameters) -> list[str]:
 
 def run_case(pipeline: str, transport: str, spec: dict, domain: int) -> tuple[dict | None, dict]:
     env = transport_environment(transport, domain)
-    me = [sys.executable, str(Path(__file__).resolve())]
     children = Children()
     memory: dict[str, dict] = {}
     try:
-        probe_process = children.start([*me, "probe", json.dumps(spec)], env)
+        probe_process = children.start(role_command(SCRIPT, "probe", spec), env)
         if pipeline == "veg_area_ros":
             camera = children.start(node_command("camera_node", source=spec["still"], loop="true", rate_hz=spec["rate"],
                                                  camera_info_url=f"file://{spec['calibration']}"), env)
             area = children.start(node_command("area_node"), env)
         else:
-            camera = children.start([*me, "plain_camera", json.dumps(spec)], env)
-            area = children.start([*me, "plain_area", json.dumps(spec)], env)
+            camera = children.start(role_command(SCRIPT, "plain_camera", spec), env)
+            area = children.start(role_command(SCRIPT, "plain_area", spec), env)
         deadline = time.monotonic() + FIRST_RESULT_TIMEOUT_S + spec["seconds"] + 30
         while probe_process.poll() is None and time.monotonic() < deadline:
             time.sleep(0.25)
@@ -232,16 +233,10 @@ def inside(args) -> int:
 
 
 def main() -> int:
-    if len(sys.argv) > 2 and sys.argv[1] in ("probe", "plain_camera", "plain_area"):
-        return role_main(sys.argv[1], json.loads(sys.argv[2]))
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument(INSIDE, action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--seconds", type=float, default=5.0, help="measuring window per case")
     parser.add_argument("--transports", default="shm,default")
-    args = parser.parse_args()
-    if args.inside:
-        return inside(args)
-    return run_confined(Path(__file__).resolve(), sys.argv[1:])
+    return bench_main(SCRIPT, ("probe", "plain_camera", "plain_area"), role_main, parser, inside)
 
 
 if __name__ == "__main__":

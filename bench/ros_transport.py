@@ -20,14 +20,16 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from rosbench import (
-    INSIDE,
     TRANSPORTS,
     Children,
+    bench_main,
     figure,
     latency_ms,
-    run_confined,
+    role_command,
     transport_environment,
 )
+
+SCRIPT = Path(__file__).resolve()
 
 LOADS = ((640, 480, 30.0), (640, 480, 1000.0), (3872, 2592, 2.0), (3872, 2592, 30.0))
 QOS_KINDS = ("best_effort", "reliable")
@@ -184,13 +186,12 @@ def role_main(role: str, spec: dict) -> int:
 def run_case(spec: dict, transport: str, mode: str, domain: int) -> dict | None:
     env = transport_environment(transport, domain)
     children = Children()
-    me = [sys.executable, str(Path(__file__).resolve())]
     timeout = MATCH_TIMEOUT_S + spec["time_cap_s"] + 40
     try:
         if mode == "composed":
-            return children.result(children.start([*me, "composed", json.dumps(spec)], env), timeout)
-        counter = children.start([*me, "sub", json.dumps(spec)], env)
-        children.start([*me, "pub", json.dumps(spec)], env)
+            return children.result(children.start(role_command(SCRIPT, "composed", spec), env), timeout)
+        counter = children.start(role_command(SCRIPT, "sub", spec), env)
+        children.start(role_command(SCRIPT, "pub", spec), env)
         return children.result(counter, timeout)
     finally:
         children.reap()
@@ -225,17 +226,11 @@ def inside(args) -> int:
 
 
 def main() -> int:
-    if len(sys.argv) > 2 and sys.argv[1] in ("pub", "sub", "composed"):
-        return role_main(sys.argv[1], json.loads(sys.argv[2]))
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument(INSIDE, action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--seconds", type=float, default=4.0, help="publishing time per case at the full rate")
     parser.add_argument("--transports", default=",".join(TRANSPORTS))
     parser.add_argument("--modes", default=",".join(MODES))
-    args = parser.parse_args()
-    if args.inside:
-        return inside(args)
-    return run_confined(Path(__file__).resolve(), sys.argv[1:])
+    return bench_main(SCRIPT, ("pub", "sub", "composed"), role_main, parser, inside)
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ always reaped, the two transport configurations, latency figures and memory per 
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import json
 import os
@@ -37,6 +38,21 @@ def run_confined(script: Path, argv: list[str]) -> int:
             return subprocess.run(command, env=env, cwd=home).returncode
         finally:
             remove_new_shm(before)
+
+
+def bench_main(script: Path, roles: tuple[str, ...], role_main, parser: argparse.ArgumentParser, inside) -> int:
+    """A ROS bench's entry point: `script ROLE SPEC` is one of its child processes; `script --inside ...` is the
+    run itself, already confined; anything else is the user's call, re-run confined."""
+    if len(sys.argv) > 2 and sys.argv[1] in roles:
+        return role_main(sys.argv[1], json.loads(sys.argv[2]))
+    parser.add_argument(INSIDE, action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    return inside(args) if args.inside else run_confined(script, sys.argv[1:])
+
+
+def role_command(script: Path, role: str, spec: dict) -> list[str]:
+    """The command that runs `script` as one of its child roles with `spec`."""
+    return [sys.executable, str(script), role, json.dumps(spec)]
 
 
 def transport_environment(transport: str, domain: int) -> dict[str, str]:

@@ -209,8 +209,13 @@ def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x",
             velocity_topic: str = "/velocity", area_topic: str = "/projected_area") -> dict:
     """One flume run recorded in a bag: the means of the force along its axis (geometry_msgs/WrenchStamped),
     the velocity (TwistStamped, linear) and Af (projected_area, Vector3Stamped x), with their sample counts."""
-    from .drag import DragError, component
+    from .drag import DragError, check_axis, component
 
+    try:
+        check_axis(force_axis)
+        check_axis(velocity_axis)
+    except DragError as exc:
+        raise BagError(str(exc)) from exc
     wanted = {"/" + t.lstrip("/"): name for t, name in ((force_topic, "force"), (velocity_topic, "velocity"),
                                                          (area_topic, "area"))}
     reader = _open_reader(path)
@@ -230,8 +235,6 @@ def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x",
                 samples[name].append(message.vector.x)
     except (AttributeError, KeyError) as exc:
         raise BagError(f"{path}: a topic has another message type than expected ({exc})") from exc
-    except DragError as exc:
-        raise BagError(str(exc)) from exc
     finally:
         reader.close()
     missing = [topic for topic, name in wanted.items() if not samples[name]]

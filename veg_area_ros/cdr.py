@@ -34,22 +34,29 @@ class Header:
     def seconds(self) -> float:
         return self.sec + self.nanosec * 1e-9
 
+    @property
+    def nanoseconds(self) -> int:
+        return self.sec * 1_000_000_000 + self.nanosec
+
 
 STAMP = struct.Struct("<iI")  # header.stamp (sec, nanosec): the first field of every stamped message
 STAMP_END = len(ENCAPSULATION) + STAMP.size
 
 
-def restamp(buffer, sec: int, nanosec: int) -> bytes:
-    """A serialized stamped message (Image, CameraInfo, ...) with another header stamp, nothing else changed."""
+def _require_stamp(buffer) -> None:
     if len(buffer) < STAMP_END:
         raise ImageMessageError("CDR data too short for a header stamp")
+
+
+def restamp(buffer, sec: int, nanosec: int) -> bytes:
+    """A serialized stamped message (Image, CameraInfo, ...) with another header stamp, nothing else changed."""
+    _require_stamp(buffer)
     return bytes(buffer[:len(ENCAPSULATION)]) + STAMP.pack(sec, nanosec) + bytes(buffer[STAMP_END:])
 
 
 def stamp_ns(buffer) -> int:
     """The header stamp of a serialized stamped message, in nanoseconds."""
-    if len(buffer) < STAMP_END:
-        raise ImageMessageError("CDR data too short for a header stamp")
+    _require_stamp(buffer)
     sec, nanosec = STAMP.unpack_from(buffer, len(ENCAPSULATION))
     return sec * 1_000_000_000 + nanosec
 

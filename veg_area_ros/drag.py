@@ -23,10 +23,16 @@ AXES = ("+x", "-x", "+y", "-y", "+z", "-z")  # signed: a sensor may point agains
 # "y" would be read as a boolean by the ROS parameter YAML parser
 
 
-def component(vector, axis: str) -> float:
-    """The signed component ("+x" .. "-z") of anything with x, y, z attributes (geometry_msgs/Vector3)."""
+def check_axis(axis: str) -> str:
+    """The axis if it is one of AXES; DragError with the choices otherwise."""
     if axis not in AXES:
         raise DragError(f"axes must be one of {', '.join(AXES)}, got {axis!r}")
+    return axis
+
+
+def component(vector, axis: str) -> float:
+    """The signed component ("+x" .. "-z") of anything with x, y, z attributes (geometry_msgs/Vector3)."""
+    check_axis(axis)
     return (1.0 if axis[0] == "+" else -1.0) * getattr(vector, axis[1])
 
 

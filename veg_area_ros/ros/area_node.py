@@ -152,7 +152,7 @@ class AreaNode(Node):
             log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
             return
         header = fields.header
-        self.frames.took(header.sec * 1_000_000_000 + header.nanosec)
+        self.frames.took(header.nanoseconds)
         if self.camera is None and self.uncalibrated == "drop":
             log.warning("no calibration yet (camera_info or calibration_file): frames dropped; set "
                         "uncalibrated_frames:=measure to measure them uncalibrated", throttle_duration_sec=10.0)

@@ -11,7 +11,7 @@ from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from ..drag import AXES, WATER_DENSITY, DragAligner, component
+from ..drag import AXES, WATER_DENSITY, DragAligner, check_axis, component
 from .common import RESULT_QOS, declare, publish_safely
 
 
@@ -31,9 +31,8 @@ class DragNode(Node):
                                      choices=AXES, read_only=True)
         force_std = declare(self, "force_std_n", 0.0, "Noise of one force sample, N.", low=0.0, high=1e6)
         velocity_std = declare(self, "velocity_std_m_s", 0.0, "Noise of one velocity sample, m/s.", low=0.0, high=1e3)
-        for axis in (self.force_axis, self.velocity_axis):
-            if axis not in AXES:
-                raise ValueError(f"axes must be one of {', '.join(AXES)}, got {axis!r}")
+        check_axis(self.force_axis)
+        check_axis(self.velocity_axis)
         self.aligner = DragAligner(tolerance, density, force_std, velocity_std)
         self.cd_pub = self.create_publisher(Vector3Stamped, "drag_coefficient", RESULT_QOS)
         self.info_pub = self.create_publisher(String, "drag_coefficient/info", RESULT_QOS)
