@@ -126,7 +126,7 @@ class AreaMeasurer:
         hand-picked points; the scale fit."""
         located = _Located(None, [], [], [], [], [])
         if self.targets.markers:
-            self._markers = track_markers(frame, self.targets.dictionary, self._markers)
+            self._markers = track_markers(frame, self.targets.dictionary, self._markers, set(self.targets.markers))
             for marker_id in self.targets.markers:
                 if marker_id not in self._markers:
                     located.missing.append(marker_id)

@@ -133,11 +133,33 @@ def marker_centre(corners: np.ndarray) -> np.ndarray:
     return p0 + s * d1
 
 
+CORNER_ACCURACY_PX = 0.01  # corners refined until they move less than this (OpenCV's default stops at 0.1 px)
+RETRACK_STARTS_PX = [(0.5, 0.5), (0.5, -0.5), (-0.5, 0.5), (-0.5, -0.5)]  # shifts of every corner's start
+RETRACK_AGREEMENT_PX = 0.05  # re-tracked corners from every start must agree this closely
+CODE_CELL_PX = 8  # a marker's cells are sampled at this size to check its code
+CODE_CONTRAST = 5.0  # grey levels that must separate every black cell from every white cell of a re-tracked marker
+
+
+@lru_cache(maxsize=8)
+def _dictionary(name: str) -> cv2.aruco.Dictionary:
+    return cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, name))
+
+
 @lru_cache(maxsize=8)
 def _detector(dictionary: str) -> cv2.aruco.ArucoDetector:
     parameters = cv2.aruco.DetectorParameters()
     parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
-    return cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)), parameters)
+    # refined to a fixed point, so that re-tracking from last frame's corners lands where detection would
+    parameters.cornerRefinementMinAccuracy = CORNER_ACCURACY_PX
+    return cv2.aruco.ArucoDetector(_dictionary(dictionary), parameters)
+
+
+@lru_cache(maxsize=256)
+def _code_cells(dictionary: str, marker_id: int) -> tuple[np.ndarray, np.ndarray]:
+    """Which cells of the marker (with its one-cell black border) are black, and which white."""
+    cells = _dictionary(dictionary).markerSize + 2
+    image = cv2.aruco.generateImageMarker(_dictionary(dictionary), marker_id, cells)
+    return image == 0, image == 255
 
 
 def detect_markers(image: np.ndarray, dictionary: str, offset: tuple[int, int] = (0, 0)) -> dict[int, DetectedMarker]:
@@ -153,15 +175,71 @@ def detect_markers(image: np.ndarray, dictionary: str, offset: tuple[int, int] =
     return found
 
 
-def track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, DetectedMarker]) -> dict[int, DetectedMarker]:
-    """Markers of a video frame: each one looked for in a window around where it was in the previous frame
-    (a few small detections instead of one over the whole frame; a wider window if the detector misses it
-    in the small one), the whole frame searched again as soon as one of them is not where it was. With no
-    previous markers, the whole frame."""
-    if previous:
+def _refinement_window(corners: np.ndarray, dictionary: str) -> int:
+    """The half-size of the corner refinement window ArUco uses for this marker: 0.3 cell, 1 to 5 px."""
+    mean_side = np.mean(np.linalg.norm(corners - np.roll(corners, -1, axis=0), axis=1))
+    cell = mean_side / (_dictionary(dictionary).markerSize + 2)
+    return min(_detector(dictionary).getDetectorParameters().cornerRefinementWinSize, max(1, round(0.3 * cell)))
+
+
+def retrack_marker(frame: np.ndarray, dictionary: str, marker_id: int,
+                   previous: DetectedMarker) -> DetectedMarker | None:
+    """The marker found again from where it was in the previous frame, without a detection: its corners refined
+    to subpixel from their previous places exactly as detection refines them, then accepted only if none moved
+    further than the refinement window (a farther move could have caught another corner) and the marker's code
+    still reads in the new corners (an occluded or vanished marker does not). None: detect it instead."""
+    half = _refinement_window(previous.corners, dictionary)
+    height, width = frame.shape[:2]
+    margin = 2 * half + 2
+    (x0, y0), (x1, y1) = previous.corners.min(axis=0), previous.corners.max(axis=0)
+    left, top = int(x0) - margin, int(y0) - margin
+    right, bottom = int(np.ceil(x1)) + margin, int(np.ceil(y1)) + margin
+    if left < 0 or top < 0 or right > width or bottom > height:
+        return None
+    patch = frame[top:bottom, left:right]
+    grey = patch if patch.ndim == 2 else cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)
+    start = (previous.corners - (left, top)).astype(np.float32)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT,
+                _detector(dictionary).getDetectorParameters().cornerRefinementMaxIterations, CORNER_ACCURACY_PX)
+    # refined from last frame's corners and from four starts around them: where they do not all meet, the corner
+    # is ill-conditioned (blur, noise) and the result would depend on the start; detection decides then
+    starts = start[None] + np.vstack([[[0.0, 0.0]], RETRACK_STARTS_PX])[:, None].astype(np.float32)
+    refined = cv2.cornerSubPix(grey, starts.reshape(-1, 1, 2), (half, half), (-1, -1), criteria).reshape(-1, 4, 2)
+    corners = refined[0]
+    if (not np.all(np.isfinite(refined)) or np.max(np.abs(corners - start)) > half
+            or np.max(np.abs(refined[1:] - corners)) > RETRACK_AGREEMENT_PX):
+        return None
+    black, white = _code_cells(dictionary, marker_id)
+    cells = len(black)
+    side = cells * CODE_CELL_PX
+    square = np.array([[0, 0], [side, 0], [side, side], [0, side]], np.float32)
+    canonical = cv2.warpPerspective(grey, cv2.getPerspectiveTransform(corners, square), (side, side),
+                                    flags=cv2.INTER_LINEAR)
+    inner = slice(CODE_CELL_PX // 4, CODE_CELL_PX - CODE_CELL_PX // 4)  # cell centres: edges blur into neighbours
+    means = canonical.reshape(cells, CODE_CELL_PX, cells, CODE_CELL_PX)[:, inner, :, inner].mean(axis=(1, 3))
+    if means[white].min() - means[black].max() < CODE_CONTRAST:
+        return None
+    corners = corners.astype(np.float64) + np.array([left, top])
+    return DetectedMarker(marker_centre(corners), corners)
+
+
+def track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, DetectedMarker],
+                  wanted: set[int] | None = None) -> dict[int, DetectedMarker]:
+    """Markers of a video frame. Each one is first re-tracked from where it was in the previous frame
+    (`retrack_marker`); if that fails, detected in a window around that place (a wider window if the detector
+    needs more context); the whole frame is searched as soon as one of them is lost, and while one of the
+    `wanted` ids (default: all found before) is missing, so that an uncovered marker comes back. Only wanted
+    ids are kept."""
+    tracked = set(previous) if wanted is None else set(wanted)
+    if previous and tracked <= set(previous):
         height, width = frame.shape[:2]
         found = {}
-        for marker_id, marker in previous.items():
+        for marker_id in sorted(tracked):
+            marker = previous[marker_id]
+            again = retrack_marker(frame, dictionary, marker_id, marker)
+            if again is not None:
+                found[marker_id] = again
+                continue
             (x0, y0), (x1, y1) = marker.corners.min(axis=0), marker.corners.max(axis=0)
             side = max(x1 - x0, y1 - y0)
             for margin in (max(0.5 * side, 8.0), 1.5 * side):  # a wider window when the detector needs context
@@ -175,7 +253,8 @@ def track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, Detect
                 break  # lost: search the whole frame
         else:
             return found
-    return detect_markers(frame, dictionary)
+    everything = detect_markers(frame, dictionary)
+    return {marker_id: marker for marker_id, marker in everything.items() if wanted is None or marker_id in wanted}
 
 
 @dataclass
