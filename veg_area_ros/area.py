@@ -127,11 +127,10 @@ class AreaMeasurer:
         located = _Located(None, [], [], [], [], [])
         if self.targets.markers:
             self._markers = track_markers(frame, self.targets.dictionary, self._markers, set(self.targets.markers))
-            for marker_id in self.targets.markers:
-                if marker_id not in self._markers:
-                    located.missing.append(marker_id)
-                    continue
-                corners = self._idealize_points(self._markers[marker_id].corners)
+            found = [marker_id for marker_id in self.targets.markers if marker_id in self._markers]
+            located.missing = [marker_id for marker_id in self.targets.markers if marker_id not in self._markers]
+            raw_corners = np.array([self._markers[marker_id].corners for marker_id in found]).reshape(-1, 2)
+            for marker_id, corners in zip(found, self._idealize_points(raw_corners).reshape(-1, 4, 2), strict=True):
                 centre = marker_centre(corners)
                 located.pixels.append(centre)
                 located.labels.append(f"marker {marker_id}")

@@ -134,6 +134,8 @@ def marker_centre(corners: np.ndarray) -> np.ndarray:
 
 
 CORNER_ACCURACY_PX = 0.01  # corners refined until they move less than this (OpenCV's default stops at 0.1 px)
+CORNER_ITERATIONS = 30  # OpenCV's default
+CORNER_WINDOW_PX = 5  # largest refinement half-window, OpenCV's default (smaller for small markers: 0.3 cell)
 RETRACK_STARTS_PX = [(0.5, 0.5), (0.5, -0.5), (-0.5, 0.5), (-0.5, -0.5)]  # shifts of every corner's start
 RETRACK_AGREEMENT_PX = 0.05  # re-tracked corners from every start must agree this closely
 CODE_CELL_PX = 8  # a marker's cells are sampled at this size to check its code
@@ -151,6 +153,8 @@ def _detector(dictionary: str) -> cv2.aruco.ArucoDetector:
     parameters.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
     # refined to a fixed point, so that re-tracking from last frame's corners lands where detection would
     parameters.cornerRefinementMinAccuracy = CORNER_ACCURACY_PX
+    parameters.cornerRefinementMaxIterations = CORNER_ITERATIONS
+    parameters.cornerRefinementWinSize = CORNER_WINDOW_PX
     return cv2.aruco.ArucoDetector(_dictionary(dictionary), parameters)
 
 
@@ -177,9 +181,9 @@ def detect_markers(image: np.ndarray, dictionary: str, offset: tuple[int, int] =
 
 def _refinement_window(corners: np.ndarray, dictionary: str) -> int:
     """The half-size of the corner refinement window ArUco uses for this marker: 0.3 cell, 1 to 5 px."""
-    mean_side = np.mean(np.linalg.norm(corners - np.roll(corners, -1, axis=0), axis=1))
-    cell = mean_side / (_dictionary(dictionary).markerSize + 2)
-    return min(_detector(dictionary).getDetectorParameters().cornerRefinementWinSize, max(1, round(0.3 * cell)))
+    sides = corners - corners[[1, 2, 3, 0]]
+    cell = float(np.sqrt((sides * sides).sum(axis=1)).mean()) / (_dictionary(dictionary).markerSize + 2)
+    return min(CORNER_WINDOW_PX, max(1, round(0.3 * cell)))
 
 
 def retrack_marker(frame: np.ndarray, dictionary: str, marker_id: int,
@@ -199,8 +203,7 @@ def retrack_marker(frame: np.ndarray, dictionary: str, marker_id: int,
     patch = frame[top:bottom, left:right]
     grey = patch if patch.ndim == 2 else cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)
     start = (previous.corners - (left, top)).astype(np.float32)
-    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT,
-                _detector(dictionary).getDetectorParameters().cornerRefinementMaxIterations, CORNER_ACCURACY_PX)
+    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, CORNER_ITERATIONS, CORNER_ACCURACY_PX)
     # refined from last frame's corners and from four starts around them: where they do not all meet, the corner
     # is ill-conditioned (blur, noise) and the result would depend on the start; detection decides then
     starts = start[None] + np.vstack([[[0.0, 0.0]], RETRACK_STARTS_PX])[:, None].astype(np.float32)
