@@ -189,9 +189,12 @@ def _refinement_window(corners: np.ndarray, dictionary: str) -> int:
 def retrack_marker(frame: np.ndarray, dictionary: str, marker_id: int,
                    previous: DetectedMarker) -> DetectedMarker | None:
     """The marker found again from where it was in the previous frame, without a detection: its corners refined
-    to subpixel from their previous places exactly as detection refines them, then accepted only if none moved
-    further than the refinement window (a farther move could have caught another corner) and the marker's code
-    still reads in the new corners (an occluded or vanished marker does not). None: detect it instead."""
+    to subpixel from their previous places as detection refines them (same window rule, same criteria), then
+    accepted only if none moved further than the refinement window (a farther move could have caught another
+    corner), refinements from four nearby starts agree, and the marker's code still reads between the new
+    corners (an occluded or vanished marker's does not). None: detect it instead. ArUco sizes the window from
+    the unrefined contour, this from the refined corners: at a size boundary the two windows can differ by a
+    pixel, and the corners by a few tenths of one."""
     half = _refinement_window(previous.corners, dictionary)
     height, width = frame.shape[:2]
     margin = 2 * half + 2
