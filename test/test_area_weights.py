@@ -104,13 +104,17 @@ class DetectionCounter:
     """Counts the ArUco detections track_markers falls back to."""
 
     def __init__(self, monkeypatch):
-        self.calls = 0
+        self.shapes = []
         real = scale.detect_markers
 
-        def counted(*args, **kwargs):
-            self.calls += 1
-            return real(*args, **kwargs)
+        def counted(image, *args, **kwargs):
+            self.shapes.append(image.shape[:2])
+            return real(image, *args, **kwargs)
         monkeypatch.setattr(scale, "detect_markers", counted)
+
+    @property
+    def calls(self) -> int:
+        return len(self.shapes)
 
 
 @pytest.mark.parametrize("camera", [ENDOSCOPE, DSLR])
@@ -173,16 +177,39 @@ def test_retracking_on_a_real_video_agrees_with_detection():
     assert np.percentile(centre_errors, 95) < RETRACK_AGREEMENT_PX
 
 
+def cover_marker(frame: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """The frame with a grey blob (a leaf) over most of a marker."""
+    covered = frame.copy()
+    blob = np.vstack([corners[:2], corners[:2].mean(0, keepdims=True) + 0.6 * (corners[2:] - corners[:2])[::-1]])
+    cv2.fillConvexPoly(covered, np.round(blob).astype(np.int32), (70, 70, 70))
+    return covered
+
+
+def test_a_hidden_marker_is_sought_where_the_others_place_it(monkeypatch):
+    """A leaf over marker 2 for a few frames: it is reported missing, looked for in windows around its last
+    place and then where the other three place it, never in the whole frame, and measured again as soon as it
+    is uncovered."""
+    frame = render_scene(ENDOSCOPE, CUBE, 0.7, FlatPort())
+    measurer = AreaMeasurer(ENDOSCOPE, targets(), Classifier(threshold=120))
+    first = measurer.measure(frame)
+    assert first.missing_targets == []
+    covered = cover_marker(frame, detect_markers(frame, CUBE.dictionary)[2].corners)
+    counter = DetectionCounter(monkeypatch)
+    for _ in range(3):
+        assert measurer.measure(covered).missing_targets == [2]
+    uncovered = measurer.measure(frame)
+    assert uncovered.missing_targets == []
+    assert uncovered.target_pixels["marker 2"] == pytest.approx(first.target_pixels["marker 2"], abs=0.02)
+    assert counter.calls >= 4  # a window or two per covered frame, and the one that found it again
+    assert frame.shape[:2] not in counter.shapes
+
+
 def test_an_occluded_marker_is_lost_and_found_again_when_uncovered():
     """A leaf drifting over a marker: its code no longer reads, so it is not re-tracked at its old corners, and
-    it is missing; once uncovered, the whole-frame search (run while a wanted marker is missing) finds it."""
+    it is missing; once uncovered, with no guess where it is, the whole-frame search finds it."""
     frame = render_scene(ENDOSCOPE, CUBE, 0.7, FlatPort())
     previous = detect_markers(frame, CUBE.dictionary)
-    covered = frame.copy()
-    corners = previous[2].corners
-    cv2.fillConvexPoly(covered, np.round(np.vstack([corners[:2], corners[:2].mean(0, keepdims=True)
-                                                    + 0.6 * (corners[2:] - corners[:2])[::-1]])).astype(np.int32),
-                       (70, 70, 70))
+    covered = cover_marker(frame, previous[2].corners)
     assert retrack_marker(covered, CUBE.dictionary, 2, previous[2]) is None
     assert retrack_marker(frame, CUBE.dictionary, 2, previous[2]) is not None
     tracked = track_markers(covered, CUBE.dictionary, previous, set(CUBE.markers))

@@ -108,6 +108,7 @@ class AreaMeasurer:
         self._markers: dict[int, DetectedMarker] = {}  # raw-frame markers of the previous frame
         self._geometry: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._weights: _Weights | None = None
+        self._last_scale: PlaneScale | None = None  # the last frame's fit: where a hidden marker should be
         self.rebuilds = 0  # how often the weights were (re)built: once for a steady camera
 
     def _idealize_points(self, raw_pixels: np.ndarray) -> np.ndarray:
@@ -115,6 +116,26 @@ class AreaMeasurer:
         if self.camera is None or len(raw_pixels) == 0:
             return raw_pixels
         return self.idealizer.ideal.normalized_to_pixels(self.camera.pixels_to_normalized(raw_pixels))
+
+    def _ideal_to_raw(self, ideal_pixels: np.ndarray) -> np.ndarray:
+        """Idealized-image pixels -> the raw frame."""
+        if self.camera is None:
+            return ideal_pixels
+        ideal = self.idealizer.ideal
+        normalized = np.column_stack([(ideal_pixels[:, 0] - ideal.xp) / ideal.fx,
+                                      (ideal_pixels[:, 1] - ideal.yp) / ideal.fy])
+        return self.camera.normalized_to_pixels(normalized)
+
+    def _hidden_marker_guesses(self) -> dict[int, tuple[np.ndarray, float]]:
+        """Where the listed markers the last frame missed should be (raw centre, half a search box of three
+        marker sides), from that frame's fit of the others; none when that fit has no orientation."""
+        scale = self._last_scale
+        hidden = [marker_id for marker_id in self.targets.markers if marker_id not in self._markers]
+        if not hidden or not self._markers or scale is None or scale.kind == "distance":
+            return {}
+        centres = self._ideal_to_raw(scale.plane_to_pixels(np.array([self.targets.markers[i] for i in hidden])))
+        side = np.mean([np.ptp(marker.corners, axis=0).max() for marker in self._markers.values()])
+        return {marker_id: (centre, 1.5 * side) for marker_id, centre in zip(hidden, centres, strict=True)}
 
     def _check_size(self, frame: np.ndarray) -> None:
         if self.idealizer is not None:
@@ -126,7 +147,8 @@ class AreaMeasurer:
         hand-picked points; the scale fit."""
         located = _Located(None, [], [], [], [], [])
         if self.targets.markers:
-            self._markers = track_markers(frame, self.targets.dictionary, self._markers, set(self.targets.markers))
+            self._markers = track_markers(frame, self.targets.dictionary, self._markers, set(self.targets.markers),
+                                          self._hidden_marker_guesses())
             found = [marker_id for marker_id in self.targets.markers if marker_id in self._markers]
             located.missing = [marker_id for marker_id in self.targets.markers if marker_id not in self._markers]
             raw_corners = np.array([self._markers[marker_id].corners for marker_id in found]).reshape(-1, 2)
@@ -146,6 +168,7 @@ class AreaMeasurer:
                                f"missing marker ids {located.missing}")
         located.scale = PlaneScale.fit(np.array(located.pixels), np.array(planes), self.targets.distance_std_m,
                                        self.targets.pixel_std)
+        self._last_scale = located.scale
         return located
 
     def _roi_polygon(self, located: _Located) -> tuple[np.ndarray, list[np.ndarray]]:

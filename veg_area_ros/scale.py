@@ -229,38 +229,59 @@ def retrack_marker(frame: np.ndarray, dictionary: str, marker_id: int,
     return DetectedMarker(marker_centre(corners), corners)
 
 
+def _detect_in_box(frame: np.ndarray, dictionary: str, marker_id: int,
+                   box: tuple[float, float, float, float]) -> DetectedMarker | None:
+    """One marker detected inside a box (x0, y0, x1, y1) of the frame, clipped to it."""
+    height, width = frame.shape[:2]
+    left, top = max(int(box[0]), 0), max(int(box[1]), 0)
+    right, bottom = min(int(np.ceil(box[2])), width), min(int(np.ceil(box[3])), height)
+    if right - left < 8 or bottom - top < 8:
+        return None
+    return detect_markers(frame[top:bottom, left:right], dictionary, (left, top)).get(marker_id)
+
+
 def track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, DetectedMarker],
-                  wanted: set[int] | None = None) -> dict[int, DetectedMarker]:
-    """Markers of a video frame. Each one is first re-tracked from where it was in the previous frame
-    (`retrack_marker`); if that fails, detected in a window around that place (a wider window if the detector
-    needs more context); the whole frame is searched as soon as one of them is lost, and while one of the
-    `wanted` ids (default: all found before) is missing, so that an uncovered marker comes back. Only wanted
-    ids are kept."""
-    tracked = set(previous) if wanted is None else set(wanted)
-    if previous and tracked <= set(previous):
-        height, width = frame.shape[:2]
-        found = {}
-        for marker_id in sorted(tracked):
+                  wanted: set[int] | None = None,
+                  guesses: dict[int, tuple[np.ndarray, float]] | None = None) -> dict[int, DetectedMarker]:
+    """Markers of a video frame. Each one found in the previous frame is first re-tracked (`retrack_marker`);
+    if that fails, detected in a window around its last place (a wider window if the detector needs more
+    context). Lost there while all the others were re-tracked in place, it is covered and missing from this
+    frame. A `wanted` id missing from the previous frame is looked for in a window around its guessed place
+    (`guesses`: raw centre and half-size in px, from the other targets), so that an uncovered marker comes
+    back without a search of the whole frame. The whole frame is searched when there is nothing to track,
+    when a marker is lost while others moved (the camera moved), or when a missing wanted id has no guess.
+    Only wanted ids are kept."""
+    keep = None if wanted is None else set(wanted)
+    follow = [marker_id for marker_id in sorted(previous) if keep is None or marker_id in keep]
+    hidden = sorted(set() if keep is None else keep - set(previous))
+    guesses = guesses or {}
+    if follow and all(marker_id in guesses for marker_id in hidden):
+        found, moved = {}, False
+        for marker_id in follow:
             marker = previous[marker_id]
             again = retrack_marker(frame, dictionary, marker_id, marker)
+            if again is None:
+                (x0, y0), (x1, y1) = marker.corners.min(axis=0), marker.corners.max(axis=0)
+                side = max(x1 - x0, y1 - y0)
+                for margin in (max(0.5 * side, 8.0), 1.5 * side):  # wider when the detector needs context
+                    again = _detect_in_box(frame, dictionary, marker_id,
+                                           (x0 - margin, y0 - margin, x1 + margin, y1 + margin))
+                    if again is not None:
+                        moved = True
+                        break
             if again is not None:
                 found[marker_id] = again
-                continue
-            (x0, y0), (x1, y1) = marker.corners.min(axis=0), marker.corners.max(axis=0)
-            side = max(x1 - x0, y1 - y0)
-            for margin in (max(0.5 * side, 8.0), 1.5 * side):  # a wider window when the detector needs context
-                left, top = max(int(x0 - margin), 0), max(int(y0 - margin), 0)
-                right, bottom = min(int(np.ceil(x1 + margin)), width), min(int(np.ceil(y1 + margin)), height)
-                window = detect_markers(frame[top:bottom, left:right], dictionary, (left, top))
-                if marker_id in window:
-                    found[marker_id] = window[marker_id]
-                    break
-            else:
-                break  # lost: search the whole frame
-        else:
+        # a marker lost while every other one stayed put is covered: seek it later where the others place it;
+        # lost while others moved, the camera moved: search the whole frame now
+        if found and (len(found) == len(follow) or not moved):
+            for marker_id in hidden:
+                (u, v), half = guesses[marker_id]
+                again = _detect_in_box(frame, dictionary, marker_id, (u - half, v - half, u + half, v + half))
+                if again is not None:
+                    found[marker_id] = again
             return found
     everything = detect_markers(frame, dictionary)
-    return {marker_id: marker for marker_id, marker in everything.items() if wanted is None or marker_id in wanted}
+    return {marker_id: marker for marker_id, marker in everything.items() if keep is None or marker_id in keep}
 
 
 @dataclass
