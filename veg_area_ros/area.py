@@ -118,13 +118,10 @@ class AreaMeasurer:
         return self.idealizer.ideal.normalized_to_pixels(self.camera.pixels_to_normalized(raw_pixels))
 
     def _ideal_to_raw(self, ideal_pixels: np.ndarray) -> np.ndarray:
-        """Idealized-image pixels -> the raw frame."""
-        if self.camera is None:
+        """Idealized-image pixels -> the raw frame (the inverse of `_idealize_points`)."""
+        if self.camera is None or len(ideal_pixels) == 0:
             return ideal_pixels
-        ideal = self.idealizer.ideal
-        normalized = np.column_stack([(ideal_pixels[:, 0] - ideal.xp) / ideal.fx,
-                                      (ideal_pixels[:, 1] - ideal.yp) / ideal.fy])
-        return self.camera.normalized_to_pixels(normalized)
+        return self.camera.normalized_to_pixels(self.idealizer.ideal.pixels_to_normalized(ideal_pixels))
 
     def _hidden_marker_guesses(self) -> dict[int, tuple[np.ndarray, float]]:
         """Where the listed markers the last frame missed should be (raw centre, half a search box of three
