@@ -2,9 +2,9 @@
 
 As root with `unshare` (CI): the scenario runs in a private network namespace that has only loopback and
 a private /dev/shm (tmpfs), so no traffic can leave and nothing is left in the host's /dev/shm; every node
-it starts lives and dies in there. Elsewhere (fallback): the nodes use the shared-memory-only Fast DDS
-profile (no network transport at all), and the harness removes from /dev/shm what the run added.
-Either way the scenario checks the sockets of its namespace and reports them.
+it starts lives and dies in there. Elsewhere (fallback): the nodes use the shipped Fast DDS profile
+(shared memory, UDP on 127.0.0.1 only, so discovery stays on loopback), and the harness removes from
+/dev/shm what the run added. Either way the scenario checks the sockets of its namespace and reports them.
 """
 
 from __future__ import annotations

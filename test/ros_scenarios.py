@@ -3,6 +3,7 @@ processes plus a probe node in this process. Prints `RESULT {json}` for the test
 
 from __future__ import annotations
 
+import ipaddress
 import json
 import os
 import signal
@@ -63,7 +64,8 @@ def _address(hex_address: str) -> str:
 
 
 def sockets_of(pids: list[int]) -> list[dict]:
-    """Internet sockets held by these processes: protocol, local and remote address."""
+    """Internet sockets held by these processes: protocol, local and remote address, and whether it stays on
+    this machine, judged now (a multicast group's memberships go with the process that joined it)."""
     inodes = set()
     for pid in pids:
         try:
@@ -73,6 +75,7 @@ def sockets_of(pids: list[int]) -> list[dict]:
                     inodes.add(target[8:-1])
         except OSError:
             continue
+    joined = multicast_interfaces()
     found = []
     for proto in ("tcp", "tcp6", "udp", "udp6"):
         try:
@@ -82,16 +85,51 @@ def sockets_of(pids: list[int]) -> list[dict]:
         for line in lines:
             fields = line.split()
             if fields[9] in inodes:
-                found.append({"proto": proto, "local": _address(fields[1]), "remote": _address(fields[2])})
+                local, remote = _address(fields[1]), _address(fields[2])
+                found.append({"proto": proto, "local": local, "remote": remote,
+                              "machine_only": _machine_only(local, joined) and _machine_only(remote, joined)})
     return found
 
 
+def multicast_interfaces() -> dict[str, set[str]]:
+    """IPv4 multicast group -> the interfaces that joined it in this network namespace (/proc/net/igmp)."""
+    joined: dict[str, set[str]] = {}
+    device = ""
+    for line in Path("/proc/net/igmp").read_text().splitlines()[1:]:
+        if not line.startswith("\t"):
+            device = line.split()[1]
+        else:
+            group = socket.inet_ntop(socket.AF_INET, struct.pack("<I", int(line.split()[0], 16)))
+            joined.setdefault(group, set()).add(device)
+    return joined
+
+
+def _machine_only(address: str, joined: dict[str, set[str]]) -> bool:
+    """Loopback or unspecified; a multicast group (Fast DDS discovery) when it is joined on loopback alone."""
+    host = address.rsplit(":", 1)[0].strip("[]")
+    if ipaddress.ip_address(host).is_multicast:
+        return joined.get(host) == {"lo"}
+    return host in ("0.0.0.0", "::", "::1") or host.startswith("127.") or host.startswith("::ffff:127.")
+
+
 def off_machine(sockets: list[dict]) -> list[dict]:
-    """Sockets bound to or talking to anything but loopback / the unspecified address."""
-    def local_only(address: str) -> bool:
-        host = address.rsplit(":", 1)[0].strip("[]")
-        return host in ("0.0.0.0", "::", "::1") or host.startswith("127.") or host.startswith("::ffff:127.")
-    return [s for s in sockets if not (local_only(s["local"]) and local_only(s["remote"]))]
+    """The sockets that can reach beyond this machine."""
+    return [s for s in sockets if not s["machine_only"]]
+
+
+def _sockets_in(result) -> list[dict]:
+    """Every socket list a scenario reported, wherever it sits in its result."""
+    if isinstance(result, dict):
+        return [*result.get("sockets", []), *(s for key, value in result.items() if key != "sockets"
+                                               for s in _sockets_in(value))]
+    return []
+
+
+def udp_datagrams_sent() -> int:
+    """UDP datagrams sent so far in this network namespace (/proc/net/snmp, all processes)."""
+    header, values = (line.split() for line in Path("/proc/net/snmp").read_text().splitlines()
+                      if line.startswith("Udp:"))
+    return int(values[header.index("OutDatagrams")])
 
 
 def interfaces() -> list[str]:
@@ -130,14 +168,17 @@ def scenario_delivery(options: dict, nodes: Nodes) -> dict:
                 rclpy.spin_once(probe, timeout_sec=0.1)
             stamps.clear()
             latencies.clear()
+            datagrams_before = udp_datagrams_sent()
             end = time.monotonic() + seconds
             while time.monotonic() < end:
                 rclpy.spin_once(probe, timeout_sec=0.05)
+            datagrams = udp_datagrams_sent() - datagrams_before
             gaps = np.diff(stamps) * rate if len(stamps) > 1 else np.array([])
             missing = int(np.sum(np.maximum(np.round(gaps) - 1, 0)))
             results[f"{width}x{height}"] = {
                 "received": len(stamps), "missing": missing, "rate_hz": rate, "seconds": seconds,
                 "mean_latency_ms": 1000 * float(np.mean(latencies)) if latencies else None,
+                "udp_datagrams_sent": datagrams,
                 "sockets": sockets_of([os.getpid(), process.pid])}
             probe.destroy_subscription(subscription)
             process.send_signal(signal.SIGINT)
@@ -153,8 +194,9 @@ def main() -> int:
     nodes = Nodes()
     try:
         result = {"delivery": scenario_delivery, "graph": scenario_graph, "record": scenario_record,
-                  "drag": scenario_drag}[name](options, nodes)
+                  "drag": scenario_drag, "interop": scenario_interop, "foreign": scenario_foreign}[name](options, nodes)
         result["interfaces"] = interfaces()
+        result["off_machine"] = off_machine(_sockets_in(result))
         result["alive_at_end"] = nodes.alive()
     finally:
         nodes.reap()
@@ -302,15 +344,15 @@ def scenario_record(options: dict, nodes: Nodes) -> dict:
     calibration = Path("endoscope.yaml").resolve()
     write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air"})
     topics = ["image_raw", "camera_info", "projected_area", "projected_area/info"]
-    # recorders and camera first, the area node once they are recording: the bag then holds every frame the
-    # live node measures from its first (it carries its pixel weights from frame to frame)
+    # recorders and the area node first, the camera once they have found each other: the bag then holds every
+    # result from the live node's first (it carries its pixel weights from frame to frame)
     closed = nodes.start("record_node", name="recorder", output=str(Path("closed_bag").resolve()), topics=topics)
     killed = nodes.start("record_node", name="doomed", output=str(Path("killed_bag").resolve()),
                          topics=["image_raw"])
+    nodes.start("area_node")
+    time.sleep(float(options["settle_s"]))
     nodes.start("camera_node", rate_hz=float(options["rate_hz"]), synthetic_scene="cube", synthetic_medium="air",
                 camera_info_url=f"file://{calibration}")
-    time.sleep(float(options["settle_s"]))
-    nodes.start("area_node")
     time.sleep(float(options["seconds"]))
     killed.kill()
     killed.wait(10)
@@ -319,6 +361,79 @@ def scenario_record(options: dict, nodes: Nodes) -> dict:
     closed.wait(20)
     return {"closed_exit": closed.returncode, "killed_exit": killed.returncode,
             "sockets": sockets_of([p.pid for _, p in nodes.processes if p.poll() is None])}
+
+
+def scenario_foreign(options: dict, nodes: Nodes) -> dict:
+    """A node as a lab's force-balance driver or rviz runs it: Fast DDS's defaults, none of our settings. It
+    counts the images and Af it receives and publishes force readings at 20 Hz."""
+    import rclpy
+    from geometry_msgs.msg import Vector3Stamped, WrenchStamped
+    from rclpy.node import Node
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    rclpy.init()
+    node = Node("force_balance")
+    images: list[list[int]] = []
+    areas: list[float] = []
+    node.create_subscription(Image, "image_raw", lambda m: images.append([m.width, m.height]), qos_profile_sensor_data)
+    node.create_subscription(Vector3Stamped, "projected_area", lambda m: areas.append(m.vector.x), 10)
+    force = node.create_publisher(WrenchStamped, "force", 10)
+    sent = []
+
+    def publish_force():
+        msg = WrenchStamped()
+        msg.header.stamp = node.get_clock().now().to_msg()
+        msg.wrench.force.x = 0.5
+        force.publish(msg)
+        sent.append(1)
+
+    node.create_timer(0.05, publish_force)
+    end = time.monotonic() + float(options["seconds"])
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return {"images": len(images), "image_sizes": sorted({tuple(size) for size in images}), "areas": areas,
+            "forces_sent": len(sent), "profile": os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")}
+
+
+def scenario_interop(options: dict, nodes: Nodes) -> dict:
+    """Our nodes (the shipped profile) and a node on Fast DDS's defaults on one machine: camera_node ->
+    area_node -> the foreign node (Af and 640x480 images), and the foreign node's force -> this probe (our
+    profile). Only inside a private network namespace: the foreign node uses every interface it finds."""
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.node import Node
+
+    from veg_area_ros.calib_io import write_calibration
+    from veg_area_ros.synthetic import ENDOSCOPE, cube_scene
+
+    calibration = Path("endoscope.yaml").resolve()
+    write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air"})
+    ours = [nodes.start("camera_node", rate_hz=10.0, synthetic_scene="cube", synthetic_medium="air",
+                        camera_info_url=f"file://{calibration}"), nodes.start("area_node")]
+    defaults = {k: v for k, v in os.environ.items() if k != "FASTDDS_DEFAULT_PROFILES_FILE"}
+    foreign = subprocess.Popen([sys.executable, __file__, "foreign", json.dumps({"seconds": options["seconds"]})],
+                               env=defaults, stdout=subprocess.PIPE, stderr=sys.stderr, text=True)
+    nodes.processes.append(("foreign", foreign))
+    rclpy.init()
+    probe = Node("probe")
+    forces: list[float] = []
+    probe.create_subscription(WrenchStamped, "force", lambda m: forces.append(m.wrench.force.x), 10)
+    sockets: list[dict] = []
+    try:
+        deadline = time.monotonic() + float(options["seconds"]) + 60
+        while foreign.poll() is None and time.monotonic() < deadline:
+            rclpy.spin_once(probe, timeout_sec=0.05)
+            if forces and not sockets:  # everyone is up: our processes' sockets, while they are open
+                sockets = sockets_of([os.getpid()] + [p.pid for p in ours])
+        lines = [line for line in foreign.communicate(timeout=30)[0].splitlines() if line.startswith("RESULT ")]
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return {"foreign": json.loads(lines[-1][len("RESULT "):]) if lines else None, "forces_received": len(forces),
+            "truth_m2": cube_scene().true_area_m2, "sockets": sockets}
 
 
 def scenario_drag(options: dict, nodes: Nodes) -> dict:

@@ -69,7 +69,7 @@ def test_config_and_launch_are_installed_and_the_launch_file_is_valid_python(pre
 
 def test_installed_node_executable_starts_and_stops_cleanly(prefix, tmp_path):
     """What `ros2 run veg_area_ros area_node` runs: it starts, waits for frames, and exits 0 on SIGINT.
-    Confined to shared memory (no network transport) and a private domain."""
+    Confined to this machine by the shipped profile (shared memory, UDP on 127.0.0.1 only), private domain."""
     import signal
     import time
 

@@ -63,10 +63,11 @@ def test_frames_the_area_node_skipped_are_counted(recorded):
                 infos.append(json.loads(store.deserialize_cdr(data, connection.msgtype).data))
     first, last = infos[0], infos[-1]
     assert first["frames_received"] == 1 and last["frames_measured"] == last["frames_received"]  # none refused
-    span = [s for s in image_stamps if (first["stamp"]["sec"], first["stamp"]["nanosec"]) <= s
+    assert first["frames_dropped"] in (0, None) and isinstance(last["frames_dropped"], int)
+    span = [s for s in image_stamps if (first["stamp"]["sec"], first["stamp"]["nanosec"]) < s
             <= (last["stamp"]["sec"], last["stamp"]["nanosec"])]
-    assert isinstance(last["frames_dropped"], int)
-    assert last["frames_received"] + last["frames_dropped"] == len(span)
+    assert len(span) >= 20
+    assert (last["frames_received"] - 1) + last["frames_dropped"] == len(span)
 
 
 def test_killed_recording_is_recovered_but_for_the_last_chunk(recorded, tmp_path):
@@ -89,12 +90,17 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
     targets.write_text(yaml.safe_dump({"dictionary": SCENE_DICTIONARY,
                                        "markers": {k: list(v) for k, v in SCENE_MARKERS.items()}}))
     store = get_typestore(Stores.ROS2_KILTED)
-    live = {}
+    live, live_std, images = {}, {}, set()
     with Reader(folder / "closed_bag") as reader:
-        areas = [c for c in reader.connections if c.topic == "/projected_area"]
-        for connection, _, data in reader.messages(connections=areas):
+        wanted = [c for c in reader.connections if c.topic in ("/projected_area", "/image_raw")]
+        for connection, _, data in reader.messages(connections=wanted):
+            if connection.topic == "/image_raw":
+                header = decode_image(data).header
+                images.add((header.sec, header.nanosec))
+                continue
             message = store.deserialize_cdr(data, connection.msgtype)
             live[(message.header.stamp.sec, message.header.stamp.nanosec)] = message.vector.x
+            live_std[(message.header.stamp.sec, message.header.stamp.nanosec)] = message.vector.y
     # from the live node's first frame on (the bag starts earlier): the pixel weights are carried from frame to
     # frame, so the same first frame gives the same numbers
     first = min(live)
@@ -106,8 +112,12 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
                if "area_m2" in r}
     common = set(live) & set(offline)
     assert len(common) >= 0.8 * len(live) and len(live) >= 15
+    # identical where both started from the same frame; if the recorder found the camera a frame after the area
+    # node did (a discovery race), the markers were re-tracked over another sequence: the README's bound
+    same_start = first in images
     for stamp in common:
-        assert abs(offline[stamp]["area_m2"] - live[stamp]) <= 1e-9, stamp
+        bound = 1e-9 if same_start else live_std[stamp]
+        assert abs(offline[stamp]["area_m2"] - live[stamp]) <= bound, (stamp, same_start)
     assert (tmp_path / "bag.png").exists()
 
 
