@@ -194,7 +194,8 @@ def main() -> int:
     nodes = Nodes()
     try:
         result = {"delivery": scenario_delivery, "graph": scenario_graph, "record": scenario_record,
-                  "drag": scenario_drag, "interop": scenario_interop, "foreign": scenario_foreign}[name](options, nodes)
+                  "drag": scenario_drag, "interop": scenario_interop, "foreign": scenario_foreign,
+                  "full_rate": scenario_full_rate}[name](options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
         result["alive_at_end"] = nodes.alive()
@@ -361,6 +362,54 @@ def scenario_record(options: dict, nodes: Nodes) -> dict:
     closed.wait(20)
     return {"closed_exit": closed.returncode, "killed_exit": killed.returncode,
             "sockets": sockets_of([p.pid for _, p in nodes.processes if p.poll() is None])}
+
+
+def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
+    """camera_node looping a still of the cube as fast as it can -> area_node, which falls behind; this probe
+    keeps every camera_info stamp (deep reliable queue) to know what was published, and the area node's info."""
+    import cv2
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import CameraInfo
+    from std_msgs.msg import String
+
+    from veg_area_ros.calib_io import write_calibration
+    from veg_area_ros.synthetic import ENDOSCOPE, cube_scene, render_scene
+
+    calibration, still = Path("endoscope.yaml").resolve(), Path("cube.png").resolve()
+    write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air"})
+    cv2.imwrite(str(still), render_scene(ENDOSCOPE, cube_scene(), 0.7))
+    rclpy.init()
+    probe = Node("probe")
+    published: list[int] = []
+    infos: list[dict] = []
+    deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100_000, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    probe.create_subscription(CameraInfo, "camera_info",
+                              lambda m: published.append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec), deep)
+    probe.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)),
+                              QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE))
+    nodes.start("area_node")
+    time.sleep(3.0)
+    nodes.start("camera_node", source=str(still), loop=True, rate_hz=1000.0, camera_info_url=f"file://{calibration}")
+    try:
+        end = time.monotonic() + float(options["seconds"]) + 10
+        while time.monotonic() < end:
+            rclpy.spin_once(probe, timeout_sec=0.01)
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    counted = [i for i in infos if i.get("frames_dropped") is not None]
+    window = counted[len(counted) // 4:]  # from when the area node has long been behind
+    first, last = (window[0], window[-1]) if len(window) > 1 else ({}, {})
+
+    def ns(info: dict) -> int:
+        return info["stamp"]["sec"] * 10**9 + info["stamp"]["nanosec"]
+    return {"published_in_window": sum(1 for s in published if ns(first) < s <= ns(last)) if first else 0,
+            "received_in_window": last["frames_received"] - first["frames_received"] if first else 0,
+            "dropped_in_window": last["frames_dropped"] - first["frames_dropped"] if first else 0,
+            "truth_m2": cube_scene().true_area_m2, "areas": [i["area_m2"] for i in window[-20:]]}
 
 
 def scenario_foreign(options: dict, nodes: Nodes) -> dict:

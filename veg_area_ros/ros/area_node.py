@@ -84,7 +84,8 @@ class AreaNode(Node):
         # each frame's camera_info waits here and is counted, where depth 1 would keep only the newest
         info_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REMEMBERED, reliability=LATCHED_QOS.reliability,
                               durability=LATCHED_QOS.durability)
-        self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, info_qos, raw=True)
+        self._info_subscription = self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, info_qos,
+                                                           raw=True)
         self.create_subscription(Image, "image_raw", self._on_frame, IMAGE_QOS, raw=True)
 
     def _build(self, settings: dict, camera) -> AreaMeasurer:
@@ -136,7 +137,23 @@ class AreaNode(Node):
             self.measurer = self._build(self.settings, camera)
             self.get_logger().info(f"calibration received: {camera.width}x{camera.height}, fx {camera.fx:.2f}")
 
+    def _take_waiting_camera_info(self) -> None:
+        """Every camera_info already waiting, before the frame is counted: the executor hands this node one message
+        per subscription per wait, so at full rate camera_info would fall behind the frames and overflow its
+        queue, and the skipped frames would be under-counted. Same call as rclpy's executor makes."""
+        subscription = self._info_subscription
+        while True:
+            try:
+                with subscription.handle:
+                    taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+            except AttributeError:  # another rclpy without this call: counted as the executor delivers them
+                return
+            if taken is None:
+                return
+            self._on_camera_info(taken[0])
+
     def _on_frame(self, data: bytes) -> None:
+        self._take_waiting_camera_info()
         try:
             self._on_image(data)
         except Exception as exc:  # one bad frame must not end the node's measuring
