@@ -5,7 +5,7 @@ with plain rclpy Image messages (message objects both ways, measuring in the sub
 reaching a third process, mean/p99 latency from the camera's stamp to that arrival, frames the area node
 dropped, and the memory each node holds (RSS, and PSS: shared pages split among the processes using them).
 
-    .venv/bin/python bench/ros_pipeline.py [--seconds 5] [--transports shm,default]
+    .venv/bin/python bench/ros_pipeline.py [--seconds 5] [--transports shm,default] [--sizes 640x480,3872x2592]
 
 The camera publishes as fast as it can (timer at 1000 Hz for 640x480, 30 Hz for 3872x2592) a still frame of
 the synthetic cube in air with the true calibration, so every frame is measurable.
@@ -17,6 +17,7 @@ import argparse
 import json
 import sys
 import time
+from collections import deque
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -97,19 +98,24 @@ def probe(spec: dict) -> dict:
     from geometry_msgs.msg import Vector3Stamped
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
+    from rclpy.serialization import deserialize_message
     from std_msgs.msg import String
 
     from veg_area_ros.ros.common import RESULT_QOS
 
     node = Node("bench_probe")
     latencies: list[float] = []
-    infos: list[dict] = []
+    infos: deque[bytes] = deque(maxlen=1)  # the newest, raw: the probe must not slow down what it measures
 
     def on_area(msg: Vector3Stamped) -> None:
         latencies.append(time.time() - (msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9))
 
+    def info(raw: bytes) -> dict:
+        return json.loads(deserialize_message(raw, String).data)
+
     node.create_subscription(Vector3Stamped, "projected_area", on_area, RESULT_QOS)
-    node.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)), RESULT_QOS)
+    node.create_subscription(String, "projected_area/info", lambda raw: infos.append(raw), RESULT_QOS,
+                             raw=True)
     executor = SingleThreadedExecutor()  # one executor: rclpy.spin_once(node) makes one per call (~ms each)
     executor.add_node(node)
     deadline = time.monotonic() + FIRST_RESULT_TIMEOUT_S
@@ -122,14 +128,15 @@ def probe(spec: dict) -> dict:
         executor.spin_once(timeout_sec=0.05)
     latencies.clear()
     started = time.monotonic()
-    first_info = infos[-1] if infos else None
+    first_info = info(infos[-1]) if infos else None
     while time.monotonic() - started < spec["seconds"]:
         executor.spin_once(timeout_sec=0.05)
     elapsed = time.monotonic() - started
     out = {"results": len(latencies), "per_s": len(latencies) / elapsed, "latency_ms": latency_ms(latencies)}
     if first_info and infos:
-        received = infos[-1]["frames_received"] - first_info["frames_received"]
-        skipped = infos[-1]["frames_dropped"] - first_info["frames_dropped"]
+        last_info = info(infos[-1])
+        received = last_info["frames_received"] - first_info["frames_received"]
+        skipped = last_info["frames_dropped"] - first_info["frames_dropped"]
         out.update(frames_in_per_s=received / elapsed, dropped_share=skipped / max(received + skipped, 1))
     return out
 
@@ -212,6 +219,8 @@ def inside(args) -> int:
         domain = 100
         for transport in args.transports.split(","):
             for width, height, rate in LOADS:
+                if f"{width}x{height}" not in args.sizes.split(","):
+                    continue
                 for pipeline in PIPELINES:
                     domain += 1
                     spec = dict(inputs[f"{width}x{height}"], rate=rate, seconds=args.seconds)
@@ -236,6 +245,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=5.0, help="measuring window per case")
     parser.add_argument("--transports", default="shm,default")
+    parser.add_argument("--sizes", default=",".join(f"{w}x{h}" for w, h, _ in LOADS), help="e.g. 640x480")
     return bench_main(SCRIPT, ("probe", "plain_camera", "plain_area"), role_main, parser, inside)
 
 
