@@ -153,7 +153,11 @@ class AreaNode(Node):
             self._on_camera_info(taken[0])
 
     def _on_frame(self, data: bytes) -> None:
-        self._take_waiting_camera_info()
+        try:
+            self._take_waiting_camera_info()
+        except Exception as exc:  # a camera_info that cannot be taken or applied must not cost the frame
+            self.get_logger().error(f"camera_info not taken: {exc.__class__.__name__}: {exc}",
+                                    throttle_duration_sec=5.0)
         try:
             self._on_image(data)
         except Exception as exc:  # one bad frame must not end the node's measuring
