@@ -59,9 +59,11 @@ def remove_new_shm(before: set[str]) -> None:
             Path("/dev/shm", leftover).unlink(missing_ok=True)
 
 
-def run_scenario(name: str, tmp_path: Path, timeout: float = 240.0, **options) -> dict:
-    """Run scenario `name` with `options` (JSON); returns its JSON result. A unique ROS_DOMAIN_ID per call."""
-    env = ros_environment(tmp_path, next(_domains) % 230)
+def run_scenario(name: str, tmp_path: Path, timeout: float = 240.0, environment: dict[str, str] | None = None,
+                 **options) -> dict:
+    """Run scenario `name` with `options` (JSON); returns its JSON result. A unique ROS_DOMAIN_ID per call;
+    `environment` adds variables (e.g. a user's ROS settings)."""
+    env = ros_environment(tmp_path, next(_domains) % 230) | (environment or {})
     command = confined([sys.executable, str(REPO / "test" / "ros_scenarios.py"), name, json.dumps(options)])
     before = set(os.listdir("/dev/shm"))
     try:

@@ -92,6 +92,16 @@ def test_camera_sized_images_are_delivered_between_processes(tmp_path):
             assert udp_capacity < 0.1 * case["received"] * width * height * 3, case  # images go through shm
 
 
+def test_localhost_discovery_range_keeps_the_shared_memory_transport(tmp_path):
+    """Users often set ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST: with the shipped profile, DSLR frames (far over
+    the default 512 KB segments, which deliver none of them best effort) must still all arrive."""
+    result = run_scenario("delivery", tmp_path, environment={"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"},
+                          cases=[[3872, 2592, 2, 4]])
+    large = result["3872x2592"]
+    assert large["missing"] == 0 and large["received"] >= 0.8 * 2 * 4, large
+    assert result["off_machine"] == []
+
+
 def test_host_shared_memory_is_left_clean():
     """Runs last in this module: nothing the scenarios started left files in the host's /dev/shm."""
     leftovers = [f for f in os.listdir("/dev/shm") if "fastdds" in f.lower() or "fastrtps" in f.lower()]
