@@ -345,15 +345,16 @@ def scenario_record(options: dict, nodes: Nodes) -> dict:
     calibration = Path("endoscope.yaml").resolve()
     write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air"})
     topics = ["image_raw", "camera_info", "projected_area", "projected_area/info"]
-    # recorders and the area node first, the camera once they have found each other: the bag then holds every
-    # result from the live node's first (it carries its pixel weights from frame to frame)
+    # recorders and camera first, the area node once they are recording: the bag then holds every image the
+    # live node measures from its first (it carries its pixel weights from frame to frame). The recorder finds
+    # the area node's topics by polling, so it may miss its first results (the tests allow for that).
     closed = nodes.start("record_node", name="recorder", output=str(Path("closed_bag").resolve()), topics=topics)
     killed = nodes.start("record_node", name="doomed", output=str(Path("killed_bag").resolve()),
                          topics=["image_raw"])
-    nodes.start("area_node")
-    time.sleep(float(options["settle_s"]))
     nodes.start("camera_node", rate_hz=float(options["rate_hz"]), synthetic_scene="cube", synthetic_medium="air",
                 camera_info_url=f"file://{calibration}")
+    time.sleep(float(options["settle_s"]))
+    nodes.start("area_node")
     time.sleep(float(options["seconds"]))
     killed.kill()
     killed.wait(10)
