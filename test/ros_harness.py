@@ -59,17 +59,24 @@ def remove_new_shm(before: set[str]) -> None:
             Path("/dev/shm", leftover).unlink(missing_ok=True)
 
 
-def run_scenario(name: str, tmp_path: Path, timeout: float = 240.0, environment: dict[str, str] | None = None,
-                 **options) -> dict:
-    """Run scenario `name` with `options` (JSON); returns its JSON result. A unique ROS_DOMAIN_ID per call;
+def run_confined(command: list[str], tmp_path: Path, timeout: float,
+                 environment: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    """`command` confined to this machine with a unique ROS_DOMAIN_ID, in `tmp_path`; /dev/shm cleaned after.
     `environment` adds variables (e.g. a user's ROS settings)."""
     env = ros_environment(tmp_path, next(_domains) % 230) | (environment or {})
-    command = confined([sys.executable, str(REPO / "test" / "ros_scenarios.py"), name, json.dumps(options)])
     before = set(os.listdir("/dev/shm"))
     try:
-        done = subprocess.run(command, env=env, capture_output=True, text=True, timeout=timeout, cwd=tmp_path)
+        return subprocess.run(confined(command), env=env, capture_output=True, text=True, timeout=timeout,
+                              cwd=tmp_path)
     finally:
         remove_new_shm(before)
+
+
+def run_scenario(name: str, tmp_path: Path, timeout: float = 240.0, environment: dict[str, str] | None = None,
+                 **options) -> dict:
+    """Run scenario `name` with `options` (JSON); returns its JSON result."""
+    done = run_confined([sys.executable, str(REPO / "test" / "ros_scenarios.py"), name, json.dumps(options)],
+                        tmp_path, timeout, environment)
     lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
     if done.returncode != 0 or not lines:
         raise AssertionError(f"scenario {name} failed (exit {done.returncode}):\n{done.stdout[-3000:]}\n"

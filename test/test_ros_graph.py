@@ -133,3 +133,22 @@ def test_skipped_frames_are_counted_exactly_when_the_camera_outruns_the_area_nod
     assert received + dropped == published, result
     areas = np.array(result["areas"])
     assert len(areas) and np.all(np.abs(areas / result["truth_m2"] - 1) <= 0.005), areas
+
+
+def test_the_main_job_measures_the_cube_within_half_a_percent(tmp_path):
+    """`make demo` (veg-area demo): the three nodes composed, calibration from the synthetic board views, then
+    Af of the cube against its rendered truth; confined like every ROS scenario."""
+    import re
+    import sys
+
+    from ros_harness import run_confined
+
+    from veg_area_ros.calib_io import read_calibration
+
+    done = run_confined([sys.executable, "-m", "veg_area_ros.cli", "demo", "--output", str(tmp_path / "demo"),
+                         "--timeout", "200"], tmp_path, timeout=300)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    error = re.search(r"Af over 10 frames: .* error ([-+][0-9.]+) %", done.stdout)
+    assert error and abs(float(error.group(1))) <= 0.5, done.stdout
+    camera = read_calibration(tmp_path / "demo" / "graph_calibration.yaml").camera
+    assert camera.width == 640 and camera.fx == pytest.approx(520.0 * 1.333, rel=0.01)  # water: c grows
