@@ -393,11 +393,20 @@ def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
                               QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE))
     nodes.start("area_node")
     time.sleep(3.0)
-    nodes.start("camera_node", source=str(still), loop=True, rate_hz=1000.0, camera_info_url=f"file://{calibration}")
+    camera = nodes.start("camera_node", source=str(still), loop=True, rate_hz=1000.0,
+                         camera_info_url=f"file://{calibration}")
     try:
         end = time.monotonic() + float(options["seconds"]) + 10
         while time.monotonic() < end:
             rclpy.spin_once(probe, timeout_sec=0.01)
+        camera.send_signal(signal.SIGINT)  # then take what is still queued here, so no camera_info is left out
+        camera.wait(10)
+        idle_since, deadline = time.monotonic(), time.monotonic() + 30
+        while time.monotonic() - idle_since < 1.0 and time.monotonic() < deadline:
+            before = len(published) + len(infos)
+            rclpy.spin_once(probe, timeout_sec=0.05)
+            if len(published) + len(infos) > before:
+                idle_since = time.monotonic()
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
