@@ -336,14 +336,20 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
     return out
 
 
-def scenario_record(options: dict, nodes: Nodes) -> dict:
-    """camera (synthetic cube in air, true calibration published) -> area_node, recorded by two record nodes:
-    one closed with SIGINT, one killed with SIGKILL mid-run. The bags are judged by the test afterwards."""
+def air_endoscope_calibration() -> Path:
+    """The synthetic endoscope's true calibration in air, as a camera_info YAML in the scenario's folder."""
     from veg_area_ros.calib_io import write_calibration
     from veg_area_ros.synthetic import ENDOSCOPE
 
     calibration = Path("endoscope.yaml").resolve()
     write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air"})
+    return calibration
+
+
+def scenario_record(options: dict, nodes: Nodes) -> dict:
+    """camera (synthetic cube in air, true calibration published) -> area_node, recorded by two record nodes:
+    one closed with SIGINT, one killed with SIGKILL mid-run. The bags are judged by the test afterwards."""
+    calibration = air_endoscope_calibration()
     topics = ["image_raw", "camera_info", "projected_area", "projected_area/info"]
     # recorders and camera first, the area node once they are recording: the bag then holds every image the
     # live node measures from its first (it carries its pixel weights from frame to frame). The recorder finds
@@ -375,11 +381,9 @@ def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
     from sensor_msgs.msg import CameraInfo
     from std_msgs.msg import String
 
-    from veg_area_ros.calib_io import write_calibration
     from veg_area_ros.synthetic import ENDOSCOPE, cube_scene, render_scene
 
-    calibration, still = Path("endoscope.yaml").resolve(), Path("cube.png").resolve()
-    write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air"})
+    calibration, still = air_endoscope_calibration(), Path("cube.png").resolve()
     cv2.imwrite(str(still), render_scene(ENDOSCOPE, cube_scene(), 0.7))
     rclpy.init()
     probe = Node("probe")
@@ -465,11 +469,9 @@ def scenario_interop(options: dict, nodes: Nodes) -> dict:
     from geometry_msgs.msg import WrenchStamped
     from rclpy.node import Node
 
-    from veg_area_ros.calib_io import write_calibration
-    from veg_area_ros.synthetic import ENDOSCOPE, cube_scene
+    from veg_area_ros.synthetic import cube_scene
 
-    calibration = Path("endoscope.yaml").resolve()
-    write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air"})
+    calibration = air_endoscope_calibration()
     ours = [nodes.start("camera_node", rate_hz=10.0, synthetic_scene="cube", synthetic_medium="air",
                         camera_info_url=f"file://{calibration}"), nodes.start("area_node")]
     defaults = {k: v for k, v in os.environ.items() if k != "FASTDDS_DEFAULT_PROFILES_FILE"}
