@@ -152,3 +152,41 @@ def test_the_main_job_measures_the_cube_within_half_a_percent(tmp_path):
     assert error and abs(float(error.group(1))) <= 0.5, done.stdout
     camera = read_calibration(tmp_path / "demo" / "graph_calibration.yaml").camera
     assert camera.width == 640 and camera.fx == pytest.approx(520.0 * 1.333, rel=0.01)  # water: c grows
+
+
+BUSY_NODE = """
+import os, signal, sys, time
+from pathlib import Path
+from rclpy.node import Node
+from veg_area_ros.ros.common import run_nodes
+
+class Busy(Node):
+    def __init__(self):
+        super().__init__("busy")
+        self.timer = self.create_timer(0.2, self.work)
+
+    def work(self):
+        self.timer.cancel()
+        for _ in range(int(sys.argv[2])):
+            os.kill(os.getpid(), getattr(signal, sys.argv[1]))
+        time.sleep(1.0)  # a KeyboardInterrupt here would leave the work half done
+        Path("finished").write_text("yes")
+
+sys.exit(run_nodes([Busy], []))
+"""
+
+
+@pytest.mark.parametrize(("signal_name", "count", "exit_code", "finished"), [
+    ("SIGINT", 1, 0, True), ("SIGTERM", 1, 0, True), ("SIGINT", 2, 130, False)])
+def test_a_stop_signal_lets_the_running_callback_finish_and_a_second_interrupts_it(
+        tmp_path, signal_name, count, exit_code, finished):
+    """Ctrl-C during a callback (e.g. record_node between writing a bag record and counting it, which left a
+    bag whose metadata disagreed with its data) stops the node after the callback; a second Ctrl-C interrupts."""
+    import sys
+
+    from ros_harness import run_confined
+
+    done = run_confined([sys.executable, "-c", BUSY_NODE, signal_name, str(count)], tmp_path, timeout=60)
+    assert done.returncode == exit_code, done.stderr[-3000:]
+    assert (tmp_path / "finished").exists() == finished
+    assert "stopping after the current callback" in done.stderr

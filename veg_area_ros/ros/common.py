@@ -4,6 +4,7 @@ the process entry point."""
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from collections.abc import Callable
 
@@ -78,13 +79,39 @@ def ensure_ros_environment() -> None:
         os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = profile
 
 
+class StopOnSignal:
+    """Ctrl-C / SIGTERM ask the spin loop to stop after the callback that is running: rclpy's own handlers
+    raise KeyboardInterrupt wherever Python happens to be, e.g. between a bag record and its count (a bag
+    whose metadata then disagrees with its data). A second signal interrupts at once (a callback that hangs)."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous = {number: signal.signal(number, self._handle) for number in self.SIGNALS}
+
+    def _handle(self, number: int, frame) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        os.write(2, b"veg_area_ros: stopping after the current callback (again to interrupt it)\n")
+
+    def restore(self) -> None:
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+
+
 def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None) -> int:
-    """Create the nodes, spin them in one executor until Ctrl-C / shutdown, clean up. Exit code 0 on a
-    clean stop (a node may call `request_stop()` on itself, e.g. at the end of a video), 1 on a failure."""
+    """Create the nodes, spin them in one executor until Ctrl-C / SIGTERM / shutdown, clean up. Exit code 0
+    on a clean stop (a node may call `request_stop()` on itself, e.g. at the end of a video), 1 on a failure,
+    130 when a second Ctrl-C interrupted a callback."""
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
     ensure_ros_environment()
-    rclpy.init(args=args if args is not None else sys.argv)
+    # rclpy's handlers stay out; ours go in after init, so a slow rcl_init is still interrupted as usual
+    rclpy.init(args=args if args is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    stop = StopOnSignal()
     executor = SingleThreadedExecutor()
     nodes: list[Node] = []
     code = 0
@@ -92,14 +119,17 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
         for factory in factories:
             nodes.append(factory())
             executor.add_node(nodes[-1])
-        while rclpy.ok() and not any(getattr(n, "stop_requested", False) for n in nodes):
+        while rclpy.ok() and not stop.requested and not any(getattr(n, "stop_requested", False) for n in nodes):
             executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except KeyboardInterrupt:
+        code = 130
+    except ExternalShutdownException:
         pass
     except Exception as exc:  # a node that cannot start (bad parameter file, ...) says why and exits 1
         print(f"veg_area_ros: {exc}", file=sys.stderr)
         code = 1
     finally:
+        stop.restore()
         for node in nodes:
             node.destroy_node()
         if rclpy.ok():
