@@ -1,0 +1,64 @@
+"""The benchmarks still run and print their figures (bench/ is not otherwise exercised, so it would rot
+unseen). Short settings; nothing here judges speed, only that every case produced a sane figure."""
+
+from __future__ import annotations
+
+import math
+import re
+import subprocess
+import sys
+
+import pytest
+from helpers import REPO
+from ros_harness import netns_available
+
+pytestmark = pytest.mark.timeout(300)
+
+
+def run_bench(script: str, *args: str) -> str:
+    done = subprocess.run([sys.executable, str(REPO / "bench" / script), *args], capture_output=True, text=True,
+                          timeout=240, cwd=REPO)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
+    return done.stdout
+
+
+def numbers(line: str) -> list[float]:
+    return [float(x) for x in re.findall(r"-?\d+(?:\.\d+)?", line)]
+
+
+def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
+    out = run_bench("area_speed.py", "--repeats", "1")
+    cores = [line for line in out.splitlines() if "area core" in line]
+    assert len(cores) == 2, out
+    for line in cores:
+        milliseconds, ratio = numbers(line)[:2]
+        assert math.isfinite(ratio) and milliseconds > 0 and ratio > 0, line
+
+
+def test_calibration_speed_ours_fits_no_worse_than_opencv():
+    out = run_bench("calibration_speed.py", "--repeats", "1")
+    rows = [numbers(line) for line in out.splitlines() if re.match(r"\s+\d+\s+\d", line)]
+    assert [int(r[0]) for r in rows] == [15, 50], out
+    for views, opencv_s, ours_s, _, opencv_rms, ours_rms in rows:
+        assert opencv_s > 0 and ours_s > 0
+        assert ours_rms <= opencv_rms + 1e-4, (views, opencv_rms, ours_rms)
+
+
+@pytest.mark.skipif(not netns_available(), reason="the ROS benches' fixed domains need a private network namespace")
+def test_ros_pipeline_measures_ours_and_plain_rclpy():
+    out = run_bench("ros_pipeline.py", "--seconds", "1", "--transports", "shm", "--sizes", "640x480")
+    rows = {line.split()[0]: line for line in out.splitlines() if line.startswith(("veg_area_ros", "plain rclpy"))}
+    assert set(rows) == {"veg_area_ros", "plain"}, out
+    for line in rows.values():
+        af_per_s = numbers(line.split("640x480")[1])[1]  # after the camera rate
+        assert af_per_s > 0, line
+
+
+@pytest.mark.skipif(not netns_available(), reason="the ROS benches' fixed domains need a private network namespace")
+def test_ros_transport_delivers_in_every_case():
+    out = run_bench("ros_transport.py", "--seconds", "0.5", "--transports", "shm", "--modes", "processes")
+    rows = [line.split() for line in out.splitlines() if line.startswith("shm ")]
+    assert len(rows) == 8, out  # two QoS kinds x four loads
+    for row in rows:
+        sent, got = int(row[5]), int(row[6])
+        assert 0 < got <= sent, row
