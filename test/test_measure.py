@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -173,3 +174,82 @@ def test_paper_reproduction_endoscope():
         else:  # the bush's thin branches are harder: held to its own reported uncertainty
             assert abs(row.calibrated_error_pct) <= row.calibrated_std_pct, row
         assert abs(row.raw_error_pct) > 4 * abs(row.calibrated_error_pct) and abs(row.raw_error_pct) > 2, row
+
+
+@pytest.fixture(scope="module")
+def long_video(workspace):
+    """The cube, 2500 frames: several seconds of measuring, so Ctrl-C surely comes in the middle."""
+    video = workspace / "long.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30, ENDOSCOPE.image_size)
+    frame = cv2.imread(str(workspace / "cube.png"))
+    for _ in range(2500):
+        writer.write(frame)
+    writer.release()
+    return video
+
+
+def interrupt_when(args: list[str], cwd, started) -> tuple[int, str]:
+    """Run `veg-area measure args` in its own process group; Ctrl-C the group (as a terminal does) at the
+    first output line for which `started(line)` holds; (exit code, what it said on stderr)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import threading
+
+    from helpers import REPO
+
+    process = subprocess.Popen([sys.executable, "-m", "veg_area_ros.cli", "measure", *args], cwd=cwd, text=True,
+                               env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, start_new_session=True)
+    seen: dict[str, list[str]] = {"stdout": [], "stderr": []}
+    signalled = threading.Event()
+
+    def read(name: str) -> None:
+        for line in getattr(process, name):
+            seen[name].append(line)
+            if not signalled.is_set() and started(line):
+                signalled.set()
+                os.killpg(process.pid, signal.SIGINT)
+
+    readers = [threading.Thread(target=read, args=(name,)) for name in seen]
+    for reader in readers:
+        reader.start()
+    try:
+        code = process.wait(120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+        for reader in readers:
+            reader.join(10)
+    assert signalled.is_set(), "".join(seen["stderr"])[-2000:]
+    return code, "".join(seen["stderr"])
+
+
+def test_ctrl_c_on_a_long_video_keeps_the_frames_measured(workspace, long_video, tmp_path):
+    code, err = interrupt_when([str(long_video), "--calibration", str(workspace / "water.yaml"), "--targets",
+                                     str(workspace / "targets.yaml"), "--csv", str(tmp_path / "run.csv")],
+                                    tmp_path, lambda line: line.startswith("[50/2500]"))
+    assert code == 130, err
+    rows = list(csv.DictReader((tmp_path / "run.csv").open()))
+    # the frame in hand when Ctrl-C came (its line may be printed) is left out; every other one is in
+    assert 49 <= len(rows) < 2500 and f"interrupted after {len(rows)} of 2500 frames ({len(rows)} measured)" in err
+    assert all(abs(float(r["area_m2"]) / SCENE.true_area_m2 - 1) <= 0.01 for r in rows)
+    assert cv2.imread(str(tmp_path / "run.png")) is not None
+
+
+def test_ctrl_c_on_a_batch_keeps_what_each_worker_measured(workspace, long_video, tmp_path):
+    code, err = interrupt_when([str(long_video), str(long_video), "--calibration", str(workspace / "water.yaml"),
+                                   "--targets", str(workspace / "targets.yaml"), "--jobs", "2", "--output-dir",
+                                   str(tmp_path / "out")], tmp_path, lambda line: "frames measured in" in line)
+    assert code == 130, err
+    summary = list(csv.DictReader((tmp_path / "out" / "batch_summary.csv").open()))
+    assert len(summary) == 2 and "batch interrupted" in err
+    for row in summary:
+        assert row["error"].startswith("interrupted"), row
+        if row["csv"]:  # its worker had begun: its CSV holds every frame it got to
+            rows = list(csv.DictReader(Path(row["csv"]).read_text().splitlines()))
+            assert row["error"] == f"interrupted after {len(rows)} frames" and 0 < len(rows) < 2500
+            assert int(row["measured"]) == len(rows)
+    assert any(row["csv"] for row in summary)

@@ -201,9 +201,10 @@ def cmd_measure(args: argparse.Namespace) -> int:
     return _measure(args)[0]
 
 
-def _measure(args: argparse.Namespace, on_frame=None) -> tuple[int, list[dict]]:
-    """Measure every frame of args.inputs; (exit code, CSV rows). `on_frame(index, total)` (a batch worker)
-    replaces the per-frame lines on stdout."""
+def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, list[dict]]:
+    """Measure every frame of args.inputs; (exit code, CSV rows; 130 when interrupted, with what was measured
+    so far). `on_frame(index, total)` (a batch worker) replaces the per-frame lines on stdout; `stop()` true
+    (the batch was interrupted) ends the series as Ctrl-C does."""
     import cv2
 
     from .area import AreaMeasurer, draw_overlay
@@ -269,49 +270,55 @@ def _measure(args: argparse.Namespace, on_frame=None) -> tuple[int, list[dict]]:
                           {"idealized_from": str(Path(args.calibration).resolve())})
     rows: list[dict] = []
     measured = 0
-    for index, frame in enumerate(iter_frames(files, args.video_step, args.image_topic), 1):
-        row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
-        if frame.stamp is not None:
-            row["stamp_sec"], row["stamp_nanosec"] = frame.stamp
-            if not (args.start_time <= frame.time_s <= args.end_time):
-                continue
-        try:
-            if frame.image is None:
-                raise InputError(f"skipped: {frame.problem}")
-            if from_bag:  # as the live area node: the latest camera_info, a new measurer when it changes
-                if frame.camera_info is None:
-                    raise InputError("no camera_info recorded before this frame")
-                recorded = info_to_camera(frame.camera_info)
-                if recorded != camera:
-                    camera = recorded
-                    measurer = AreaMeasurer(camera, targets, classifier, roi=args.roi,
-                                            threshold_delta=args.sweep_step)
-            result = measurer.measure(frame.image, keep_images=bool(args.overlay or args.idealized))
-        except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
-            row["error"] = str(exc)
-            say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
-        else:
-            measured += 1
-            summary = result.summary()
-            row.update(summary)
-            if result.missing_targets:
-                say(f"[{index}/{total}] {frame.name}: targets not found: markers {result.missing_targets}")
-            if on_frame is None and (not args.json or index % 25 == 0 or index == total):
-                line = (f"[{index}/{total}] {frame.name}: Af = {result.area_m2:.6g} ± {result.area_std_m2:.2g} m² "
-                        f"({result.pixel_count} px, threshold {result.threshold:g}, {result.scale.kind} scale"
-                        f"{'' if result.calibrated else ', UNCALIBRATED'})")
-                print(line, file=sys.stderr if args.json else sys.stdout, flush=True)
-            if args.overlay:
-                target = Path(args.overlay) if single_overlay else Path(args.overlay) / _frame_file_name(frame.name)
-                target.parent.mkdir(parents=True, exist_ok=True)
-                cv2.imwrite(str(target), draw_overlay(result))
-            if args.idealized and camera is not None:
-                cv2.imwrite(str(Path(args.idealized) / _frame_file_name(frame.name)), result.image)
-        if args.json:
-            print(json.dumps({k: v for k, v in row.items() if k != "error" or v}), flush=True)
-        rows.append(row)
-        if on_frame is not None:
-            on_frame(index, total)
+    interrupted = False
+    try:
+        for index, frame in enumerate(iter_frames(files, args.video_step, args.image_topic), 1):
+            row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
+            if frame.stamp is not None:
+                row["stamp_sec"], row["stamp_nanosec"] = frame.stamp
+                if not (args.start_time <= frame.time_s <= args.end_time):
+                    continue
+            try:
+                if frame.image is None:
+                    raise InputError(f"skipped: {frame.problem}")
+                if from_bag:  # as the live area node: the latest camera_info, a new measurer when it changes
+                    if frame.camera_info is None:
+                        raise InputError("no camera_info recorded before this frame")
+                    recorded = info_to_camera(frame.camera_info)
+                    if recorded != camera:
+                        camera = recorded
+                        measurer = AreaMeasurer(camera, targets, classifier, roi=args.roi,
+                                                threshold_delta=args.sweep_step)
+                result = measurer.measure(frame.image, keep_images=bool(args.overlay or args.idealized))
+            except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
+                row["error"] = str(exc)
+                say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
+            else:
+                measured += 1
+                summary = result.summary()
+                row.update(summary)
+                if result.missing_targets:
+                    say(f"[{index}/{total}] {frame.name}: targets not found: markers {result.missing_targets}")
+                if on_frame is None and (not args.json or index % 25 == 0 or index == total):
+                    line = (f"[{index}/{total}] {frame.name}: Af = {result.area_m2:.6g} ± {result.area_std_m2:.2g} m² "
+                            f"({result.pixel_count} px, threshold {result.threshold:g}, {result.scale.kind} scale"
+                            f"{'' if result.calibrated else ', UNCALIBRATED'})")
+                    print(line, file=sys.stderr if args.json else sys.stdout, flush=True)
+                if args.overlay:
+                    target = Path(args.overlay) if single_overlay else Path(args.overlay) / _frame_file_name(frame.name)
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    cv2.imwrite(str(target), draw_overlay(result))
+                if args.idealized and camera is not None:
+                    cv2.imwrite(str(Path(args.idealized) / _frame_file_name(frame.name)), result.image)
+            if args.json:
+                print(json.dumps({k: v for k, v in row.items() if k != "error" or v}), flush=True)
+            rows.append(row)
+            if on_frame is not None:
+                on_frame(index, total)
+            if stop is not None and stop():
+                raise KeyboardInterrupt
+    except KeyboardInterrupt:  # Ctrl-C on a long video or bag: what was measured is kept (CSV, plot)
+        interrupted = True
 
     if csv_path is not None:
         _write_area_csv(csv_path, rows)
@@ -326,6 +333,11 @@ def _measure(args: argparse.Namespace, on_frame=None) -> tuple[int, list[dict]]:
                                     csv_path.with_suffix(".png"), title=f"Projected area, {csv_path.stem}",
                                     time_label="time [s]" if timed else "frame")
             say(f"plot: {plot}")
+    if interrupted:  # the frame in hand when Ctrl-C came is not in the rows
+        measured = sum(not r["error"] for r in rows)
+        say(f"interrupted after {len(rows)} of {total} frames ({measured} measured)"
+            + (f"; the series so far: {csv_path}" if csv_path is not None and rows else ""))
+        return 130, rows
     if measured == 0:
         reasons = sorted({r["error"] for r in rows})
         raise CliError(f"no frame measured: {'; '.join(reasons)[:500]}")
@@ -344,7 +356,15 @@ def _batch_csv_paths(inputs: list[str], folder: Path) -> list[Path]:
             for k, stem in enumerate(stems)]
 
 
-def _measure_batch_job(options: dict, source: str, csv_path: str, progress) -> dict:
+def _ignore_ctrl_c() -> None:
+    """Batch workers leave Ctrl-C to the main process, which asks them to stop between frames: interrupted
+    anywhere (an idle worker, one writing its CSV), a worker would break the pool and lose the others' work."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _measure_batch_job(options: dict, source: str, csv_path: str, progress, stopping) -> dict:
     """One input of a batch, in a worker process: its CSV and plot, and a one-line summary."""
     import statistics
 
@@ -354,10 +374,13 @@ def _measure_batch_job(options: dict, source: str, csv_path: str, progress) -> d
     summary = {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "std_area_m2": "",
                "csv": csv_path, "error": ""}
     try:
-        _, rows = _measure(args, on_frame=lambda index, total: progress.put((source, index, total)))
+        code, rows = _measure(args, on_frame=lambda index, total: progress.put((source, index, total)),
+                              stop=stopping.is_set)
     except CliError as exc:
         summary["error"] = str(exc)
         return summary
+    if code == 130:
+        summary["error"] = f"interrupted after {len(rows)} frames"
     areas = [r["area_m2"] for r in rows if not r["error"] and "area_m2" in r]
     summary.update(frames=len(rows), measured=len(areas))
     if areas:
@@ -389,30 +412,44 @@ def _measure_batch(args: argparse.Namespace) -> int:
     csv_paths = _batch_csv_paths(args.inputs, folder)
     say = _progress(args.quiet)
     say(f"batch: {len(args.inputs)} inputs, {min(jobs, len(args.inputs))} at a time")
-    with context.Manager() as manager, ProcessPoolExecutor(min(jobs, len(args.inputs)), mp_context=context) as pool:
-        progress = manager.Queue()
-        pending = {pool.submit(_measure_batch_job, options, source, str(path), progress): source
+    with context.Manager() as manager, ProcessPoolExecutor(min(jobs, len(args.inputs)), mp_context=context,
+                                                           initializer=_ignore_ctrl_c) as pool:
+        progress, stopping = manager.Queue(), manager.Event()
+        pending = {pool.submit(_measure_batch_job, options, source, str(path), progress, stopping): source
                    for source, path in zip(args.inputs, csv_paths, strict=True)}
         done_frames: dict[str, tuple[int, int]] = {}
         summaries: dict[str, dict] = {}
         last_line = 0.0
-        while pending:
-            finished, _ = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
-            for future in finished:
-                source = pending.pop(future)
-                summaries[source] = future.result()
-                state = summaries[source]["error"] or f"{summaries[source]['measured']} frames measured"
-                say(f"batch: {source} done: {state}")
-            with contextlib.suppress(queue.Empty):
-                while True:
-                    source, index, total = progress.get_nowait()
-                    done_frames[source] = (index, total)
-            if time.monotonic() - last_line > 2.0 and pending and done_frames:
-                frames = sum(i for i, _ in done_frames.values())
-                total = sum(t for _, t in done_frames.values())
-                say(f"batch: {len(summaries)}/{len(args.inputs)} inputs done; {frames} of {total} frames measured "
-                    "in the inputs begun")
-                last_line = time.monotonic()
+        interrupted = False
+        try:
+            while pending:
+                finished, _ = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    source = pending.pop(future)
+                    summaries[source] = future.result()
+                    state = summaries[source]["error"] or f"{summaries[source]['measured']} frames measured"
+                    say(f"batch: {source} done: {state}")
+                with contextlib.suppress(queue.Empty):
+                    while True:
+                        source, index, total = progress.get_nowait()
+                        done_frames[source] = (index, total)
+                if time.monotonic() - last_line > 2.0 and pending and done_frames:
+                    frames = sum(i for i, _ in done_frames.values())
+                    total = sum(t for _, t in done_frames.values())
+                    say(f"batch: {len(summaries)}/{len(args.inputs)} inputs done; {frames} of {total} frames "
+                        "measured in the inputs begun")
+                    last_line = time.monotonic()
+        except KeyboardInterrupt:  # the workers stop after their current frame and keep what they measured
+            interrupted = True
+            stopping.set()
+            for future in pending:
+                future.cancel()
+            for future, source in pending.items():
+                try:
+                    summaries[source] = future.result()
+                except Exception:  # cancelled before it began
+                    summaries[source] = {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "",
+                                         "std_area_m2": "", "csv": "", "error": "interrupted before it began"}
     rows = [summaries[source] for source in args.inputs]
     summary_path = folder / "batch_summary.csv"
     _write_csv(summary_path, BATCH_COLUMNS, rows)
@@ -424,6 +461,9 @@ def _measure_batch(args: argparse.Namespace) -> int:
             if row["measured"] else f"not measured: {row['error'] or 'no frame measured'}"
         print(f"{row['input']}: {mean}", flush=True)
     say(f"batch summary: {summary_path}")
+    if interrupted:
+        say("batch interrupted: what each input measured so far is in its CSV")
+        return 130
     failed = [row["input"] for row in rows if not row["measured"]]
     if failed:
         raise CliError(f"{len(failed)} of {len(rows)} inputs gave no measurement: {', '.join(failed)}")
