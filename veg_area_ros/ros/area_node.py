@@ -18,7 +18,6 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 
@@ -27,10 +26,10 @@ from ..calib_io import CalibrationFileError, read_calibration
 from ..cdr import decode_camera_info, decode_image, info_to_camera, stamp_ns, unstamped
 from ..classify import CHANNELS, OBJECTS, Classifier, ClassifyError
 from ..idealize import FrameSizeError
-from ..latest import REMEMBERED, FrameTally
+from ..latest import FrameTally
 from ..scale import TargetsError, TargetsSpec
 from ..synthetic import SCENE_DICTIONARY, SCENE_MARKERS
-from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, declare, publish_safely
+from .common import IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS, declare, publish_safely
 from .messages import ImageMessageError, image_bytes
 
 TUNABLE = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "targets_file")
@@ -80,12 +79,8 @@ class AreaNode(Node):
         self.measurer = self._build(self.settings, self.camera)  # invalid start parameters: the node fails
         self.add_on_set_parameters_callback(self._on_parameters)
         self._info_seen = b""  # the last camera_info without its stamp
-        # latched like the publishers, but deep: while a slow frame (the first builds the pixel weights) is measured,
-        # each frame's camera_info waits here and is counted, where depth 1 would keep only the newest
-        info_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REMEMBERED, reliability=LATCHED_QOS.reliability,
-                              durability=LATCHED_QOS.durability)
-        self._info_subscription = self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, info_qos,
-                                                           raw=True)
+        self._info_subscription = self.create_subscription(CameraInfo, "camera_info", self._on_camera_info,
+                                                           PER_FRAME_INFO_QOS, raw=True)
         self.create_subscription(Image, "image_raw", self._on_frame, IMAGE_QOS, raw=True)
 
     def _build(self, settings: dict, camera) -> AreaMeasurer:

@@ -13,6 +13,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
+from ..latest import REMEMBERED
+
 # images: what camera drivers use (best effort, newest frame only); a slow consumer never queues frames
 IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE)
@@ -21,6 +23,10 @@ SENSOR_QOS = qos_profile_sensor_data
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 RESULT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50, reliability=ReliabilityPolicy.RELIABLE)
+# camera_info as the area node takes it: matches the latched publisher, but deep: while a slow frame (the first
+# builds the pixel weights) is measured, each frame's camera_info waits and is counted (depth 1 keeps the newest)
+PER_FRAME_INFO_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=REMEMBERED,
+                                reliability=LATCHED_QOS.reliability, durability=LATCHED_QOS.durability)
 
 
 def declare(node: Node, name: str, default, description: str, *, low: float | None = None,
