@@ -172,6 +172,17 @@ class Busy(Node):
         self.timer.cancel()
         for _ in range(int(sys.argv[2])):
             os.kill(os.getpid(), getattr(signal, sys.argv[1]))
+        if sys.argv[3] == "callback":
+            self.finish()
+
+    def destroy_node(self):
+        if sys.argv[3] == "close":  # an impatient user while files are written
+            os.kill(os.getpid(), signal.SIGINT)
+            os.kill(os.getpid(), signal.SIGINT)
+            self.finish()
+        super().destroy_node()
+
+    def finish(self):
         time.sleep(1.0)  # a KeyboardInterrupt here would leave the work half done
         Path("finished").write_text("yes")
 
@@ -179,17 +190,19 @@ sys.exit(run_nodes([Busy], []))
 """
 
 
-@pytest.mark.parametrize(("signal_name", "count", "exit_code", "finished"), [
-    ("SIGINT", 1, 0, True), ("SIGTERM", 1, 0, True), ("SIGINT", 2, 130, False)])
+@pytest.mark.parametrize(("signal_name", "count", "during", "exit_code", "finished"), [
+    ("SIGINT", 1, "callback", 0, True), ("SIGTERM", 1, "callback", 0, True), ("SIGINT", 2, "callback", 130, False),
+    ("SIGINT", 1, "close", 0, True)])
 def test_a_stop_signal_lets_the_running_callback_finish_and_a_second_interrupts_it(
-        tmp_path, signal_name, count, exit_code, finished):
+        tmp_path, signal_name, count, during, exit_code, finished):
     """Ctrl-C during a callback (e.g. record_node between writing a bag record and counting it, which left a
-    bag whose metadata disagreed with its data) stops the node after the callback; a second Ctrl-C interrupts."""
+    bag whose metadata disagreed with its data) stops the node after the callback; a second Ctrl-C interrupts
+    a callback, but not the nodes' closing (a recorder writing its bag's summary)."""
     import sys
 
     from ros_harness import run_confined
 
-    done = run_confined([sys.executable, "-c", BUSY_NODE, signal_name, str(count)], tmp_path, timeout=60)
+    done = run_confined([sys.executable, "-c", BUSY_NODE, signal_name, str(count), during], tmp_path, timeout=60)
     assert done.returncode == exit_code, done.stderr[-3000:]
     assert (tmp_path / "finished").exists() == finished
     assert "stopping after the current callback" in done.stderr

@@ -88,15 +88,20 @@ def ensure_ros_environment() -> None:
 class StopOnSignal:
     """Ctrl-C / SIGTERM ask the spin loop to stop after the callback that is running: rclpy's own handlers
     raise KeyboardInterrupt wherever Python happens to be, e.g. between a bag record and its count (a bag
-    whose metadata then disagrees with its data). A second signal interrupts at once (a callback that hangs)."""
+    whose metadata then disagrees with its data). A second signal interrupts at once (a callback that hangs);
+    none does while the nodes close (a recorder writing its bag's summary)."""
 
     SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
     def __init__(self) -> None:
         self.requested = False
+        self.closing = False
         self._previous = {number: signal.signal(number, self._handle) for number in self.SIGNALS}
 
     def _handle(self, number: int, frame) -> None:
+        if self.closing:
+            os.write(2, b"veg_area_ros: closing (files are being written)\n")
+            return
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
@@ -135,9 +140,12 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
         print(f"veg_area_ros: {exc}", file=sys.stderr)
         code = 1
     finally:
-        stop.restore()
-        for node in nodes:
-            node.destroy_node()
-        if rclpy.ok():
-            rclpy.try_shutdown()
+        stop.closing = True
+        try:
+            for node in nodes:
+                node.destroy_node()
+            if rclpy.ok():
+                rclpy.try_shutdown()
+        finally:
+            stop.restore()
     return code
