@@ -105,13 +105,6 @@ def test_localhost_discovery_range_keeps_the_shared_memory_transport(tmp_path):
     assert result["off_machine"] == []
 
 
-def test_host_shared_memory_is_left_clean():
-    """Runs last in this module: nothing the scenarios started left files in the host's /dev/shm."""
-    leftovers = [f for f in os.listdir("/dev/shm") if "fastdds" in f.lower() or "fastrtps" in f.lower()]
-    if netns_available():
-        assert leftovers == []
-
-
 @pytest.mark.skipif(not netns_available(), reason="the node on Fast DDS's defaults would use the host's interfaces")
 def test_nodes_on_fast_dds_defaults_exchange_topics_with_ours(tmp_path):
     """A lab's instrument driver, rviz or `ros2 topic echo` runs without our profile: it must still get Af and
@@ -206,3 +199,10 @@ def test_a_stop_signal_lets_the_running_callback_finish_and_a_second_interrupts_
     assert done.returncode == exit_code, done.stderr[-3000:]
     assert (tmp_path / "finished").exists() == finished
     assert "stopping after the current callback" in done.stderr
+
+
+def test_host_shared_memory_is_left_clean():
+    """Runs last in this module: nothing the scenarios started left files in the host's /dev/shm."""
+    leftovers = [f for f in os.listdir("/dev/shm") if "fastdds" in f.lower() or "fastrtps" in f.lower()]
+    if netns_available():
+        assert leftovers == []
