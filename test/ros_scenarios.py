@@ -266,6 +266,7 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         out["rate_window"] = image_stamps[-20:]
         areas = [i["area_m2"] for i in calibrated()]
         out["calibrated_areas"] = areas
+        out["calibrated_scales"] = [i["scale_m_per_px"] for i in calibrated()]
         spin_until(lambda: len(masks) >= 3, 20)
         out["masks"] = masks[-3:]
         out["info_stamps"] = [[i["stamp"]["sec"], i["stamp"]["nanosec"]] for i in infos]
@@ -299,6 +300,7 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         mark = len(infos)
         spin_until(lambda: len(calibrated(mark)) >= 8, 30)
         out["areas_after_set_camera_info"] = [i["area_m2"] for i in calibrated(mark)[3:]]
+        out["scales_after_set_camera_info"] = [i["scale_m_per_px"] for i in calibrated(mark)[3:]]
         out["persisted_fx_after_set"] = read_calibration(calibration_file).camera.fx
 
         # parameters at run time: an out-of-range threshold is refused with a reason, a valid change applies
@@ -329,6 +331,35 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
             rclpy.spin_once(probe, timeout_sec=0.05)
         mark = len(infos)
         out["measures_after_bad_frames"] = spin_until(lambda: len(calibrated(mark)) >= 3, 30)
+
+        # bad calibrations: a camera_info beyond any camera (refused: the served one stays), then the targets file
+        # spoiled on disk before a new calibration comes (the file was read when set: the calibration applies)
+        from veg_area_ros.synthetic import SCENE_DICTIONARY, SCENE_MARKERS
+
+        targets = Path("targets.yaml").resolve()
+        targets.write_text(f"dictionary: {SCENE_DICTIONARY}\nmarkers:\n"
+                           + "".join(f"  {k}: [{x}, {y}]\n" for k, (x, y) in SCENE_MARKERS.items()))
+        done = set_parameter("targets_file", str(targets))
+        out["targets_file_set"] = None if done is None else done.results[0].successful
+        set_parameter("threshold", 120.0)
+        mark = len(infos)
+        spin_until(lambda: len(calibrated(mark)) >= 4, 30)
+        out["areas_before_bogus_camera_info"] = [i["area_m2"] for i in calibrated(mark)[2:]]
+        targets.write_text("markers: [spoiled")
+        bogus = camera_to_info(served)
+        bogus.width = bogus.height = 100_000
+        probe.create_publisher(CameraInfo, "camera_info", LATCHED_QOS).publish(bogus)
+        mark = len(infos)
+        spin_until(lambda: len(calibrated(mark)) >= 4, 30)
+        out["areas_after_bogus_camera_info"] = [i["area_m2"] for i in calibrated(mark)[2:]]
+        request = SetCameraInfo.Request()
+        request.camera_info = camera_to_info(served)  # the fitted calibration back: Af of the cube again
+        response = call(probe.create_client(SetCameraInfo, "set_camera_info"), request)
+        out["set_camera_info_back"] = None if response is None else response.success
+        mark = len(infos)
+        spin_until(lambda: len(calibrated(mark)) >= 6, 30)
+        out["areas_after_spoiled_targets_file"] = [i["area_m2"] for i in calibrated(mark)[3:]]
+        out["scales_after_spoiled_targets_file"] = [i["scale_m_per_px"] for i in calibrated(mark)[3:]]
         out["sockets"] = sockets_of([os.getpid()] + [p.pid for _, p in nodes.processes])
     finally:
         probe.destroy_node()

@@ -57,3 +57,7 @@ def test_camera_info_round_trip_and_refusals():
     info.d = [float("nan")] * 5
     with pytest.raises(ValueError, match="not finite"):
         info_to_camera(info)
+    info.d = [0.0] * 5
+    info.width = 100_000  # a corrupt size would have the area node allocate pixel maps of 10^10 px
+    with pytest.raises(ValueError, match="beyond any camera"):
+        info_to_camera(info)

@@ -69,6 +69,23 @@ def test_parameters_are_validated_and_change_at_run_time(graph):
 
 def test_bad_frames_do_not_stop_the_nodes(graph):
     assert graph["measures_after_bad_frames"]
+
+
+def test_bad_calibrations_are_refused_and_the_node_goes_on(graph):
+    """A camera_info of 100000x100000 px is refused (frames are still measured, Af as before it); a calibration
+    arriving after the targets file was spoiled on disk still applies (the file was read when set): the fitted
+    calibration back gives the cube's Af again. Before, both ended the area node."""
+    assert graph["targets_file_set"] and graph["set_camera_info_back"]
+    before, after = (np.array(graph[k]) for k in ("areas_before_bogus_camera_info", "areas_after_bogus_camera_info"))
+    assert len(before) >= 2 and len(after) >= 2
+    assert np.mean(after) == pytest.approx(np.mean(before), rel=1e-3)
+    again = np.array(graph["areas_after_spoiled_targets_file"])
+    assert len(again) >= 3 and np.all(np.abs(again / graph["truth_m2"] - 1) <= 0.005), again / graph["truth_m2"]
+    # the idealized pixel's size tells the calibrations apart (Af hardly: the markers' homography absorbs c)
+    fitted, longer, back = (np.median(graph[k]) for k in ("calibrated_scales", "scales_after_set_camera_info",
+                                                          "scales_after_spoiled_targets_file"))
+    assert abs(longer / fitted - 1) > 1e-3 and back == pytest.approx(fitted, rel=3e-4), (fitted, longer, back)
+    assert all(graph["alive_at_end"].values()), graph["alive_at_end"]
     assert all(graph["alive_at_end"].values()), graph["alive_at_end"]
     assert graph["exit_codes"] == {"camera_node": 0, "calibration_node": 0, "area_node": 0}  # clean on SIGINT
 
@@ -162,10 +179,13 @@ class Busy(Node):
         self.timer = self.create_timer(0.2, self.work)
 
     def work(self):
+        if sys.argv[3] == "raise" and not Path("raised").exists():
+            Path("raised").write_text("yes")
+            raise RuntimeError("a bug in a callback")  # the node must go on: the timer fires again
         self.timer.cancel()
         for _ in range(int(sys.argv[2])):
             os.kill(os.getpid(), getattr(signal, sys.argv[1]))
-        if sys.argv[3] == "callback":
+        if sys.argv[3] in ("callback", "raise"):
             self.finish()
 
     def destroy_node(self):
@@ -185,12 +205,13 @@ sys.exit(run_nodes([Busy], []))
 
 @pytest.mark.parametrize(("signal_name", "count", "during", "exit_code", "finished"), [
     ("SIGINT", 1, "callback", 0, True), ("SIGTERM", 1, "callback", 0, True), ("SIGINT", 2, "callback", 130, False),
-    ("SIGINT", 1, "close", 0, True)])
+    ("SIGINT", 1, "close", 0, True), ("SIGINT", 1, "raise", 0, True)])
 def test_a_stop_signal_lets_the_running_callback_finish_and_a_second_interrupts_it(
         tmp_path, signal_name, count, during, exit_code, finished):
     """Ctrl-C during a callback (e.g. record_node between writing a bag record and counting it, which left a
     bag whose metadata disagreed with its data) stops the node after the callback; a second Ctrl-C interrupts
-    a callback, but not the nodes' closing (a recorder writing its bag's summary)."""
+    a callback, but not the nodes' closing (a recorder writing its bag's summary). A callback that raises is
+    reported and the nodes go on."""
     import sys
 
     from ros_harness import run_confined
@@ -199,6 +220,7 @@ def test_a_stop_signal_lets_the_running_callback_finish_and_a_second_interrupts_
     assert done.returncode == exit_code, done.stderr[-3000:]
     assert (tmp_path / "finished").exists() == finished
     assert "stopping after the current callback" in done.stderr
+    assert ("a callback failed, the nodes go on" in done.stderr) == (during == "raise")
 
 
 def test_host_shared_memory_is_left_clean():

@@ -18,6 +18,7 @@ from .camera_model import BrownCamera
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, no options
 CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1}
+MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in a camera_info are corrupt
 
 
 class ImageMessageError(ValueError):
@@ -282,4 +283,7 @@ def info_to_camera(msg) -> BrownCamera:
     dist[: d.size] = d
     if msg.width == 0 or msg.height == 0:
         raise ValueError("camera_info has no image size")
+    if max(msg.width, msg.height) > MAX_IMAGE_SIDE:
+        raise ValueError(f"camera_info image size {msg.width}x{msg.height} is beyond any camera "
+                         f"(at most {MAX_IMAGE_SIDE} px a side)")
     return BrownCamera.from_opencv(k, dist, (msg.width, msg.height))

@@ -76,15 +76,21 @@ class AreaNode(Node):
             except CalibrationFileError as exc:
                 self.get_logger().error(f"{exc}; waiting for camera_info instead")
         self.settings = {p: self.get_parameter(p).value for p in TUNABLE}
-        self.measurer = self._build(self.settings, self.camera)  # invalid start parameters: the node fails
+        # read when targets_file is set (set it again to re-read an edited file), not at every new calibration
+        self.targets = self._load_targets(self.settings["targets_file"])  # invalid start parameters: the node fails
+        self.measurer = self._build(self.settings, self.camera, self.targets)
         self.add_on_set_parameters_callback(self._on_parameters)
         self._info_seen = b""  # the last camera_info without its stamp
         self._info_subscription = self.create_subscription(CameraInfo, "camera_info", self._on_camera_info,
                                                            PER_FRAME_INFO_QOS, raw=True)
         self.create_subscription(Image, "image_raw", self._on_frame, IMAGE_QOS, raw=True)
 
-    def _build(self, settings: dict, camera) -> AreaMeasurer:
-        """A measurer for these settings; raises ValueError (TargetsError, ClassifyError) with the reason."""
+    @staticmethod
+    def _load_targets(path: str) -> TargetsSpec:
+        return TargetsSpec.load(path) if path else default_targets()
+
+    def _build(self, settings: dict, camera, targets: TargetsSpec) -> AreaMeasurer:
+        """A measurer for these settings; raises ValueError (ClassifyError, ...) with the reason."""
         threshold = "otsu" if settings["threshold_mode"] == "otsu" else float(settings["threshold"])
         classifier = Classifier(threshold=threshold, object=settings["object"], channel=settings["channel"],
                                 open_px=int(settings["open_px"]), close_px=int(settings["close_px"]))
@@ -95,7 +101,6 @@ class AreaNode(Node):
             if len(roi) % 2 or len(roi) < 6 or not all(math.isfinite(v) for v in roi):
                 raise ClassifyError("roi needs at least 3 x,y pairs of finite numbers (or [0.0] for the default)")
             polygon = roi
-        targets = TargetsSpec.load(settings["targets_file"]) if settings["targets_file"] else default_targets()
         return AreaMeasurer(camera, targets, classifier, roi=polygon)
 
     def _on_parameters(self, parameters) -> SetParametersResult:
@@ -106,10 +111,13 @@ class AreaNode(Node):
             elif parameter.name == "uncalibrated_frames" and parameter.value not in ("drop", "measure"):
                 return SetParametersResult(successful=False, reason="uncalibrated_frames must be drop or measure")
         try:
-            measurer = self._build(proposed, self.camera)
+            targets = self.targets
+            if any(parameter.name == "targets_file" for parameter in parameters):
+                targets = self._load_targets(proposed["targets_file"])
+            measurer = self._build(proposed, self.camera, targets)
         except (ValueError, OSError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        self.settings, self.measurer = proposed, measurer
+        self.settings, self.targets, self.measurer = proposed, targets, measurer
         for parameter in parameters:
             if parameter.name == "uncalibrated_frames":
                 self.uncalibrated = parameter.value
@@ -127,10 +135,16 @@ class AreaNode(Node):
         except ValueError as exc:
             self.get_logger().warning(f"camera_info ignored: {exc}", throttle_duration_sec=10.0)
             return
-        if camera != self.camera:
-            self.camera = camera
-            self.measurer = self._build(self.settings, camera)
-            self.get_logger().info(f"calibration received: {camera.width}x{camera.height}, fx {camera.fx:.2f}")
+        if camera == self.camera:
+            return
+        try:
+            measurer = self._build(self.settings, camera, self.targets)
+        except Exception as exc:  # e.g. no memory for its pixel maps: the node goes on with what it had
+            self.get_logger().error(f"calibration received but not applied ({exc.__class__.__name__}: {exc}); "
+                                    "frames are measured with the previous one", throttle_duration_sec=10.0)
+            return
+        self.camera, self.measurer = camera, measurer
+        self.get_logger().info(f"calibration received: {camera.width}x{camera.height}, fx {camera.fx:.2f}")
 
     def _take_waiting_camera_info(self) -> None:
         """Every camera_info already waiting, before the frame is counted: the executor hands this node one message

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import traceback
 from collections.abc import Callable
 
 import rclpy
@@ -117,6 +118,7 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
     on a clean stop (a node may call `request_stop()` on itself, e.g. at the end of a video), 1 on a failure,
     130 when a second Ctrl-C interrupted a callback."""
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.logging import get_logger
     from rclpy.signals import SignalHandlerOptions
 
     ensure_ros_environment()
@@ -131,7 +133,13 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
             nodes.append(factory())
             executor.add_node(nodes[-1])
         while rclpy.ok() and not stop.requested and not any(getattr(n, "stop_requested", False) for n in nodes):
-            executor.spin_once(timeout_sec=0.1)
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except (KeyboardInterrupt, ExternalShutdownException):
+                raise
+            except Exception:  # a callback's bug must not end a measurement run: said, and the nodes go on
+                get_logger("veg_area_ros").error(
+                    f"a callback failed, the nodes go on:\n{traceback.format_exc()}", throttle_duration_sec=10.0)
     except KeyboardInterrupt:
         code = 130
     except ExternalShutdownException:
