@@ -118,3 +118,31 @@ def test_bad_image_fields_are_refused_like_messages():
     msg = Image(height=4, width=4, encoding="16UC1", step=8, data=bytes(32))
     with pytest.raises(ImageMessageError, match="not supported"):
         decode_image(serialize_message(msg)).pixels()
+
+
+GOOD_IMAGE = encode_image(np.zeros((5, 7, 3), np.uint8), 1, 2, "cam")
+GOOD_INFO = _camera_info_writer(CameraInfoFields(
+    Header(1, 2, "cam"), 480, 640, "plumb_bob", [0.1] * 5, [500, 0, 320, 0, 500, 240, 0, 0, 1],
+    [1, 0, 0, 0, 1, 0, 0, 0, 1], [500, 0, 320, 0, 0, 500, 240, 0, 0, 0, 1, 0])).bytes()
+
+
+@settings(max_examples=300, deadline=None)
+@given(image=st.booleans(), cut=st.integers(0, 400), edits=st.lists(st.tuples(st.integers(0, 400),
+       st.integers(0, 255)), max_size=6), tail=st.binary(max_size=20))
+def test_mangled_bytes_give_a_frame_or_a_reason_never_another_error(image, cut, edits, tail):
+    """Whatever a foreign publisher or a damaged bag hands over: a frame (calibration), or ValueError saying why."""
+    from veg_area_ros.cdr import info_to_camera
+
+    data = bytearray(GOOD_IMAGE if image else GOOD_INFO)
+    for position, value in edits:
+        if position < len(data):
+            data[position] = value
+    data = bytes(data[:cut]) + tail
+    try:
+        if image:
+            frame = decode_image(data).pixels()
+            assert frame.dtype == np.uint8 and frame.ndim in (2, 3)
+        else:
+            assert info_to_camera(decode_camera_info(data)).width > 0
+    except ValueError:
+        pass
