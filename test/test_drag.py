@@ -41,6 +41,23 @@ def test_aligned_streams_give_the_known_cd_within_half_a_percent():
     assert all(r.force_samples >= 100 and r.velocity_samples >= 2 for r in results)
 
 
+def test_glitched_instrument_samples_are_left_out_and_counted():
+    """A NaN or infinite sample (a balance or probe glitch) would make every window holding it give no Cd."""
+    area, aligner = 0.01, DragAligner(tolerance_s=0.05)
+    force = 0.5 * WATER_DENSITY * 0.3**2 * area * 1.1
+    results = []
+    for k in range(1000):
+        t = k * 0.001
+        aligner.add_force(t, float("nan") if k % 50 == 3 else force)
+        if k % 40 == 7:
+            aligner.add_velocity(t, float("inf") if k == 407 else 0.3)
+        if k % 100 == 50:
+            aligner.add_area(t, area)
+        results += aligner.ready()
+    assert aligner.rejected_samples == 20 + 1 and aligner.unmatched == 0
+    assert len(results) >= 8 and all(r.cd == pytest.approx(1.1, rel=1e-12) for r in results)
+
+
 def test_an_area_without_force_in_its_window_is_counted_not_guessed():
     aligner = DragAligner(tolerance_s=0.01, give_up_s=0.5)
     aligner.add_area(1.0, 0.01)

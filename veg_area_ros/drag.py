@@ -72,8 +72,12 @@ class _Stream:
         self.times: deque[float] = deque()
         self.values: deque[float] = deque()
         self.horizon_s = horizon_s
+        self.rejected = 0  # non-finite samples (an instrument's glitch): one would spoil every window it is in
 
     def add(self, t: float, value: float) -> None:
+        if not (math.isfinite(t) and math.isfinite(value)):
+            self.rejected += 1
+            return
         if self.times and t < self.times[-1]:
             return  # out of order (a replayed bag restarting): ignored rather than breaking the order
         self.times.append(t)
@@ -113,6 +117,11 @@ class DragAligner:
 
     def add_velocity(self, t: float, metres_per_second: float) -> None:
         self.velocity.add(t, metres_per_second)
+
+    @property
+    def rejected_samples(self) -> int:
+        """Force and velocity samples left out for being NaN or infinite."""
+        return self.force.rejected + self.velocity.rejected
 
     def add_area(self, t: float, area_m2: float, area_std_m2: float = 0.0) -> None:
         self.pending.append((t, area_m2, area_std_m2))

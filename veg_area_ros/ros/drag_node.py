@@ -1,7 +1,8 @@
 """drag_node: Cd = 2F / (rho U² Af) for every Af frame, with force (geometry_msgs/WrenchStamped) and velocity
 (geometry_msgs/TwistStamped, linear), each one signed axis such as "+x", averaged over ±tolerance around the
 frame's stamp. Publishes `drag_coefficient` (Vector3Stamped: x = Cd, y = its standard deviation, z = U m/s; header =
-the Af frame's) and `drag_coefficient/info` (JSON with force, velocity, Af and the sample counts)."""
+the Af frame's) and `drag_coefficient/info` (JSON with force, velocity, Af and the sample counts; NaN or infinite
+instrument samples are left out and counted in `rejected_samples`)."""
 
 from __future__ import annotations
 
@@ -63,7 +64,8 @@ class DragNode(Node):
             out.header.frame_id = self.frame_ids.pop(drag.time_s, "")
             out.vector.x, out.vector.y, out.vector.z = drag.cd, drag.cd_std, drag.velocity_m_s
             publish_safely(self, self.cd_pub, out)
-            info = {**drag.__dict__, "unmatched_frames": self.aligner.unmatched}
+            info = {**drag.__dict__, "unmatched_frames": self.aligner.unmatched,
+                    "rejected_samples": self.aligner.rejected_samples}
             publish_safely(self, self.info_pub, String(data=json.dumps(info)))
         if len(self.frame_ids) > 1000:  # frames that never matched
             self.frame_ids = dict(list(self.frame_ids.items())[-100:])
