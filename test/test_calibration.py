@@ -1,7 +1,7 @@
 import cv2
 import numpy as np
 import pytest
-from helpers import OPENCV_LEFT, render_views
+from helpers import OPENCV_LEFT, render_views, shared
 
 from veg_area_ros.board import BoardSpec, Detection
 from veg_area_ros.calibration import PARAM_NAMES, CalibrationError, View, calibrate
@@ -47,6 +47,7 @@ def test_real_images_match_or_beat_opencv():
     assert abs(result.camera.fx - 536.07) < 5 * result.std["fx"] + 1
     assert abs(result.camera.xp - 342.37) < 5 * result.std["cx"] + 1
     assert len(result.views) == 13 and all(v.max_px >= v.rms_px >= 0 for v in result.views)
+    assert not any("systematic" in w for w in result.warnings)  # a lens the model follows
 
 
 def test_underwater_calibration_absorbs_refraction():
@@ -56,6 +57,41 @@ def test_underwater_calibration_absorbs_refraction():
     result = calibrate(views, ENDOSCOPE.image_size)
     assert result.rms_px < 0.1
     assert result.camera.c / ENDOSCOPE.c == pytest.approx(1.333, rel=0.01)
+    # the flat port's refraction is absorbed: no ring of the image is left with a radial bias
+    assert result.radial_profile and all(abs(r["mean_radial_px"]) < 0.01 for r in result.radial_profile)
+    assert not any("systematic" in w for w in result.warnings)
+
+
+def test_a_lens_the_brown_model_cannot_follow_is_warned_about(air_views):
+    """Image points bent by a radial wiggle no polynomial in r of K1-K3 follows (0.4 px, 2.5 periods over the
+    half-diagonal): the rings' mean radial residuals show it; the same views unbent do not."""
+    import dataclasses
+
+    views = air_views[3]
+    half_diagonal = np.hypot(*ENDOSCOPE.image_size) / 2
+    centre = np.array([ENDOSCOPE.xp, ENDOSCOPE.yp])
+    bent = []
+    for view in views:
+        offsets = view.detection.image_points - centre
+        r = np.hypot(*offsets.T)[:, None]
+        wiggle = 0.4 * np.sin(2 * np.pi * 2.5 * r / half_diagonal)
+        moved = view.detection.image_points + wiggle * offsets / np.maximum(r, 1e-9)
+        bent.append(View(view.name, dataclasses.replace(view.detection, image_points=moved)))
+    result = calibrate(bent, ENDOSCOPE.image_size)
+    assert any("residuals are systematic with the distance from the centre" in w for w in result.warnings)
+    assert max(abs(r["mean_radial_px"]) for r in result.radial_profile) > 0.05
+    assert not any("systematic" in w for w in calibrate(views, ENDOSCOPE.image_size).warnings)
+
+
+def test_a_real_wide_angle_lens_shows_its_misfit():
+    """The GoPro (../shared/data/gopro-wide): strong barrel distortion that plumb_bob fits poorly."""
+    folder = shared("gopro-wide")
+    board = BoardSpec.parse("chessboard:8x6:1")
+    views = [View(path.name, d) for path in sorted(folder.glob("GOPR*.jpg"))
+             if (d := board.detect(cv2.imread(str(path)))) is not None]
+    assert len(views) >= 34
+    result = calibrate(views, (1280, 960))
+    assert any("residuals are systematic" in w for w in result.warnings), result.radial_profile
 
 
 def test_outliers_are_rejected_and_do_not_bend_the_fit(air_views):
