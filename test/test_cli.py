@@ -41,7 +41,7 @@ def test_calibrate_writes_yaml_json_and_report(board_folder, tmp_path):
     saved = yaml.safe_load(out.read_text())
     assert saved["veg_area_ros"]["medium"] == "air" and saved["veg_area_ros"]["calibration_distance_m"] == 0.6
     assert saved["camera_matrix"]["data"][0] == pytest.approx(summary["fx"])
-    for name in ("residuals.png", "per_view.png", "coverage.png", "calibration.json"):
+    for name in ("residuals.png", "per_view.png", "coverage.png", "radial.png", "calibration.json"):
         assert (tmp_path / "report" / name).stat().st_size > 1000
 
 

@@ -179,15 +179,21 @@ def coverage_grid(image_points: Sequence[np.ndarray], width: int, height: int, n
     return grid
 
 
+def radial_residuals(camera: BrownCamera, points: np.ndarray, residuals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per point: distance from the principal point as a fraction of the half-diagonal, and the residual's
+    component along that direction (px, outwards positive)."""
+    offsets = points - (camera.xp, camera.yp)
+    distance = np.hypot(*offsets.T)
+    radial = np.sum(residuals * offsets, axis=1) / np.maximum(distance, 1e-9)
+    return distance / np.hypot(camera.width / 2, camera.height / 2), radial
+
+
 def radial_profile(camera: BrownCamera, points: Sequence[np.ndarray], residuals: Sequence[np.ndarray]) -> list[dict]:
     """The residuals (detected - projected, px) in rings of distance from the principal point: per ring with enough
     points, its bounds (fractions of the half-diagonal), point count, mean radial residual (outwards positive)
     with its standard error, and RMS. A model that fits leaves every ring's mean radial residual at zero."""
-    points, residuals = np.vstack(points), np.vstack(residuals)
-    offsets = points - (camera.xp, camera.yp)
-    distance = np.hypot(*offsets.T)
-    radial = np.sum(residuals * offsets, axis=1) / np.maximum(distance, 1e-9)
-    where = distance / np.hypot(camera.width / 2, camera.height / 2)
+    residuals = np.vstack(residuals)
+    where, radial = radial_residuals(camera, np.vstack(points), residuals)
     rings = []
     for low, high in RADIAL_RINGS:
         inside = (where >= low) & (where < high)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import CalibrationResult
+from .calibration import CalibrationResult, radial_residuals
 
 
 def _pyplot():
@@ -23,7 +23,7 @@ def _pyplot():
 
 
 def write_calibration_report(result: CalibrationResult, folder: str | Path) -> list[Path]:
-    """Write residuals.png, per_view.png, coverage.png and calibration.json into `folder`."""
+    """Write residuals.png, per_view.png, coverage.png, radial.png and calibration.json into `folder`."""
     plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -74,6 +74,23 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path) -> l
     ax.set_aspect("equal")
     ax.set_title(f"Board points of all views (coverage {100 * result.coverage:.0f} % of an 8x6 grid)")
     written.append(folder / "coverage.png")
+    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+    # the lens beyond the model: residuals that lean outwards or inwards depending on the distance from the centre
+    where, radial = radial_residuals(result.camera, points[inliers], residuals[inliers])
+    fig, ax = plt.subplots(figsize=(8, 4))
+    ax.plot(where, radial, ".", markersize=2, alpha=0.3, color="tab:blue", label="points")
+    rings = result.radial_profile
+    ax.errorbar([(r["from"] + min(r["to"], where.max())) / 2 for r in rings], [r["mean_radial_px"] for r in rings],
+                yerr=[2 * r["standard_error_px"] for r in rings], fmt="o", color="tab:red", capsize=4,
+                label="ring mean ± 2 standard errors")
+    ax.axhline(0.0, color="black", lw=0.8)
+    ax.set_xlabel("distance from the principal point / half-diagonal")
+    ax.set_ylabel("radial residual [px]")
+    ax.set_title("Radial residuals (a lens the model follows: every ring mean at zero)")
+    ax.legend(loc="best")
+    written.append(folder / "radial.png")
     fig.savefig(written[-1], dpi=110, bbox_inches="tight")
     plt.close(fig)
 
