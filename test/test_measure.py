@@ -253,3 +253,17 @@ def test_ctrl_c_on_a_batch_keeps_what_each_worker_measured(workspace, long_video
             assert row["error"] == f"interrupted after {len(rows)} frames" and 0 < len(rows) < 2500
             assert int(row["measured"]) == len(rows)
     assert any(row["csv"] for row in summary)
+
+
+def test_a_real_video_without_the_targets_says_why_and_keeps_every_frames_row(workspace, tmp_path):
+    """OpenCV's Megamind.avi (../shared/data/video) shows no marker: exit 1 with the reason, and the CSV still
+    lists every frame with its error (a researcher sees which frames failed and why)."""
+    from helpers import shared
+
+    video = shared("video/Megamind.avi")
+    done = run_cli("measure", str(video), "--calibration", "none", "--targets", str(workspace / "targets.yaml"),
+                   "--csv", str(tmp_path / "mm.csv"), "--quiet", cwd=tmp_path)
+    assert done.returncode == 1 and "no frame measured" in done.stderr and "missing marker ids" in done.stderr
+    rows = list(csv.DictReader((tmp_path / "mm.csv").open()))
+    assert len(rows) == int(cv2.VideoCapture(str(video)).get(cv2.CAP_PROP_FRAME_COUNT))
+    assert all(r["error"] and not r["area_m2"] for r in rows)

@@ -49,6 +49,24 @@ def test_video_end_and_loop(tmp_path):
     assert all(looping.read() is not None for _ in range(7))
 
 
+def test_a_real_video_file_plays_to_its_end_and_loops():
+    """OpenCV's Megamind.avi (../shared/data/video): every frame, its size, then the end; looping restarts it."""
+    from helpers import shared
+
+    path = str(shared("video/Megamind.avi"))
+    expected = int(cv2.VideoCapture(path).get(cv2.CAP_PROP_FRAME_COUNT))
+    source = open_source(path)
+    frames = []
+    while (frame := source.read()) is not None:
+        frames.append(frame.shape)
+    assert len(frames) == expected > 100 and set(frames) == {(528, 720, 3)}
+    looping = open_source(path, loop=True)
+    first = looping.read()
+    for _ in range(expected - 1):
+        looping.read()
+    assert np.array_equal(looping.read(), first)  # the first frame again
+
+
 def test_bad_sources_say_why(tmp_path):
     with pytest.raises(SourceError, match="not 'synthetic'"):
         open_source(str(tmp_path / "nothing*.png"))
