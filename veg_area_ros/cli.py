@@ -364,6 +364,12 @@ def _ignore_ctrl_c() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def _batch_summary(source: str, csv_path: str, error: str = "") -> dict:
+    """One input's row of batch_summary.csv before anything was measured."""
+    return {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "std_area_m2": "", "csv": csv_path,
+            "error": error}
+
+
 def _measure_batch_job(options: dict, source: str, csv_path: str, progress, stopping) -> dict:
     """One input of a batch, in a worker process: its CSV and plot, and a one-line summary."""
     import statistics
@@ -371,8 +377,7 @@ def _measure_batch_job(options: dict, source: str, csv_path: str, progress, stop
     args = argparse.Namespace(**dict(options, inputs=[source], csv=csv_path, json=False, quiet=True))
     if options["overlay"]:
         args.overlay = str(Path(options["overlay"]) / Path(csv_path).stem)
-    summary = {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "std_area_m2": "",
-               "csv": csv_path, "error": ""}
+    summary = _batch_summary(source, csv_path)
     try:
         code, rows = _measure(args, on_frame=lambda index, total: progress.put((source, index, total)),
                               stop=stopping.is_set)
@@ -448,8 +453,7 @@ def _measure_batch(args: argparse.Namespace) -> int:
                 try:
                     summaries[source] = future.result()
                 except Exception:  # cancelled before it began
-                    summaries[source] = {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "",
-                                         "std_area_m2": "", "csv": "", "error": "interrupted before it began"}
+                    summaries[source] = _batch_summary(source, "", "interrupted before it began")
     rows = [summaries[source] for source in args.inputs]
     summary_path = folder / "batch_summary.csv"
     _write_csv(summary_path, BATCH_COLUMNS, rows)

@@ -135,7 +135,7 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
         while rclpy.ok() and not stop.requested and not any(getattr(n, "stop_requested", False) for n in nodes):
             try:
                 executor.spin_once(timeout_sec=0.1)
-            except (KeyboardInterrupt, ExternalShutdownException):
+            except ExternalShutdownException:
                 raise
             except Exception:  # a callback's bug must not end a measurement run: said, and the nodes go on
                 get_logger("veg_area_ros").error(
