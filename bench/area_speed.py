@@ -37,8 +37,10 @@ def main() -> int:
         frames = [render_scene(camera, cube_scene(), 0.7, FlatPort(), seed=seed,
                                supersample=1 if camera is DSLR else 3) for seed in range(4)]
         frame = frames[0]
-        measurer = AreaMeasurer(camera, targets, Classifier(threshold=120))
+        measurer = AreaMeasurer(camera, targets, Classifier(threshold=120), area_mode="count")
         measurer.measure(frame)  # pixel geometry and weights built once, as in the node
+        subpixel = AreaMeasurer(camera, targets, Classifier(threshold=120), area_mode="subpixel")
+        subpixel.measure(frame)
         weights = measurer._weights
         band = cv2.cvtColor(frame[weights.window], cv2.COLOR_BGR2GRAY)
         stream = itertools.cycle(frames)
@@ -53,6 +55,7 @@ def main() -> int:
             lambda band=band, roi=weights.roi: cv2.calcHist([band], [0], roi, [256], [0, 256]), repeats)
         naive_ms = 1000 * median_seconds(naive, repeats)
         core_ms = 1000 * median_seconds(lambda m=measurer, s=stream: m.measure(next(s)), repeats)
+        subpixel_ms = 1000 * median_seconds(lambda m=subpixel, s=stream: m.measure(next(s)), repeats)
         paper_ms = 1000 * median_seconds(lambda m=measurer, f=frame: m.measure_idealized(f), max(3, repeats // 3))
         width, height = camera.image_size
         print(f"{width}x{height} bgr8, median of {repeats}")
@@ -60,9 +63,11 @@ def main() -> int:
         print(f"  one histogram of the ROI (floor)    {histogram_ms:9.3f} ms  ({histogram_ms / copy_ms:6.1f}x copy)")
         print(f"  naive undistort + threshold         {naive_ms:9.3f} ms  ({naive_ms / copy_ms:6.1f}x copy)")
         print(f"  idealize-then-count (paper's path)  {paper_ms:9.3f} ms  ({paper_ms / copy_ms:6.1f}x copy)")
-        print(f"  area core (Af + uncertainty)        {core_ms:9.3f} ms  ({core_ms / copy_ms:6.1f}x copy, "
+        print(f"  area core, count (Af + uncertainty) {core_ms:9.3f} ms  ({core_ms / copy_ms:6.1f}x copy, "
               f"{core_ms / naive_ms:.2f}x naive, {core_ms / (1000 / 30):.0%} of a 30 fps frame interval)")
-        print(f"  weights built {measurer.rebuilds} time(s) for {repeats + 1} frames")
+        print(f"  area core, sub-pixel                {subpixel_ms:9.3f} ms  ({subpixel_ms / copy_ms:6.1f}x copy, "
+              f"{subpixel_ms / core_ms:.2f}x count)")
+        print(f"  weights built {measurer.rebuilds} and {subpixel.rebuilds} time(s) for {repeats + 1} frames each")
     return 0
 
 

@@ -48,11 +48,17 @@ def render_views(seed: int, count: int = 15, port: FlatPort | None = None, spec:
 
 
 
-@functools.cache
 def calibrated_endoscope(medium: str):
     """The synthetic endoscope calibrated in `medium` ('air' or 'water') at 0.7 m, the measuring distance,
     from 15 rendered 9x6 chessboard views (seed 3); computed once per test session."""
+    return calibrated_camera("endoscope", medium)
+
+
+@functools.cache
+def calibrated_camera(setup: str, medium: str):
+    """A synthetic camera ('endoscope' or 'dslr') calibrated in `medium` ('air' or 'water') at 0.7 m from the
+    rendered chessboard views of reproduction.SETUPS (seed 3); computed once per test session."""
     from veg_area_ros.reproduction import CONDITIONS, SETUPS, calibrate_synthetic
 
     condition = next(c for c in CONDITIONS if c.name == {"air": "air", "water": "water tank"}[medium])
-    return calibrate_synthetic(SETUPS["endoscope"], condition, np.random.default_rng(3)).camera
+    return calibrate_synthetic(SETUPS[setup], condition, np.random.default_rng(3)).camera

@@ -58,7 +58,7 @@ def test_two_markers_give_the_papers_distance_scale(calibrated):
     frame = render_scene(ENDOSCOPE, SCENE, 0.7, port)
     top = targets((0, 1))
     roi = np.array([[200, 150], [440, 150], [440, 330], [200, 330]], float)
-    measurer = AreaMeasurer(camera, top, Classifier(threshold=120), roi=roi)
+    measurer = AreaMeasurer(camera, top, Classifier(threshold=120), roi=roi, area_mode="count")
     result, paper = measurer.measure(frame), measurer.measure_idealized(frame)
     assert result.scale.kind == paper.scale.kind == "distance"
     # the paper's Af = count x scale² on the idealized image; the raw-pixel weights agree with it

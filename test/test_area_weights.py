@@ -39,7 +39,7 @@ def test_raw_pixel_weights_agree_with_idealize_then_count(water_camera, scene, c
     if classifier.object == "green":  # the renderer is grey: make the dark plant green, keep the markers
         grey = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
         frame = cv2.merge([grey, 100 + grey // 2, grey])  # linear in grey: ExG = 228 - grey / 2
-    measurer = AreaMeasurer(water_camera, targets(scene), classifier)
+    measurer = AreaMeasurer(water_camera, targets(scene), classifier, area_mode="count")  # as the paper's path
     fast, reference = measurer.measure(frame), measurer.measure_idealized(frame)
     tolerance = reference.threshold_std_m2 + fast.weight_error_bound * fast.area_m2
     assert abs(fast.area_m2 - reference.area_m2) <= tolerance, (fast.area_m2, reference.area_m2, tolerance)
@@ -49,7 +49,7 @@ def test_raw_pixel_weights_agree_with_idealize_then_count(water_camera, scene, c
 
 def test_dslr_frame_agrees_too():
     frame = render_scene(DSLR, CUBE, 0.7, supersample=1)  # 10 megapixels: supersampling takes a minute
-    measurer = AreaMeasurer(DSLR, targets(), Classifier(threshold=120))
+    measurer = AreaMeasurer(DSLR, targets(), Classifier(threshold=120), area_mode="count")
     fast, reference = measurer.measure(frame), measurer.measure_idealized(frame)
     assert fast.area_m2 == pytest.approx(reference.area_m2, rel=0.001)
     assert fast.area_m2 == pytest.approx(CUBE.true_area_m2, rel=0.003)

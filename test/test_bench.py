@@ -29,10 +29,12 @@ def numbers(line: str) -> list[float]:
 def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
     out = run_bench("area_speed.py", "--repeats", "1")
     cores = [line for line in out.splitlines() if "area core" in line]
-    assert len(cores) == 2, out
+    assert len(cores) == 4, out  # count and sub-pixel mode at each size
     for line in cores:
         milliseconds, ratio = numbers(line)[:2]
         assert math.isfinite(ratio) and milliseconds > 0 and ratio > 0, line
+    for line in cores[1::2]:
+        assert "sub-pixel" in line and numbers(line.split("copy,")[1])[0] > 0, line  # its cost against count's
 
 
 def test_calibration_speed_ours_fits_no_worse_than_opencv():

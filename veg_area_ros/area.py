@@ -10,23 +10,41 @@ path of the paper (`measure_idealized`) stays as the reference the fast path is 
 The weights are quantized into 256 levels (each level's weight is the mean of its pixels' exact weights) and,
 while the targets stay put, carried to each frame's scale fit by its ratio at the ROI's centre; every result
 reports the bound both put on Af (`weight_error_bound`, relative: 2e-4 to 1e-3 for the endoscope).
+
+Two area modes. `count` is the paper's: a pixel is object or not, so each edge pixel errs by up to half a
+pixel, the same way all along an edge that lies along the pixel grid. `subpixel` (the default) counts each
+pixel's object fraction from its band value between the object's and the background's level (`Levels`),
+from the same histogram. The uncertainty has a term for each: pixel discretisation in count mode (from the
+edge length, estimated by the mixed pixels), levels, noise and pure zones in sub-pixel mode.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
 from .camera_model import BrownCamera
-from .classify import Classifier, ClassifyError, check_polygon, polygon_roi
+from .classify import (
+    AREA_MODES,
+    Classifier,
+    ClassifyError,
+    LevelEstimator,
+    Levels,
+    check_levels,
+    check_polygon,
+    polygon_roi,
+)
 from .idealize import Idealizer
 from .scale import DetectedMarker, PlaneScale, TargetsError, TargetsSpec, marker_centre, track_markers
 
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
 WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per frame
 ROI_TOLERANCE_PX = 0.5  # targets moved further than this (idealized px) since the weights were built: rebuild
+NO_CALIBRATION_FOR_OFFSET = ("an object plane offset needs a calibration (the camera's pinhole); measure with "
+                             "one, or put the targets in the object's plane")
 SCALE_TOLERANCE = 2e-4  # the scale changed unevenly by more than this (relative) over the ROI: rebuild
 
 
@@ -47,14 +65,29 @@ class AreaResult:
     image: np.ndarray | None = field(default=None, repr=False)  # the idealized frame
     target_pixels: dict[str, np.ndarray] = field(default_factory=dict)  # "marker 3" / "point 0" -> idealized px
     weight_error_bound: float = 0.0  # relative bound on Af from quantizing the pixel weights
+    area_mode: str = "count"
+    levels: Levels | None = None  # the object/background levels used (None: none could be told apart)
+    discretisation_std_m2: float = 0.0  # count mode: whole edge pixels counted or not
+    levels_std_m2: float = 0.0  # sub-pixel mode: level estimates, noise, pure zones
+    plane_offset_std_m2: float = 0.0  # the object's plane offset from the targets' plane
+    edge_length_px: float = 0.0  # the object's boundary in raw pixels, from its mixed pixels
+    count_area_m2: float = 0.0  # Af of the whole-pixel count (equals area_m2 in count mode)
 
     def summary(self) -> dict:
         return {
-            "area_m2": self.area_m2, "area_std_m2": self.area_std_m2, "pixel_count": self.pixel_count,
+            "area_m2": self.area_m2, "area_std_m2": self.area_std_m2, "area_mode": self.area_mode,
+            # sub-pixel mode counts whole pixels where no band value tells an edge pixel's share
+            "subpixel_applied": self.area_mode == "subpixel" and self.levels is not None,
+            "pixel_count": self.pixel_count, "count_area_m2": self.count_area_m2,
             "scale_m_per_px": self.scale.metres_per_pixel, "scale_kind": self.scale.kind,
             "homography": self.scale.matrix.tolist() if self.scale.kind != "distance" else None,
+            "object_plane_offset_m": self.scale.plane_offset_m,
             "threshold": self.threshold, "calibrated": self.calibrated,
             "scale_std_m2": self.scale_std_m2, "threshold_std_m2": self.threshold_std_m2,
+            "discretisation_std_m2": self.discretisation_std_m2, "levels_std_m2": self.levels_std_m2,
+            "plane_offset_std_m2": self.plane_offset_std_m2,
+            "levels": self.levels.to_dict() if self.levels is not None else None,
+            "edge_length_px": self.edge_length_px,
             "missing_targets": list(self.missing_targets), "sweep": [list(s) for s in self.sweep],
             "weight_error_bound": self.weight_error_bound,
         }
@@ -86,6 +119,7 @@ class _Weights:
     corners: np.ndarray  # ROI polygon corners (idealized px): where a homography's change is extreme
     centre: np.ndarray  # ROI centroid (idealized px)
     relative_scale_std: float
+    relative_offset_std: float  # relative std of Af from the object plane offset's uncertainty
 
 
 def _centroid(mask: np.ndarray) -> np.ndarray:
@@ -97,7 +131,12 @@ class AreaMeasurer:
     """Measures the frames of one camera: per-pixel geometry once per camera, weights once per target layout."""
 
     def __init__(self, camera: BrownCamera | None, targets: TargetsSpec, classifier: Classifier,
-                 roi: np.ndarray | None = None, threshold_delta: float = 5.0):
+                 roi: np.ndarray | None = None, threshold_delta: float = 5.0, area_mode: str = "subpixel",
+                 levels: tuple[float, float] | None = None):
+        if area_mode not in AREA_MODES:
+            raise ClassifyError(f"area mode must be one of {', '.join(AREA_MODES)}, got {area_mode!r}")
+        self.area_mode = area_mode
+        self.given_levels = check_levels(levels)
         self.camera = camera
         self.idealizer = Idealizer(camera) if camera is not None else None
         self.targets = targets
@@ -163,8 +202,12 @@ class AreaMeasurer:
         if len(located.pixels) < 2:
             raise TargetsError(f"only {len(located.pixels)} target(s) found in the frame; "
                                f"missing marker ids {located.missing}")
+        offset = self.targets.object_plane_offset_m or 0.0
+        if offset and self.camera is None:
+            raise TargetsError(NO_CALIBRATION_FOR_OFFSET)
         located.scale = PlaneScale.fit(np.array(located.pixels), np.array(planes), self.targets.distance_std_m,
-                                       self.targets.pixel_std)
+                                       self.targets.pixel_std, offset,
+                                       self.idealizer.ideal.camera_matrix if offset else None)
         self._last_scale = located.scale
         return located
 
@@ -233,9 +276,13 @@ class AreaMeasurer:
         levels[inside] = level
         centre = _centroid(roi_ideal)
         self.rebuilds += 1
+        offset_std = 0.0
+        if self.targets.object_plane_offset_m is not None:
+            offset_std = (located.scale.relative_area_change_per_metre_at(centre)
+                          * self.targets.object_plane_offset_std_m)
         return _Weights(window, roi, levels, level_area, float(np.max(np.abs(level_area[level] - exact) / exact)),
                         roi_ideal, located.scale, list(located.labels), np.array(located.pixels), polygon, centre,
-                        located.scale.relative_area_std_at(centre))
+                        located.scale.relative_area_std_at(centre), offset_std)
 
     def _weights_for(self, frame: np.ndarray, located: _Located) -> tuple[_Weights, float, float]:
         """The weights for this frame's targets, the factor that carries them to this frame's scale and the
@@ -253,6 +300,17 @@ class AreaMeasurer:
         self._weights = self._build_weights(frame, located)
         return self._weights, 1.0, 0.0
 
+    def _levels(self, estimator: LevelEstimator, threshold: float) -> Levels | None:
+        """The object/background levels at this threshold: estimated from the ROI's band histogram, or the
+        user's with the spreads the histogram shows around them."""
+        estimated = estimator.at(threshold)
+        if self.given_levels is None:
+            return estimated if estimated is not None and estimated.resolvable() else None
+        object_level, background_level = self.given_levels
+        spreads = (estimated.object_spread, estimated.background_spread) if estimated is not None else (0.5, 0.5)
+        given = Levels(object_level, background_level, *spreads, estimated=False)
+        return given if given.resolvable() else None
+
     def measure(self, frame: np.ndarray, keep_images: bool = False) -> AreaResult:
         """Af of one raw frame. `keep_images` also returns the idealized frame, its ROI and the object mask
         in it (for overlays and the node's image topics; costs a remap)."""
@@ -261,37 +319,70 @@ class AreaMeasurer:
         weights, factor, carried = self._weights_for(frame, located)
         band = self.classifier.index_image(frame[weights.window])
         threshold = self.classifier.resolve_threshold(band, weights.roi)
+        # area (m²) and number of the ROI's pixels at every band value, from one 2-D histogram
+        histogram = cv2.calcHist([band, weights.levels], [0, 1], weights.roi, [256, WEIGHT_LEVELS],
+                                 [0, 256, 0, WEIGHT_LEVELS]).astype(np.float64)
+        roi_area = histogram @ weights.level_area * factor
+        roi_count = histogram.sum(axis=1)
         morphology = self.classifier.open_px or self.classifier.close_px
-        if not morphology:  # Af and pixel count at every band value from one 2-D histogram
-            histogram = cv2.calcHist([band, weights.levels], [0, 1], weights.roi, [256, WEIGHT_LEVELS],
-                                     [0, 256, 0, WEIGHT_LEVELS]).astype(np.float64)
-            cumulative_area = np.cumsum(histogram @ weights.level_area) * factor
-            cumulative_count = np.cumsum(histogram.sum(axis=1))
+        subpixel = self.area_mode == "subpixel"
+        estimator = LevelEstimator(roi_count, self.classifier.object != "dark")
+        cumulative_area, cumulative_count = np.cumsum(roi_area), np.cumsum(roi_count)
+        outcomes: dict[float, tuple[float, float, int, Levels | None]] = {}
 
-        def area_and_count(level: float) -> tuple[float, int]:
-            if morphology:
-                mask = self.classifier.mask(band, weights.roi, level)
-                counts = cv2.calcHist([weights.levels], [0], mask, [WEIGHT_LEVELS], [0, WEIGHT_LEVELS]).ravel()
-                return float(counts @ weights.level_area * factor), int(counts.sum())
-            index = int(np.floor(level))
-            if self.classifier.object == "dark":  # band <= level
-                return float(cumulative_area[index]), int(cumulative_count[index])
-            return (float(cumulative_area[-1] - cumulative_area[index]),
-                    int(cumulative_count[-1] - cumulative_count[index]))
+        def measured(level: float) -> tuple[float, float, int, Levels | None]:
+            """(Af in this mode, Af counted, pixels counted, levels) at a threshold, once per threshold."""
+            if level not in outcomes:
+                outcomes[level] = outcome(level)
+            return outcomes[level]
 
-        area, count = area_and_count(threshold)
+        def outcome(level: float) -> tuple[float, float, int, Levels | None]:
+            if not morphology:
+                index = int(np.floor(level))
+                if self.classifier.object == "dark":  # band <= level
+                    counted, count = float(cumulative_area[index]), int(cumulative_count[index])
+                else:
+                    counted = float(cumulative_area[-1] - cumulative_area[index])
+                    count = int(cumulative_count[-1] - cumulative_count[index])
+                if not subpixel:  # levels only for the uncertainty, at the chosen threshold
+                    return counted, counted, count, None
+                levels = self._levels(estimator, level)
+                area = float(roi_area @ levels.fractions()) if levels is not None else counted
+                return area, counted, count, levels
+            levels = self._levels(estimator, level)
+            mask = self.classifier.mask(band, weights.roi, level)
+            counted, count = self._mask_area(mask, weights, factor)
+            if not subpixel or levels is None:
+                return counted, counted, count, levels
+            # the cleaned mask counts whole inside; its one-pixel rings inside and outside count their fraction
+            kernel = np.ones((3, 3), np.uint8)
+            inner = cv2.subtract(mask, cv2.erode(mask, kernel))
+            outer = cv2.subtract(cv2.dilate(mask, kernel), mask) & weights.roi
+            fractions = levels.fractions()
+            area = (counted - self._ring_area(band, inner, weights, factor) @ (1 - fractions)
+                    + self._ring_area(band, outer, weights, factor) @ fractions)
+            return float(area), counted, count, levels
+
+        area, counted, count, levels = measured(threshold)
+        if levels is None:
+            levels = self._levels(estimator, threshold)
         delta = self.threshold_delta
-        sweep = [(float(level), area_and_count(level)[0])
+        sweep = [(float(level), measured(level)[0])
                  for level in threshold + delta * np.arange(-3, 4) if 0 <= level <= 255]
-        threshold_std = abs(area_and_count(min(threshold + delta, 255))[0]
-                            - area_and_count(max(threshold - delta, 0))[0]) / 2
+        threshold_std = abs(measured(min(threshold + delta, 255))[0] - measured(max(threshold - delta, 0))[0]) / 2
+        edge = _edge_terms(roi_area, roi_count, levels, counted, subpixel,
+                           lambda lv: float(roi_area @ lv.fractions()))
         scale_std = area * weights.relative_scale_std
+        offset_std = area * weights.relative_offset_std
         result = AreaResult(
-            area_m2=area, area_std_m2=float(np.hypot(scale_std, threshold_std)), pixel_count=count,
-            threshold=threshold, calibrated=self.camera is not None, scale=located.scale, scale_std_m2=scale_std,
-            threshold_std_m2=threshold_std, missing_targets=located.missing, sweep=sweep,
+            area_m2=area, area_std_m2=float(np.sqrt(scale_std**2 + threshold_std**2 + edge.discretisation**2
+                                                    + edge.levels**2 + offset_std**2)),
+            pixel_count=count, threshold=threshold, calibrated=self.camera is not None, scale=located.scale,
+            scale_std_m2=scale_std, threshold_std_m2=threshold_std, missing_targets=located.missing, sweep=sweep,
             target_pixels=dict(zip(located.labels, located.pixels, strict=True)),
-            weight_error_bound=weights.error_bound + carried)
+            weight_error_bound=weights.error_bound + carried, area_mode=self.area_mode, levels=levels,
+            discretisation_std_m2=edge.discretisation, levels_std_m2=edge.levels, plane_offset_std_m2=offset_std,
+            edge_length_px=edge.length_px, count_area_m2=counted)
         if keep_images:
             raw_mask = np.zeros(frame.shape[:2], np.uint8)
             raw_mask[weights.window] = self.classifier.mask(band, weights.roi, threshold)
@@ -299,6 +390,18 @@ class AreaMeasurer:
             result.image = self.idealizer(frame) if self.idealizer is not None else frame
             result.roi = weights.roi_ideal
         return result
+
+    @staticmethod
+    def _mask_area(mask: np.ndarray, weights: _Weights, factor: float) -> tuple[float, int]:
+        counts = cv2.calcHist([weights.levels], [0], mask, [WEIGHT_LEVELS], [0, WEIGHT_LEVELS]).ravel()
+        return float(counts @ weights.level_area * factor), int(counts.sum())
+
+    @staticmethod
+    def _ring_area(band: np.ndarray, ring: np.ndarray, weights: _Weights, factor: float) -> np.ndarray:
+        """Area (m²) of a ring's pixels at every band value."""
+        histogram = cv2.calcHist([band, weights.levels], [0, 1], ring, [256, WEIGHT_LEVELS],
+                                 [0, 256, 0, WEIGHT_LEVELS]).astype(np.float64)
+        return histogram @ weights.level_area * factor
 
     def measure_idealized(self, frame: np.ndarray) -> AreaResult:
         """The paper's path, kept as the reference: remap the frame to the ideal camera, classify there and
@@ -326,6 +429,48 @@ class AreaMeasurer:
             target_pixels=dict(zip(located.labels, located.pixels, strict=True)))
 
 
+@dataclass
+class _EdgeTerms:
+    discretisation: float = 0.0  # m², count mode
+    levels: float = 0.0  # m², sub-pixel mode
+    length_px: float = 0.0
+
+
+def _edge_terms(roi_area: np.ndarray, roi_count: np.ndarray, levels: Levels | None, counted_area: float,
+                subpixel: bool, subpixel_area: Callable[[Levels], float]) -> _EdgeTerms:
+    """The uncertainty that the object's edge adds, from its mixed pixels (band values strictly between the
+    pure zones of the two levels): their number / (1 - both zones) bounds the edge length L in pixels (a
+    blurred edge has more mixed pixels per unit length), w is their mean metric area.
+    Count mode: an edge pixel covered by a fraction phi is counted whole or not at all. Where the edge crosses
+    the pixel grid at random phases these errors are independent, sd w sqrt(L / 12); along an edge that follows
+    the grid every pixel errs alike, a systematic error that the sub-pixel area of the same frame measures:
+    the term is the larger of |Af counted - Af sub-pixel| and the random part.
+    Sub-pixel mode: each level moved by its spread (Af's sensitivity to the levels), per-pixel noise of the
+    background's spread over the contrast, and the pure zones: an edge pixel whose fraction lies within a zone
+    is counted 0 or 1, error up to the zone (sd per pixel sqrt((eps_o³ + eps_b³) / 3), alike along an edge)."""
+    if levels is None:
+        return _EdgeTerms()
+    mixed = levels.mixed()
+    mixed_count = float(roi_count[mixed].sum())
+    if mixed_count == 0:
+        return _EdgeTerms()
+    eps_object, eps_background = levels.pure_zones()
+    length = mixed_count / max(1.0 - eps_object - eps_background, 0.1)
+    weight = float(roi_area[mixed].sum()) / mixed_count
+    if not subpixel:
+        systematic = abs(counted_area - subpixel_area(levels))
+        return _EdgeTerms(discretisation=max(systematic, weight * float(np.sqrt(length / 12))), length_px=length)
+    sensitivity = []
+    for name, spread in (("object", levels.object_spread), ("background", levels.background_spread)):
+        moved = [subpixel_area(Levels(**{**levels.to_dict(), name: getattr(levels, name) + sign * spread}))
+                 for sign in (1, -1)]
+        sensitivity.append((moved[0] - moved[1]) / 2)
+    noise = weight * np.sqrt(mixed_count) * levels.background_spread / levels.contrast
+    zones = weight * length * np.sqrt((eps_object**3 + eps_background**3) / 3)
+    return _EdgeTerms(levels=float(np.sqrt(sensitivity[0] ** 2 + sensitivity[1] ** 2 + noise**2 + zones**2)),
+                      length_px=length)
+
+
 def draw_overlay(result: AreaResult) -> np.ndarray:
     """The idealized frame with the object mask tinted red, the ROI outlined in yellow, the targets marked
     in green and Af written in the corner (BGR)."""
@@ -344,7 +489,9 @@ def draw_overlay(result: AreaResult) -> np.ndarray:
         cv2.drawMarker(canvas, centre, (0, 255, 0), cv2.MARKER_CROSS, 2 * size, 1, cv2.LINE_AA)
         cv2.putText(canvas, label, (centre[0] + size, centre[1] - size), cv2.FONT_HERSHEY_SIMPLEX,
                     size / 25, (0, 255, 0), 1, cv2.LINE_AA)
-    text = (f"Af = {result.area_m2 * 1e4:.2f} +/- {result.area_std_m2 * 1e4:.2f} cm2, T = {result.threshold:g}, "
+    mode = "sub-pixel" if result.area_mode == "subpixel" and result.levels is not None else "count"
+    text = (f"Af = {result.area_m2 * 1e4:.2f} +/- {result.area_std_m2 * 1e4:.2f} cm2 ({mode}), "
+            f"T = {result.threshold:g}, "
             f"{'calibrated' if result.calibrated else 'UNCALIBRATED'}")
     font_scale = max(0.4, canvas.shape[1] / 1400)
     thickness = max(1, round(font_scale * 1.5))

@@ -3,16 +3,28 @@
 No ROS here. The threshold stays the researcher's: a fixed value on grey or one channel, or Otsu within
 the ROI; for plants an excess-green index (2G - R - B). The object is darker or brighter than the
 background (`dark`, `bright`) or greener (`green`).
+
+Sub-pixel area: a pixel on the object's edge holds both; its band value lies between the object's and the
+background's level in proportion to how much of it the object covers. `Levels` holds the two levels (from
+the ROI's band histogram, or given) and turns every band value into an object fraction. Values within a
+few noise widths of a level count as pure (0 or 1), so noise and mild texture of a large background do not
+add up to area.
 """
 
 from __future__ import annotations
 
+import bisect
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 OBJECTS = ("dark", "bright", "green")
+AREA_MODES = ("subpixel", "count")  # object fraction of each pixel, or the paper's whole-pixel count
+PURE_ZONE_SPREADS = 4.0  # band values within this many spreads of a level are taken as pure, not mixed
+MIN_SPREAD_DN = 0.5  # the spread of a level is at least the band's quantisation
+BAND_VALUES = np.arange(256, dtype=float)
+MAX_PURE_ZONES = 0.5  # both pure zones together may cover at most this share of the contrast
 CHANNELS = ("grey", "blue", "green", "red")
 EXCESS_GREEN = np.array([[-0.5, 1.0, -0.5, 128.0]])  # B, G, R, offset -> (2G - R - B) / 2 + 128, saturated
 
@@ -66,6 +78,125 @@ class Classifier:
                 kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
                 mask = cv2.morphologyEx(mask, op, kernel) & roi
         return mask
+
+
+@dataclass(frozen=True)
+class Levels:
+    """The band values of pure object and pure background pixels and their spreads (robust sd: noise plus
+    texture), in band units (DN)."""
+
+    object: float
+    background: float
+    object_spread: float = MIN_SPREAD_DN
+    background_spread: float = MIN_SPREAD_DN
+    estimated: bool = True  # from the frame's ROI, or given by the user
+
+    @property
+    def contrast(self) -> float:
+        return abs(self.background - self.object)
+
+    def pure_zones(self) -> tuple[float, float]:
+        """Fractions within which a pixel counts as pure object (1 - eps..1) or background (0..eps). The two
+        zones are equally wide (the wider spread's): a blurred edge's symmetric ramp then loses at one end
+        what it gains at the other."""
+        eps = PURE_ZONE_SPREADS * max(self.object_spread, self.background_spread) / max(self.contrast, 1e-9)
+        return eps, eps
+
+    def resolvable(self) -> bool:
+        """Whether the mixed range between the pure zones is at least half the contrast; else the levels are
+        too uneven for sub-pixel shares to beat the whole-pixel count, which is used instead."""
+        eps_object, eps_background = self.pure_zones()
+        return eps_object + eps_background <= MAX_PURE_ZONES
+
+    def fractions(self, values: np.ndarray | None = None) -> np.ndarray:
+        """The object fraction (0..1) of a pixel of each band value (all 256 by default)."""
+        values = BAND_VALUES if values is None else np.asarray(values, float)
+        fraction = (self.background - values) / (self.background - self.object)
+        eps_object, eps_background = self.pure_zones()
+        fraction[fraction <= eps_background] = 0.0
+        fraction[fraction >= 1 - eps_object] = 1.0
+        return fraction
+
+    def mixed(self, values: np.ndarray | None = None) -> np.ndarray:
+        """Which band values are mixed (strictly between the pure zones): the pixels of an edge."""
+        fraction = self.fractions(values)
+        return (fraction > 0) & (fraction < 1)
+
+    def to_dict(self) -> dict:
+        return {"object": self.object, "background": self.background, "object_spread": self.object_spread,
+                "background_spread": self.background_spread, "estimated": self.estimated}
+
+
+class LevelEstimator:
+    """Object and background levels of a 256-bin band histogram of the ROI, split at a threshold: each class's
+    mode, its spread (the one-sided RMS deviation from the mode on the side away from the other class, where
+    no mixed edge pixel lies) and the mode refined by the class's centroid within two spreads. Built once per
+    frame (cumulative sums), then cheap at any threshold. The background's spread is also taken from its
+    quantiles on the side of the object (uneven light darkens or brightens it there too): a background
+    that varies widely leaves no value mixed, and sub-pixel area becomes the whole-pixel count."""
+
+    def __init__(self, counts: np.ndarray, object_is_high: bool):
+        counts = np.asarray(counts, float)
+        self.counts = counts
+        self.object_is_high = object_is_high
+        zero = np.zeros(1)
+        self._sums = [np.concatenate([zero, np.cumsum(counts * BAND_VALUES**power)]).tolist() for power in range(3)]
+
+    def _sum(self, power: int, first: int, last: int) -> float:
+        """Σ counts * value**power over values first..last (inclusive)."""
+        return self._sums[power][last + 1] - self._sums[power][first]
+
+    def _quantile(self, first: int, last: int, share: float) -> int:
+        """The band value below which `share` of the pixels with values first..last lie."""
+        cumulative = self._sums[0]
+        goal = cumulative[first] + share * (cumulative[last + 1] - cumulative[first])
+        return min(max(bisect.bisect_left(cumulative, goal) - 1, first), last)
+
+    def _class(self, first: int, last: int, far_side: int, background: bool) -> tuple[float, float] | None:
+        if last < first or self._sum(0, first, last) == 0:
+            return None
+        mode = first + int(np.argmax(self.counts[first:last + 1]))
+        far = (first, mode) if far_side < 0 else (mode, last)
+        n, s1, s2 = (self._sum(power, *far) for power in range(3))
+        spread = max(float(np.sqrt(max(s2 - 2 * mode * s1 + mode * mode * n, 0.0) / n)), MIN_SPREAD_DN)
+        if background:  # uneven light spreads the background both ways; its few mixed pixels barely move quantiles
+            spread = max(spread, abs(mode - self._quantile(first, last, 0.16 if far_side > 0 else 0.84)))
+        reach = int(np.floor(2 * spread + 0.5))
+        near = (max(first, mode - reach), min(last, mode + reach))
+        return self._sum(1, *near) / self._sum(0, *near), spread
+
+    def at(self, threshold: float) -> Levels | None:
+        """The levels with the classes split at `threshold` (low class: band <= threshold); None when either
+        class is empty (nothing to take a level from)."""
+        split = min(max(int(np.floor(threshold)), -1), 255)
+        low = self._class(0, split, -1, background=self.object_is_high)
+        high = self._class(split + 1, 255, +1, background=not self.object_is_high)
+        if low is None or high is None:
+            return None
+        (obj, obj_spread), (bg, bg_spread) = (high, low) if self.object_is_high else (low, high)
+        return Levels(obj, bg, obj_spread, bg_spread)
+
+
+def estimate_levels(counts: np.ndarray, threshold: float, object_is_high: bool) -> Levels | None:
+    """Object and background levels of a 256-bin band histogram, split at the threshold (`LevelEstimator`)."""
+    return LevelEstimator(counts, object_is_high).at(threshold)
+
+
+def check_levels(levels) -> tuple[float, float] | None:
+    """User-given (object level, background level) as two floats, or None to estimate them per frame; a
+    ClassifyError if they cannot tell an edge pixel's share."""
+    if levels is None or (isinstance(levels, list | tuple) and len(levels) == 0):
+        return None
+    try:
+        object_level, background_level = (float(v) for v in levels)
+    except (TypeError, ValueError) as exc:
+        raise ClassifyError(f"levels must be two numbers (object, background), got {levels!r}") from exc
+    if not all(np.isfinite(v) and 0 <= v <= 255 for v in (object_level, background_level)):
+        raise ClassifyError(f"levels must be two numbers 0..255, got {levels!r}")
+    if abs(background_level - object_level) < 4:
+        raise ClassifyError(f"object level {object_level:g} and background level {background_level:g} are too "
+                            "close to tell an edge pixel's share (at least 4 grey levels apart)")
+    return object_level, background_level
 
 
 def otsu_level(counts: np.ndarray) -> float:

@@ -170,6 +170,15 @@ def _threshold(text: str) -> float | str:
     return value
 
 
+def _levels(text: str) -> tuple[float, float]:
+    from .classify import ClassifyError, check_levels
+
+    try:
+        return check_levels(text.split(","))
+    except ClassifyError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
 def _roi(text: str):
     from .classify import ClassifyError, check_polygon
 
@@ -189,8 +198,10 @@ def _frame_file_name(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(name).stem) + ".png"
 
 
-CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "pixel_count",
-               "threshold", "scale_m_per_px", "scale_kind", "calibrated", "missing_targets", "error")
+CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "area_mode",
+               "subpixel_applied", "pixel_count", "count_area_m2", "threshold", "scale_std_m2", "threshold_std_m2",
+               "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2", "object_plane_offset_m",
+               "scale_m_per_px", "scale_kind", "calibrated", "missing_targets", "error")
 
 
 def cmd_measure(args: argparse.Namespace) -> int:
@@ -207,7 +218,7 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
     (the batch was interrupted) ends the series as Ctrl-C does."""
     import cv2
 
-    from .area import AreaMeasurer, draw_overlay
+    from .area import NO_CALIBRATION_FOR_OFFSET, AreaMeasurer, draw_overlay
     from .bags import BagError, bag_image_count
     from .calib_io import CalibrationFileError, read_calibration, write_calibration
     from .cdr import info_to_camera
@@ -263,7 +274,19 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
         raise CliError(f"--overlay {args.overlay} names one image but the input has {total} frames; "
                        "give a folder", 2)
 
-    measurer = AreaMeasurer(camera, targets, classifier, roi=args.roi, threshold_delta=args.sweep_step)
+    if targets.object_plane_offset_m is not None and camera is None and not from_bag:
+        raise CliError(NO_CALIBRATION_FOR_OFFSET)
+
+    def new_measurer(camera) -> AreaMeasurer:
+        try:
+            return AreaMeasurer(camera, targets, classifier, roi=args.roi, threshold_delta=args.sweep_step,
+                                area_mode=args.area_mode, levels=args.levels)
+        except ClassifyError as exc:
+            raise CliError(str(exc), 2) from exc
+        except TargetsError as exc:
+            raise CliError(str(exc)) from exc
+
+    measurer = new_measurer(camera) if not from_bag else None
     if args.idealized and camera is not None:
         folder = Path(args.idealized)
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
@@ -285,10 +308,9 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
                     if frame.camera_info is None:
                         raise InputError("no camera_info recorded before this frame")
                     recorded = info_to_camera(frame.camera_info)
-                    if recorded != camera:
+                    if recorded != camera or measurer is None:
                         camera = recorded
-                        measurer = AreaMeasurer(camera, targets, classifier, roi=args.roi,
-                                                threshold_delta=args.sweep_step)
+                        measurer = new_measurer(camera)
                 result = measurer.measure(frame.image, keep_images=bool(args.overlay or args.idealized))
             except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
                 row["error"] = str(exc)
@@ -612,6 +634,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="band the threshold acts on (dark/bright)")
     mea.add_argument("--roi", type=_roi, default=None, metavar="x1,y1,x2,y2,...",
                      help="region of interest, polygon in idealized-image pixels (default: inside the targets)")
+    mea.add_argument("--area-mode", default="subpixel", choices=["subpixel", "count"],
+                     help="subpixel (default): each edge pixel counts its object share from its grey level "
+                          "between the object's and the background's; count: whole pixels, as in the paper")
+    mea.add_argument("--levels", type=_levels, default=None, metavar="OBJECT,BACKGROUND",
+                     help="sub-pixel mode: the object's and background's grey levels (default: from each frame)")
     mea.add_argument("--open", type=int, default=0, metavar="PX", help="morphological opening radius")
     mea.add_argument("--close", type=int, default=0, metavar="PX", help="morphological closing radius")
     mea.add_argument("--sweep-step", type=_positive_float, default=5.0,

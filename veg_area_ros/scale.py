@@ -10,6 +10,11 @@ camera). Targets are ArUco markers (their centre) or points picked by hand, list
       - {pixel: [u, v], plane: [x, y]}
     distance_std_m: 0.0005      # calliper uncertainty of target distances (default 0.5 mm)
     pixel_std: 0.1              # localisation uncertainty of a target centre, px (default 0.1)
+    object_plane_offset_m: 0.035     # optional: object's plane this far behind the targets' (+ = farther)
+    object_plane_offset_std_m: 0.002 # its uncertainty (default 2 mm when an offset is given)
+
+The offset is measured along the camera's viewing direction (the optical axis) and needs four or more
+targets and a calibration: the targets' plane pose follows from them, Af is taken on the parallel plane.
 
 No ROS here. All pixel coordinates handed to a PlaneScale are in the idealized image.
 """
@@ -63,6 +68,8 @@ class TargetsSpec:
     points: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)  # (raw pixel, plane)
     distance_std_m: float = 0.0005
     pixel_std: float = 0.1
+    object_plane_offset_m: float | None = None  # None: the object lies in the targets' plane (the paper's set-up)
+    object_plane_offset_std_m: float = 0.002
 
     @classmethod
     def load(cls, path: str | Path) -> TargetsSpec:
@@ -98,10 +105,10 @@ class TargetsSpec:
             if not isinstance(entry, dict) or "pixel" not in entry or "plane" not in entry:
                 raise TargetsError(f"point {k} needs 'pixel' and 'plane'")
             spec.points.append((_pair(entry["pixel"], f"point {k} pixel"), _pair(entry["plane"], f"point {k} plane")))
-        for key in ("distance_std_m", "pixel_std"):
+        for key in ("distance_std_m", "pixel_std", "object_plane_offset_std_m"):
             if key in content:
                 value = content[key]
-                if not isinstance(value, int | float) or not np.isfinite(value) or value < 0:
+                if not _is_number(value) or value < 0:
                     raise TargetsError(f"'{key}' must be a non-negative number, got {value!r}")
                 setattr(spec, key, float(value))
         planes = [tuple(p) for p in spec.markers.values()] + [tuple(p) for _, p in spec.points]
@@ -109,11 +116,25 @@ class TargetsSpec:
             raise TargetsError(f"{len(planes)} target(s) given; at least 2 are needed for a scale")
         if len(set(planes)) != len(planes):
             raise TargetsError("two targets share the same plane position")
+        if "object_plane_offset_m" in content:
+            offset = content["object_plane_offset_m"]
+            if not _is_number(offset) or abs(offset) > 10:
+                raise TargetsError(f"'object_plane_offset_m' must be a distance in metres, got {offset!r}")
+            if len(planes) < 4:
+                raise TargetsError(f"an object plane offset needs 4 or more targets (their plane's pose); this file "
+                                   f"lists {len(planes)}: put the targets in the object's plane, or add targets")
+            spec.object_plane_offset_m = float(offset)
+        elif "object_plane_offset_std_m" in content:
+            raise TargetsError("'object_plane_offset_std_m' given without 'object_plane_offset_m'")
         return spec
 
     def all_planes(self) -> np.ndarray:
         """Plane positions of every listed target, markers then points (N, 2)."""
         return np.array([*self.markers.values(), *(plane for _, plane in self.points)], float).reshape(-1, 2)
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and bool(np.isfinite(value))
 
 
 @dataclass(frozen=True)
@@ -286,19 +307,24 @@ def track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, Detect
 
 @dataclass
 class PlaneScale:
-    """Pixel (idealized image) -> object plane (metres), and the metric area of every pixel."""
+    """Pixel (idealized image) -> targets' plane (metres), and the metric area of every pixel on the object's
+    plane: the targets' plane itself, or the parallel plane `plane_offset_m` farther along the optical axis."""
 
     kind: str  # "distance", "affine" or "homography"
     pixels: np.ndarray  # (N, 2) the targets used
     planes: np.ndarray  # (N, 2)
-    matrix: np.ndarray  # 3x3 pixel -> plane (similarity, affine or homography)
-    metres_per_pixel: float  # at the centre of the targets
+    matrix: np.ndarray  # 3x3 pixel -> targets' plane (similarity, affine or homography)
+    metres_per_pixel: float  # at the centre of the targets, on the object's plane
     distance_std_m: float = 0.0005
     pixel_std: float = 0.1
+    plane_offset_m: float = 0.0
+    camera_matrix: np.ndarray | None = None  # the idealized image's pinhole K (needed for an offset)
+    area_matrix: np.ndarray | None = None  # 3x3 pixel -> object's plane, when it is not the targets' plane
 
     @classmethod
     def fit(cls, pixels: np.ndarray, planes: np.ndarray, distance_std_m: float = 0.0005,
-            pixel_std: float = 0.1) -> PlaneScale:
+            pixel_std: float = 0.1, plane_offset_m: float = 0.0,
+            camera_matrix: np.ndarray | None = None) -> PlaneScale:
         pixels = np.asarray(pixels, float).reshape(-1, 2)
         planes = np.asarray(planes, float).reshape(-1, 2)
         n = len(pixels)
@@ -323,14 +349,16 @@ class PlaneScale:
             kind = "homography"
         if kind != "distance" and abs(np.linalg.det(matrix[:2, :2])) < 1e-18:
             raise TargetsError("the targets are collinear; they do not span the plane")
-        scale = cls(kind, pixels, planes, matrix, 0.0, distance_std_m, pixel_std)
+        scale = cls(kind, pixels, planes, matrix, 0.0, distance_std_m, pixel_std, plane_offset_m, camera_matrix)
+        if plane_offset_m:
+            scale.area_matrix = _offset_plane_matrix(matrix, kind, camera_matrix, plane_offset_m)
         scale.metres_per_pixel = float(np.sqrt(scale.pixel_area(pixels.mean(axis=0, keepdims=True))[0]))
         return scale
 
     def pixel_area(self, uv: np.ndarray) -> np.ndarray:
         """Metric area (m²) of the unit pixel at each (u, v): |det| of the map's Jacobian there."""
         uv = np.asarray(uv, float).reshape(-1, 2)
-        H = self.matrix
+        H = self.matrix if self.area_matrix is None else self.area_matrix
         w = H[2, 0] * uv[:, 0] + H[2, 1] * uv[:, 1] + H[2, 2]
         return np.abs(np.linalg.det(H)) / np.abs(w) ** 3
 
@@ -360,6 +388,39 @@ class PlaneScale:
                     moved = values.copy()
                     moved[index] += sign * step
                     pixels, planes = (moved, self.planes) if name == "pixels" else (self.pixels, moved)
-                    shifted.append(PlaneScale.fit(pixels, planes).pixel_area(uv)[0])
+                    shifted.append(PlaneScale.fit(pixels, planes, plane_offset_m=self.plane_offset_m,
+                                                  camera_matrix=self.camera_matrix).pixel_area(uv)[0])
                 variance += ((shifted[0] - shifted[1]) / (2 * step) * sigma) ** 2
         return float(np.sqrt(variance) / base)
+
+    def relative_area_change_per_metre_at(self, uv: np.ndarray) -> float:
+        """d ln(pixel area)/d(plane offset) at `uv`, 1/m: how an error in the object's plane offset moves Af
+        (about 2 / distance)."""
+        if self.kind != "homography" or self.camera_matrix is None:
+            return 0.0
+        step = 1e-4
+        areas = [PlaneScale.fit(self.pixels, self.planes, plane_offset_m=self.plane_offset_m + sign * step,
+                                camera_matrix=self.camera_matrix).pixel_area(uv)[0] for sign in (1, -1)]
+        return float(abs(np.log(areas[0] / areas[1])) / (2 * step))
+
+
+def _offset_plane_matrix(matrix: np.ndarray, kind: str, camera_matrix: np.ndarray | None,
+                         offset: float) -> np.ndarray:
+    """Pixel -> object plane for the plane parallel to the targets' one, `offset` metres farther along the
+    optical axis. The targets' homography G = H^-1 (plane -> pixel) is K [r1 r2 t] / lambda; the object's
+    plane has the same axes and origin t + offset * e_z, so its G' adds offset * lambda^-1 * e_z to K^-1 G's
+    third column."""
+    if kind != "homography":
+        raise TargetsError(f"an object plane offset needs 4 or more targets found (their plane's pose); "
+                           f"this frame's scale is {kind}")
+    if camera_matrix is None:
+        raise TargetsError("an object plane offset needs a calibration (the camera's pinhole)")
+    columns = np.linalg.inv(camera_matrix) @ np.linalg.inv(matrix)  # [r1 r2 t] / lambda
+    norm = np.sqrt(np.linalg.norm(columns[:, 0]) * np.linalg.norm(columns[:, 1]))  # 1 / lambda
+    if columns[2, 2] < 0:  # the plane in front of the camera: t_z > 0
+        columns = -columns
+    shifted = columns.copy()
+    shifted[2, 2] += offset * norm
+    if shifted[2, 2] <= 0:
+        raise TargetsError(f"the object plane offset {offset:g} m puts the object behind the camera")
+    return np.linalg.inv(camera_matrix @ shifted)

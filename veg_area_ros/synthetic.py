@@ -115,6 +115,13 @@ def render_plane(
     supersample: int = 3,
 ) -> np.ndarray:
     """Render a textured plane whose texture covers `extent` = (x0, y0, x1, y1) metres of the plane z = 0."""
+    fine = _render_fine(camera, texture, extent, rvec, tvec, port, background, supersample)
+    return cv2.resize(fine, camera.image_size, interpolation=cv2.INTER_AREA)
+
+
+def _render_fine(camera: BrownCamera, texture: np.ndarray, extent: tuple[float, float, float, float],
+                 rvec: np.ndarray, tvec: np.ndarray, port: FlatPort | None, background, supersample: int) -> np.ndarray:
+    """The plane's texture at every sub-pixel sample (supersampled image, before averaging to pixels)."""
     x0, y0, x1, y1 = extent
     scale_x = texture.shape[1] / (x1 - x0)
     scale_y = texture.shape[0] / (y1 - y0)
@@ -125,8 +132,7 @@ def render_plane(
     map_x[np.isnan(map_x)] = -1e6
     map_y[np.isnan(map_y)] = -1e6
     border = background if np.ndim(background) == 0 or texture.ndim == 3 else int(np.mean(background))
-    fine = cv2.remap(texture, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=border)
-    return cv2.resize(fine, camera.image_size, interpolation=cv2.INTER_AREA)
+    return cv2.remap(texture, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=border)
 
 
 def look_at_pose(
@@ -233,6 +239,10 @@ class Scene:
     true_area_m2: float
     markers: dict[int, tuple[float, float]]
     dictionary: str = SCENE_DICTIONARY
+    coverage: np.ndarray | None = None  # the object's share of each texel (0..1)
+    marker_mask: np.ndarray | None = None  # texels of the markers with their white quiet zone
+    background: int = 200
+    object_level: int = 40
 
 
 def _coverage_1d(n: int, start: float, stop: float) -> np.ndarray:
@@ -242,28 +252,34 @@ def _coverage_1d(n: int, start: float, stop: float) -> np.ndarray:
 
 
 def _compose_scene(coverage_fn, pixels_per_metre: float, marker_size: float, background: int,
-                   object_level: int) -> Scene:
-    """A bright board with the four ArUco markers and an object whose per-texel coverage (0..1) comes from
-    `coverage_fn(width, height, x0, y0)`; the true area is the coverage sum, so it is exact for the texture."""
+                   object_level: int, markers: dict[int, tuple[float, float]] | None = None) -> Scene:
+    """A bright board with four ArUco markers (`markers`: id -> centre, default SCENE_MARKERS) and an object
+    whose per-texel coverage (0..1) comes from `coverage_fn(width, height, x0, y0)`; the true area is the
+    coverage sum, so it is exact for the texture."""
+    markers = dict(SCENE_MARKERS if markers is None else markers)
     x0, y0, x1, y1 = -0.3, -0.225, 0.3, 0.225
     width, height = round((x1 - x0) * pixels_per_metre), round((y1 - y0) * pixels_per_metre)
     coverage = coverage_fn(width, height, x0, y0)
     texture = np.rint(background + (object_level - background) * coverage).astype(np.uint8)
+    marker_mask = np.zeros(texture.shape, bool)
     dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, SCENE_DICTIONARY))
     size = round(marker_size * pixels_per_metre)
-    for marker_id, (mx, my) in SCENE_MARKERS.items():
+    for marker_id, (mx, my) in markers.items():
         image = cv2.aruco.generateImageMarker(dictionary, marker_id, size)
         left = round((mx - x0) * pixels_per_metre - size / 2)
         top = round((my - y0) * pixels_per_metre - size / 2)
         quiet = size // 4
         texture[top - quiet: top + size + quiet, left - quiet: left + size + quiet] = 255
         texture[top: top + size, left: left + size] = image
+        marker_mask[top - quiet: top + size + quiet, left - quiet: left + size + quiet] = True
     true_area = float(coverage.sum()) / pixels_per_metre**2
-    return Scene(texture, (x0, y0, x1, y1), true_area, dict(SCENE_MARKERS))
+    return Scene(texture, (x0, y0, x1, y1), true_area, markers, coverage=coverage, marker_mask=marker_mask,
+                 background=background, object_level=object_level)
 
 
 def cube_scene(side: float = CUBE_SIDE_M, marker_size: float = 0.05, pixels_per_metre: float = 2000.0,
-               background: int = 200, object_level: int = 40) -> Scene:
+               background: int = 200, object_level: int = 40,
+               markers: dict[int, tuple[float, float]] | None = None) -> Scene:
     """A dark square cube face of exactly `side` metres centred between four ArUco markers on a bright
     board; texels on the face's edge carry their exact coverage, so the true area is side² to rounding."""
     def coverage(width: int, height: int, x0: float, y0: float) -> np.ndarray:
@@ -271,7 +287,7 @@ def cube_scene(side: float = CUBE_SIDE_M, marker_size: float = 0.05, pixels_per_
         cover_y = _coverage_1d(height, (-side / 2 - y0) * pixels_per_metre, (side / 2 - y0) * pixels_per_metre)
         return np.outer(cover_y, cover_x)
 
-    return _compose_scene(coverage, pixels_per_metre, marker_size, background, object_level)
+    return _compose_scene(coverage, pixels_per_metre, marker_size, background, object_level, markers)
 
 
 def bush_scene(seed: int = 7, marker_size: float = 0.05, pixels_per_metre: float = 2000.0, background: int = 200,
@@ -306,14 +322,65 @@ def bush_scene(seed: int = 7, marker_size: float = 0.05, pixels_per_metre: float
     return _compose_scene(coverage, pixels_per_metre, marker_size, background, object_level)
 
 
+def twig_scene(widths_m: tuple[float, ...] = (0.0015, 0.0025, 0.004), length: float = 0.16, seed: int = 3,
+               marker_size: float = 0.05, pixels_per_metre: float = 2000.0, background: int = 200,
+               object_level: int = 40, oversample: int = 8) -> Scene:
+    """Thin straight twigs (one per width, at assorted angles, not crossing) drawn at `oversample` x the texture
+    resolution and averaged: 1-3 endoscope pixels wide at 0.7 m, the branches a count loses or gains whole."""
+    rng = np.random.default_rng(seed)
+
+    def coverage(width: int, height: int, x0: float, y0: float) -> np.ndarray:
+        k = pixels_per_metre * oversample
+        fine = np.zeros((height * oversample, width * oversample), np.uint8)
+        for index, twig_width in enumerate(widths_m):
+            x = (index - (len(widths_m) - 1) / 2) * 0.06
+            angle = rng.uniform(-0.35, 0.35)
+            dx, dy = length / 2 * np.sin(angle), length / 2 * np.cos(angle)
+            ends = [(round((x + sx * dx - x0) * k), round((sy * dy - y0) * k)) for sx, sy in ((-1, -1), (1, 1))]
+            cv2.line(fine, ends[0], ends[1], 255, max(1, round(twig_width * k)), cv2.LINE_8)
+        return cv2.resize(fine.astype(np.float32) / 255, (width, height), interpolation=cv2.INTER_AREA)
+
+    return _compose_scene(coverage, pixels_per_metre, marker_size, background, object_level)
+
+
 def render_scene(camera: BrownCamera, scene: Scene, distance: float = 0.7, port: FlatPort | None = None,
                  tilt_deg: float = 0.0, roll_deg: float = 4.0, noise_sigma: float = 1.0, seed: int = 0,
-                 blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3) -> np.ndarray:
-    """The scene plane facing the camera at `distance`, tilted about its vertical axis by `tilt_deg` and
-    rolled a little by default: edges exactly along pixel rows would make every edge pixel err the same way,
-    which real scenes do not do. BGR."""
-    rvec, tvec = look_at_pose(distance, tilt_y_deg=tilt_deg, roll_deg=roll_deg)
-    image = render_plane(camera, scene.texture, scene.extent, rvec, tvec, port, background=60,
-                         supersample=supersample)
+                 blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3,
+                 centre: tuple[float, float] = (0.0, 0.0), object_offset: float = 0.0) -> np.ndarray:
+    """The scene plane facing the camera at `distance` (its origin at `centre`, metres in camera x, y), tilted
+    about its vertical axis by `tilt_deg` and rolled about the optical axis by `roll_deg` (4° by default, as
+    the older tests were written; 0 puts edges along the pixel rows). With `object_offset` the object lies on
+    its own parallel plane that much farther along the optical axis (negative: nearer), the markers on a
+    frame in the scene's plane and the board's background behind both. BGR."""
+    rvec, tvec = look_at_pose(distance, tilt_y_deg=tilt_deg, roll_deg=roll_deg, centre=centre)
+    if not object_offset:
+        fine = _render_fine(camera, scene.texture, scene.extent, rvec, tvec, port, 60, supersample)
+    else:
+        fine = _render_layers(camera, scene, rvec, tvec, object_offset, port, supersample)
+    image = cv2.resize(fine, camera.image_size, interpolation=cv2.INTER_AREA)
     grey = degrade(image, np.random.default_rng(seed), noise_sigma, blur_sigma_px, light_gradient)
     return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
+
+
+def _render_layers(camera: BrownCamera, scene: Scene, rvec: np.ndarray, tvec: np.ndarray, object_offset: float,
+                   port: FlatPort | None, supersample: int) -> np.ndarray:
+    """The markers (with their quiet zones) on the scene's plane, the object on the plane `object_offset`
+    farther along the optical axis, the uniform background behind both: composited front to back per sample."""
+    if scene.coverage is None or scene.marker_mask is None:
+        raise ValueError("this scene has no separate object and marker layers")
+
+    def layer(texture: np.ndarray, translation: np.ndarray) -> np.ndarray:
+        return _render_fine(camera, texture.astype(np.float32), scene.extent, rvec, translation, port, 0.0,
+                            supersample)
+
+    shifted = np.asarray(tvec, float) + np.array([0.0, 0.0, object_offset])
+    object_alpha = layer(scene.coverage, shifted)
+    marker_alpha = layer(scene.marker_mask.astype(np.float32), np.asarray(tvec, float))
+    marker_value = layer(np.where(scene.marker_mask, scene.texture, 0).astype(np.float32), np.asarray(tvec, float))
+    behind = scene.background * (1 - object_alpha) + scene.object_level * object_alpha  # object over background
+    if object_offset > 0:  # markers in front of the object
+        fine = marker_value + (1 - marker_alpha) * behind
+    else:  # the object in front of the markers' frame
+        frame = marker_value + (1 - marker_alpha) * scene.background
+        fine = scene.object_level * object_alpha + (1 - object_alpha) * frame
+    return np.clip(fine, 0, 255).astype(np.float32)

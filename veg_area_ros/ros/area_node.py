@@ -24,7 +24,7 @@ from std_msgs.msg import String
 from ..area import AreaMeasurer, draw_overlay
 from ..calib_io import CalibrationFileError, read_calibration
 from ..cdr import decode_camera_info, decode_image, info_to_camera, stamp_ns, unstamped
-from ..classify import CHANNELS, OBJECTS, Classifier, ClassifyError
+from ..classify import AREA_MODES, CHANNELS, OBJECTS, Classifier, ClassifyError
 from ..idealize import FrameSizeError
 from ..latest import FrameTally
 from ..scale import TargetsError, TargetsSpec
@@ -32,7 +32,8 @@ from ..synthetic import SCENE_DICTIONARY, SCENE_MARKERS
 from .common import IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS, declare, publish_safely
 from .messages import ImageMessageError, image_bytes
 
-TUNABLE = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "targets_file")
+TUNABLE = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "targets_file",
+           "area_mode", "levels")
 
 
 def default_targets() -> TargetsSpec:
@@ -54,6 +55,9 @@ class AreaNode(Node):
         declare(self, "open_px", 0, "Morphological opening radius (removes specks).", low=0, high=50)
         declare(self, "close_px", 0, "Morphological closing radius (fills pin-holes).", low=0, high=50)
         declare(self, "targets_file", "", "Targets YAML; '' = the synthetic scene's four markers.")
+        declare(self, "area_mode", "subpixel", "'subpixel': each edge pixel counts its object share from its grey "
+                "level; 'count': whole pixels, as in the paper.", choices=AREA_MODES)
+        declare(self, "levels", [0.0], "Sub-pixel mode: [object, background] grey levels; [0.0] = from each frame.")
         self.uncalibrated = declare(self, "uncalibrated_frames", "drop",
                                     "Frames before any calibration: 'drop' (throttled warning) or 'measure' "
                                     "(as an uncalibrated camera, flagged calibrated=false).",
@@ -101,7 +105,11 @@ class AreaNode(Node):
             if len(roi) % 2 or len(roi) < 6 or not all(math.isfinite(v) for v in roi):
                 raise ClassifyError("roi needs at least 3 x,y pairs of finite numbers (or [0.0] for the default)")
             polygon = roi
-        return AreaMeasurer(camera, targets, classifier, roi=polygon)
+        levels = list(settings["levels"])
+        if settings["area_mode"] not in AREA_MODES:
+            raise ClassifyError(f"area_mode must be one of {', '.join(AREA_MODES)}, got {settings['area_mode']!r}")
+        return AreaMeasurer(camera, targets, classifier, roi=polygon, area_mode=settings["area_mode"],
+                            levels=None if levels in ([0.0], []) else levels)
 
     def _on_parameters(self, parameters) -> SetParametersResult:
         proposed = dict(self.settings)
