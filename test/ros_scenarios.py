@@ -318,6 +318,18 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         mark = len(infos)
         spin_until(lambda: len(calibrated(mark)) >= 6, 30)
         out["thresholds_after_change"] = sorted({i["threshold"] for i in calibrated(mark)[3:]})
+        out["area_modes_before"] = sorted({i["area_mode"] for i in calibrated(mark)[3:]})
+        bad_mode = set_parameter("area_mode", "fractional")
+        out["bad_area_mode"] = None if bad_mode is None else [bad_mode.results[0].successful, bad_mode.results[0].reason]
+        bad_levels = set_parameter("levels", [100.0, 101.0])
+        out["bad_levels"] = None if bad_levels is None else [bad_levels.results[0].successful,
+                                                             bad_levels.results[0].reason]
+        good_mode = set_parameter("area_mode", "count")
+        out["good_area_mode"] = None if good_mode is None else good_mode.results[0].successful
+        mark = len(infos)
+        spin_until(lambda: len(calibrated(mark)) >= 6, 30)
+        out["area_modes_after_change"] = sorted({i["area_mode"] for i in calibrated(mark)[3:]})
+        set_parameter("area_mode", "subpixel")
 
         # bad frames on image_raw: wrong encoding, wrong size, empty data, lying step
         for encoding, width, height, data in (("16UC1", 640, 480, bytes(640 * 480 * 2)),

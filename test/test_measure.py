@@ -267,3 +267,40 @@ def test_a_real_video_without_the_targets_says_why_and_keeps_every_frames_row(wo
     rows = list(csv.DictReader((tmp_path / "mm.csv").open()))
     assert len(rows) == int(cv2.VideoCapture(str(video)).get(cv2.CAP_PROP_FRAME_COUNT))
     assert all(r["error"] and not r["area_m2"] for r in rows)
+
+
+def test_area_modes_levels_and_the_uncertainty_terms_from_the_command_line(workspace, tmp_path):
+    """--area-mode, --levels and an object plane offset from the command line: the JSON carries each term and
+    the CSV its columns; a frame with edges along the pixel rows (0° roll) is where the modes differ."""
+    cv2.imwrite(str(workspace / "cube_aligned.png"), render_scene(ENDOSCOPE, SCENE, 0.72, FlatPort(), roll_deg=0.0))
+    results = {}
+    for mode in ("subpixel", "count"):
+        done = measure(workspace, "--json", "--area-mode", mode, image="cube_aligned.png")
+        assert done.returncode == 0, done.stderr
+        results[mode] = json.loads(done.stdout)
+    sub, count = results["subpixel"], results["count"]
+    assert sub["area_mode"] == "subpixel" and sub["subpixel_applied"] is True and count["area_mode"] == "count"
+    for key in ("scale_std_m2", "threshold_std_m2", "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2"):
+        assert key in sub and key in count
+    assert sub["levels_std_m2"] > 0 and sub["discretisation_std_m2"] == 0 and count["discretisation_std_m2"] > 0
+    assert sub["pixel_count"] == count["pixel_count"] and count["area_m2"] == count["count_area_m2"]
+    assert abs(sub["area_m2"] / SCENE.true_area_m2 - 1) < 0.002 < abs(count["area_m2"] / SCENE.true_area_m2 - 1)
+    assert abs(count["area_m2"] - SCENE.true_area_m2) <= 2 * count["area_std_m2"]
+
+    given = measure(workspace, "--json", "--levels", "40,200", image="cube_aligned.png")
+    assert given.returncode == 0 and json.loads(given.stdout)["levels"]["object"] == 40
+    bad = measure(workspace, "--levels", "100,101", image="cube_aligned.png")
+    assert bad.returncode == 2 and "too close" in bad.stderr
+
+    offset_targets = tmp_path / "targets_offset.yaml"
+    offset_targets.write_text((workspace / "targets.yaml").read_text() + "object_plane_offset_m: 0.0\n")
+    done = run_cli("measure", str(workspace / "cube_aligned.png"), "--calibration", "none", "--targets",
+                   str(offset_targets), cwd=workspace)
+    assert done.returncode == 1 and "needs a calibration" in done.stderr
+    csv_path = tmp_path / "rows.csv"
+    done = run_cli("measure", str(workspace / "cube_aligned.png"), "--calibration", str(workspace / "water.yaml"),
+                   "--targets", str(offset_targets), "--csv", str(csv_path), cwd=workspace)
+    assert done.returncode == 0, done.stderr
+    row = next(csv.DictReader(csv_path.open()))
+    assert float(row["plane_offset_std_m2"]) > 0.004 * float(row["area_m2"])  # 2 mm at 0.72 m: about 0.55 %
+    assert row["area_mode"] == "subpixel" and float(row["levels_std_m2"]) > 0

@@ -65,6 +65,12 @@ def test_parameters_are_validated_and_change_at_run_time(graph):
     ok, reason = graph["bad_roi"]
     assert not ok and "at least 3 x,y pairs" in reason
     assert graph["good_threshold"] is True and graph["thresholds_after_change"] == [60.0]
+    ok, reason = graph["bad_area_mode"]
+    assert not ok and "subpixel, count" in reason
+    ok, reason = graph["bad_levels"]
+    assert not ok and "too close" in reason
+    assert graph["area_modes_before"] == ["subpixel"]
+    assert graph["good_area_mode"] is True and graph["area_modes_after_change"] == ["count"]
 
 
 def test_bad_frames_do_not_stop_the_nodes(graph):

@@ -202,12 +202,12 @@ class AreaMeasurer:
         if len(located.pixels) < 2:
             raise TargetsError(f"only {len(located.pixels)} target(s) found in the frame; "
                                f"missing marker ids {located.missing}")
-        offset = self.targets.object_plane_offset_m or 0.0
-        if offset and self.camera is None:
+        offset = self.targets.object_plane_offset_m
+        if offset is not None and self.camera is None:
             raise TargetsError(NO_CALIBRATION_FOR_OFFSET)
         located.scale = PlaneScale.fit(np.array(located.pixels), np.array(planes), self.targets.distance_std_m,
                                        self.targets.pixel_std, offset,
-                                       self.idealizer.ideal.camera_matrix if offset else None)
+                                       self.idealizer.ideal.camera_matrix if offset is not None else None)
         self._last_scale = located.scale
         return located
 

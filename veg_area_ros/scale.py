@@ -317,13 +317,13 @@ class PlaneScale:
     metres_per_pixel: float  # at the centre of the targets, on the object's plane
     distance_std_m: float = 0.0005
     pixel_std: float = 0.1
-    plane_offset_m: float = 0.0
+    plane_offset_m: float | None = None  # None: the object lies in the targets' plane, no pose needed
     camera_matrix: np.ndarray | None = None  # the idealized image's pinhole K (needed for an offset)
     area_matrix: np.ndarray | None = None  # 3x3 pixel -> object's plane, when it is not the targets' plane
 
     @classmethod
     def fit(cls, pixels: np.ndarray, planes: np.ndarray, distance_std_m: float = 0.0005,
-            pixel_std: float = 0.1, plane_offset_m: float = 0.0,
+            pixel_std: float = 0.1, plane_offset_m: float | None = None,
             camera_matrix: np.ndarray | None = None) -> PlaneScale:
         pixels = np.asarray(pixels, float).reshape(-1, 2)
         planes = np.asarray(planes, float).reshape(-1, 2)
@@ -350,7 +350,7 @@ class PlaneScale:
         if kind != "distance" and abs(np.linalg.det(matrix[:2, :2])) < 1e-18:
             raise TargetsError("the targets are collinear; they do not span the plane")
         scale = cls(kind, pixels, planes, matrix, 0.0, distance_std_m, pixel_std, plane_offset_m, camera_matrix)
-        if plane_offset_m:
+        if plane_offset_m is not None:
             scale.area_matrix = _offset_plane_matrix(matrix, kind, camera_matrix, plane_offset_m)
         scale.metres_per_pixel = float(np.sqrt(scale.pixel_area(pixels.mean(axis=0, keepdims=True))[0]))
         return scale
@@ -396,7 +396,7 @@ class PlaneScale:
     def relative_area_change_per_metre_at(self, uv: np.ndarray) -> float:
         """d ln(pixel area)/d(plane offset) at `uv`, 1/m: how an error in the object's plane offset moves Af
         (about 2 / distance)."""
-        if self.kind != "homography" or self.camera_matrix is None:
+        if self.plane_offset_m is None:
             return 0.0
         step = 1e-4
         areas = [PlaneScale.fit(self.pixels, self.planes, plane_offset_m=self.plane_offset_m + sign * step,

@@ -95,6 +95,8 @@ class AreaNode(Node):
 
     def _build(self, settings: dict, camera, targets: TargetsSpec) -> AreaMeasurer:
         """A measurer for these settings; raises ValueError (ClassifyError, ...) with the reason."""
+        if settings["threshold_mode"] not in ("fixed", "otsu"):
+            raise ClassifyError(f"threshold_mode must be fixed or otsu, got {settings['threshold_mode']!r}")
         threshold = "otsu" if settings["threshold_mode"] == "otsu" else float(settings["threshold"])
         classifier = Classifier(threshold=threshold, object=settings["object"], channel=settings["channel"],
                                 open_px=int(settings["open_px"]), close_px=int(settings["close_px"]))
