@@ -320,7 +320,8 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         out["thresholds_after_change"] = sorted({i["threshold"] for i in calibrated(mark)[3:]})
         out["area_modes_before"] = sorted({i["area_mode"] for i in calibrated(mark)[3:]})
         bad_mode = set_parameter("area_mode", "fractional")
-        out["bad_area_mode"] = None if bad_mode is None else [bad_mode.results[0].successful, bad_mode.results[0].reason]
+        out["bad_area_mode"] = None if bad_mode is None else [bad_mode.results[0].successful,
+                                                              bad_mode.results[0].reason]
         bad_levels = set_parameter("levels", [100.0, 101.0])
         out["bad_levels"] = None if bad_levels is None else [bad_levels.results[0].successful,
                                                              bad_levels.results[0].reason]
