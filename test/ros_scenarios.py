@@ -195,7 +195,7 @@ def main() -> int:
     try:
         result = {"delivery": scenario_delivery, "graph": scenario_graph, "record": scenario_record,
                   "drag": scenario_drag, "interop": scenario_interop, "foreign": scenario_foreign,
-                  "full_rate": scenario_full_rate}[name](options, nodes)
+                  "full_rate": scenario_full_rate, "driver_qos": scenario_driver_qos}[name](options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
         result["alive_at_end"] = nodes.alive()
@@ -593,6 +593,70 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
         probe.destroy_node()
         rclpy.try_shutdown()
     return {"received": received, "true_cd": cd}
+
+
+INFO_QOS_OF = {  # how camera drivers offer camera_info
+    "usb_cam": dict(reliability="RELIABLE", durability="VOLATILE", depth=100),
+    "sensor_data": dict(reliability="BEST_EFFORT", durability="VOLATILE", depth=5),
+    "latched": dict(reliability="RELIABLE", durability="TRANSIENT_LOCAL", depth=1),
+}
+
+
+def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
+    """A camera driver in this probe: image_raw (sensor data QoS) and camera_info with every frame, offered with
+    options["qos"] (INFO_QOS_OF); the area node (started after the driver's first frames) must measure."""
+    import rclpy
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from veg_area_ros.ros.common import RESULT_QOS
+    from veg_area_ros.ros.messages import camera_to_info, image_to_msg
+    from veg_area_ros.synthetic import ENDOSCOPE, cube_scene, render_scene
+
+    offered = INFO_QOS_OF[options["qos"]]
+    info_qos = QoSProfile(depth=offered["depth"], reliability=getattr(ReliabilityPolicy, offered["reliability"]),
+                          durability=getattr(DurabilityPolicy, offered["durability"]))
+    rclpy.init()
+    probe = Node("driver")
+    image_pub = probe.create_publisher(Image, "image_raw", qos_profile_sensor_data)
+    info_pub = probe.create_publisher(CameraInfo, "camera_info", info_qos)
+    areas: list[float] = []
+    published_before_first_area: list[int] = []
+
+    def on_area(msg: Vector3Stamped) -> None:
+        if not areas:
+            published_before_first_area.append(published)
+        areas.append(msg.vector.x)
+
+    probe.create_subscription(Vector3Stamped, "projected_area", on_area, RESULT_QOS)
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7, roll_deg=0.0)
+    published = 0
+
+    def publish() -> None:
+        nonlocal published
+        stamp = probe.get_clock().now().to_msg()
+        image = image_to_msg(frame, stamp, "camera")
+        info = camera_to_info(ENDOSCOPE, "camera", stamp)
+        info_pub.publish(info)
+        image_pub.publish(image)
+        published += 1
+
+    probe.create_timer(0.1, publish)
+    try:
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:  # the driver runs first, as in a lab
+            rclpy.spin_once(probe, timeout_sec=0.05)
+        nodes.start("area_node")
+        end = time.monotonic() + float(options["seconds"])
+        while time.monotonic() < end:
+            rclpy.spin_once(probe, timeout_sec=0.05)
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return {"areas": areas, "published": published, "truth_m2": cube_scene().true_area_m2,
+            "published_since_first_area": published - (published_before_first_area or [published])[0] + 1}
 
 
 if __name__ == "__main__":

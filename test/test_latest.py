@@ -57,3 +57,22 @@ def test_skipped_plus_taken_is_every_frame_up_to_the_last_taken(taken_mask, imag
         taken = [k for k, t in enumerate(taken_mask, 1) if t]
         assert tally.skipped == taken[-1] - taken[0] + 1 - len(taken)
     assert tally.received == sum(taken_mask)
+
+
+@given(st.lists(st.tuples(st.booleans(), st.sampled_from(["before", "between", "after"])), min_size=1,
+                max_size=200))
+def test_a_camera_info_heard_on_both_subscriptions_is_one_frame(frames):
+    """The area node listens to camera_info twice (latched, and a subscription any publisher matches): each stamp
+    announced a second time (before the frame, or after it was taken) must not change the count."""
+    tally = FrameTally()
+    for stamp, (taken, echo) in enumerate(frames, 1):
+        tally.announce(stamp)
+        if echo == "before":
+            tally.announce(stamp)
+        if taken:
+            tally.took(stamp)
+        if echo in ("between", "after"):
+            tally.announce(stamp)
+    taken = [k for k, (t, _) in enumerate(frames, 1) if t]
+    if taken:
+        assert tally.skipped == taken[-1] - taken[0] + 1 - len(taken)

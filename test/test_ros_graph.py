@@ -142,6 +142,18 @@ def test_nodes_on_fast_dds_defaults_exchange_topics_with_ours(tmp_path):
     assert result["sockets"] and result["off_machine"] == []
 
 
+@pytest.mark.parametrize("qos", ["usb_cam", "sensor_data", "latched"])
+def test_camera_info_from_every_kind_of_driver_is_used(tmp_path, qos):
+    """camera_info offered volatile and reliable (usb_cam), best effort (v4l2_camera's sensor-data QoS) or
+    latched (ours): the area node, started after the driver, measures the cube from it at 10 Hz."""
+    result = run_scenario("driver_qos", tmp_path, qos=qos, seconds=8.0)
+    areas = np.array(result["areas"])
+    # from its first Af on (its start-up takes seconds), the node measures the frames as they come
+    assert len(areas) >= 10 and len(areas) >= 0.9 * result["published_since_first_area"], result
+    assert np.all(np.abs(areas / result["truth_m2"] - 1) <= 0.005), areas
+    assert result["off_machine"] == []
+
+
 def test_skipped_frames_are_counted_exactly_when_the_camera_outruns_the_area_node(tmp_path):
     """The camera loops a still at up to 1000 Hz; the area node measures the newest frame and counts the rest.
     Over a window, frames taken + frames counted skipped = frames the camera published (every camera_info)."""

@@ -19,13 +19,18 @@ REMEMBERED = 256  # stamps kept on each side: far more than frames in flight bet
 class FrameTally:
     def __init__(self) -> None:
         self._announced: deque[int] = deque(maxlen=REMEMBERED)  # camera_info stamps not yet accounted for
+        self._heard: deque[int] = deque(maxlen=REMEMBERED)  # every stamp announced (one frame heard twice is one)
         self._taken: deque[int] = deque(maxlen=REMEMBERED)  # frames whose camera_info may still come
         self._per_frame = False  # a taken frame's stamp was announced: camera_info comes with every frame
         self.received = 0  # frames taken
         self._skipped = 0  # frames announced after the first frame taken, never taken
 
     def announce(self, stamp_ns: int) -> None:
-        """A camera_info with this stamp: a frame the camera published."""
+        """A camera_info with this stamp: a frame the camera published. The same stamp again (the node listens
+        on two subscriptions, a latched one and one any publisher matches) is the same frame."""
+        if stamp_ns in self._heard:
+            return
+        self._heard.append(stamp_ns)
         if stamp_ns in self._taken:  # its frame came first (two topics are not ordered)
             self._per_frame = True
             self._taken.remove(stamp_ns)

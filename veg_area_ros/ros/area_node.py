@@ -17,6 +17,7 @@ import math
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
@@ -29,7 +30,7 @@ from ..idealize import FrameSizeError
 from ..latest import FrameTally
 from ..scale import TargetsError, TargetsSpec
 from ..synthetic import SCENE_DICTIONARY, SCENE_MARKERS
-from .common import IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS, declare, publish_safely
+from .common import ANY_INFO_QOS, IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS, declare, publish_safely
 from .messages import ImageMessageError, image_bytes
 
 TUNABLE = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "targets_file",
@@ -85,8 +86,13 @@ class AreaNode(Node):
         self.measurer = self._build(self.settings, self.camera, self.targets)
         self.add_on_set_parameters_callback(self._on_parameters)
         self._info_seen = b""  # the last camera_info without its stamp
-        self._info_subscription = self.create_subscription(CameraInfo, "camera_info", self._on_camera_info,
-                                                           PER_FRAME_INFO_QOS, raw=True)
+        # two subscriptions: latched (a calibration published before this node started) and one that every
+        # publisher matches (volatile drivers, bag replay); a camera_info heard on both is handled once
+        quiet = SubscriptionEventCallbacks(incompatible_qos=lambda _: None)  # the other subscription hears those
+        self._info_subscriptions = [
+            self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, PER_FRAME_INFO_QOS, raw=True,
+                                     event_callbacks=quiet),
+            self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, ANY_INFO_QOS, raw=True)]
         self.create_subscription(Image, "image_raw", self._on_frame, IMAGE_QOS, raw=True)
 
     @staticmethod
@@ -160,16 +166,16 @@ class AreaNode(Node):
         """Every camera_info already waiting, before the frame is counted: the executor hands this node one message
         per subscription per wait, so at full rate camera_info would fall behind the frames and overflow its
         queue, and the skipped frames would be under-counted. Same call as rclpy's executor makes."""
-        subscription = self._info_subscription
-        while True:
-            try:
-                with subscription.handle:
-                    taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
-            except AttributeError:  # another rclpy without this call: counted as the executor delivers them
-                return
-            if taken is None:
-                return
-            self._on_camera_info(taken[0])
+        for subscription in self._info_subscriptions:
+            while True:
+                try:
+                    with subscription.handle:
+                        taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+                except AttributeError:  # another rclpy without this call: counted as the executor delivers them
+                    return
+                if taken is None:
+                    break
+                self._on_camera_info(taken[0])
 
     def _on_frame(self, data: bytes) -> None:
         try:
