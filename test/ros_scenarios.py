@@ -555,8 +555,14 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
     rclpy.init()
     probe = Node("drag_probe")
     received: list[list[float]] = []
-    probe.create_subscription(Vector3Stamped, "drag_coefficient",
-                              lambda m: received.append([m.vector.x, m.vector.y, m.vector.z]), RESULT_QOS)
+    received_stamps: list[list[int]] = []
+    area_stamps: list[list[int]] = []
+
+    def on_drag(msg: Vector3Stamped) -> None:
+        received.append([msg.vector.x, msg.vector.y, msg.vector.z])
+        received_stamps.append([msg.header.stamp.sec, msg.header.stamp.nanosec])
+
+    probe.create_subscription(Vector3Stamped, "drag_coefficient", on_drag, RESULT_QOS)
     publishers = {name: probe.create_publisher(kind, name, RESULT_QOS)
                   for name, kind in (("force", WrenchStamped), ("velocity", TwistStamped),
                                      ("projected_area", Vector3Stamped))}
@@ -569,11 +575,10 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
         for tick in range(int(options["seconds"] * 200)):  # a 200 Hz clock of simulated instruments
             stamp_ns = start + tick * 5_000_000
             sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-            if tick % 1 == 0:
-                msg = WrenchStamped()
-                msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
-                msg.wrench.force.y = -force * (1 + 0.005 * rng.standard_normal())  # the balance points upstream
-                publishers["force"].publish(msg)
+            msg = WrenchStamped()  # a force sample at every tick
+            msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+            msg.wrench.force.y = -force * (1 + 0.005 * rng.standard_normal())  # the balance points upstream
+            publishers["force"].publish(msg)
             if tick % 4 == 0:
                 msg = TwistStamped()
                 msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
@@ -584,6 +589,7 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
                 msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
                 msg.vector.x, msg.vector.y = area, 0.002 * area
                 publishers["projected_area"].publish(msg)
+                area_stamps.append([sec, nanosec])
             rclpy.spin_once(probe, timeout_sec=0.0)
             time.sleep(0.001)
         deadline = time.monotonic() + 10
@@ -592,7 +598,7 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
-    return {"received": received, "true_cd": cd}
+    return {"received": received, "true_cd": cd, "received_stamps": received_stamps, "area_stamps": area_stamps}
 
 
 INFO_QOS_OF = {  # how camera drivers offer camera_info

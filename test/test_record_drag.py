@@ -138,3 +138,6 @@ def test_drag_node_recovers_a_known_drag_coefficient(tmp_path):
     cd, cd_std, velocity = received[:, 0], received[:, 1], received[:, 2]
     assert np.all(np.abs(cd / result["true_cd"] - 1) <= 0.005), cd
     assert np.allclose(velocity, 0.3) and np.all(cd_std > 0)
+    # each Cd carries its Af message's exact stamp (an exact-time join with projected_area must match)
+    sent = {tuple(stamp) for stamp in result["area_stamps"]}
+    assert all(tuple(stamp) in sent for stamp in result["received_stamps"]), result["received_stamps"][:5]

@@ -37,7 +37,7 @@ class DragNode(Node):
         self.aligner = DragAligner(tolerance, density, force_std, velocity_std)
         self.cd_pub = self.create_publisher(Vector3Stamped, "drag_coefficient", RESULT_QOS)
         self.info_pub = self.create_publisher(String, "drag_coefficient/info", RESULT_QOS)
-        self.frame_ids: dict[float, str] = {}
+        self.headers: dict[float, tuple[int, int, str]] = {}  # Af time -> its exact stamp and frame_id
         self.create_subscription(WrenchStamped, "force", self._on_force, RESULT_QOS)
         self.create_subscription(TwistStamped, "velocity", self._on_velocity, RESULT_QOS)
         self.create_subscription(Vector3Stamped, "projected_area", self._on_area, RESULT_QOS)
@@ -52,23 +52,24 @@ class DragNode(Node):
 
     def _on_area(self, msg: Vector3Stamped) -> None:
         t = _seconds(msg.header.stamp)
-        self.frame_ids[t] = msg.header.frame_id
+        self.headers[t] = (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id)
         self.aligner.add_area(t, msg.vector.x, msg.vector.y)
         self._publish_ready()
 
     def _publish_ready(self) -> None:
         for drag in self.aligner.ready():
             out = Vector3Stamped()
+            # the Af message's own stamp, not seconds through a float (exact-time joins must match)
             sec = int(drag.time_s // 1)
-            out.header.stamp.sec, out.header.stamp.nanosec = sec, round((drag.time_s - sec) * 1e9) % 1_000_000_000
-            out.header.frame_id = self.frame_ids.pop(drag.time_s, "")
+            out.header.stamp.sec, out.header.stamp.nanosec, out.header.frame_id = self.headers.pop(
+                drag.time_s, (sec, round((drag.time_s - sec) * 1e9) % 1_000_000_000, ""))
             out.vector.x, out.vector.y, out.vector.z = drag.cd, drag.cd_std, drag.velocity_m_s
             publish_safely(self, self.cd_pub, out)
             info = {**drag.__dict__, "unmatched_frames": self.aligner.unmatched,
                     "rejected_samples": self.aligner.rejected_samples}
             publish_safely(self, self.info_pub, String(data=json.dumps(info)))
-        if len(self.frame_ids) > 1000:  # frames that never matched
-            self.frame_ids = dict(list(self.frame_ids.items())[-100:])
+        if len(self.headers) > 1000:  # frames that never matched
+            self.headers = dict(list(self.headers.items())[-100:])
 
 
 def main(args: list[str] | None = None) -> int:
