@@ -195,7 +195,8 @@ def main() -> int:
     try:
         result = {"delivery": scenario_delivery, "graph": scenario_graph, "record": scenario_record,
                   "drag": scenario_drag, "interop": scenario_interop, "foreign": scenario_foreign,
-                  "full_rate": scenario_full_rate, "driver_qos": scenario_driver_qos}[name](options, nodes)
+                  "full_rate": scenario_full_rate, "driver_qos": scenario_driver_qos,
+                  "replay": scenario_replay, "record_cli": scenario_record_cli}[name](options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
         result["alive_at_end"] = nodes.alive()
@@ -599,6 +600,68 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
         probe.destroy_node()
         rclpy.try_shutdown()
     return {"received": received, "true_cd": cd, "received_stamps": received_stamps, "area_stamps": area_stamps}
+
+
+def scenario_record_cli(options: dict, nodes: Nodes) -> dict:
+    """`veg-area record` as a user types it, beside a camera: a mistyped topic, and --all, both --duration 3."""
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    nodes.start("camera_node", rate_hz=5.0, synthetic_scene="cube", synthetic_medium="air")
+    rclpy.init()
+    probe = Node("camera_watch")
+    images: list[int] = []
+    probe.create_subscription(Image, "image_raw", lambda m: images.append(1), qos_profile_sensor_data)
+    deadline = time.monotonic() + 60
+    while not images and time.monotonic() < deadline:  # the camera is publishing before anyone records
+        rclpy.spin_once(probe, timeout_sec=0.1)
+    probe.destroy_node()
+    rclpy.try_shutdown()
+    runs = {}
+    for name, args in (("mistyped", ["image_rwa"]), ("all", ["--all"])):
+        started = time.monotonic()
+        done = subprocess.run([sys.executable, "-m", "veg_area_ros.cli", "record", *args, "--duration", "3", "-o",
+                               str(Path(name).resolve())], capture_output=True, text=True, timeout=60)
+        runs[name] = {"exit": done.returncode, "stderr": done.stderr[-2000:], "seconds": time.monotonic() - started,
+                      "bag": str(Path(name).resolve())}
+    return runs
+
+
+def scenario_replay(options: dict, nodes: Nodes) -> dict:
+    """A recorded bag's image_raw and camera_info replayed by `veg-area play` to a fresh area node; this probe
+    keeps the replayed run's Af by stamp."""
+    import rclpy
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.node import Node
+
+    from veg_area_ros.ros.common import RESULT_QOS
+
+    rclpy.init()
+    probe = Node("replay_probe")
+    areas: dict[str, float] = {}
+    probe.create_subscription(
+        Vector3Stamped, "projected_area",
+        lambda m: areas.__setitem__(f"{m.header.stamp.sec}.{m.header.stamp.nanosec:09d}", m.vector.x), RESULT_QOS)
+    area = nodes.start("area_node")
+    try:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and not probe.get_publishers_info_by_topic("/projected_area"):
+            rclpy.spin_once(probe, timeout_sec=0.1)
+        player = subprocess.Popen([sys.executable, "-m", "veg_area_ros.cli", "play", options["bag"], "--topics",
+                                   "image_raw", "camera_info", "--delay", "2"], stdout=sys.stderr, stderr=sys.stderr)
+        nodes.processes.append(("player", player))
+        deadline = time.monotonic() + 120
+        while player.poll() is None and time.monotonic() < deadline:
+            rclpy.spin_once(probe, timeout_sec=0.05)
+        end = time.monotonic() + 3  # the last frames' results
+        while time.monotonic() < end:
+            rclpy.spin_once(probe, timeout_sec=0.05)
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return {"areas": areas, "player_exit": player.returncode, "area_alive": area.poll() is None}
 
 
 INFO_QOS_OF = {  # how camera drivers offer camera_info

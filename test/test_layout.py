@@ -10,7 +10,7 @@ import pytest
 import yaml
 from helpers import REPO
 
-NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node"]
+NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node"]
 PREFIX = Path(os.environ.get("VEG_AREA_PREFIX", REPO / ".venv"))
 
 

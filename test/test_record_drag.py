@@ -4,6 +4,7 @@ node's (issue #5), and the drag node on synthetic instrument streams."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -76,6 +77,50 @@ def test_frames_the_area_node_skipped_are_counted(recorded):
     assert len(span) >= 20
     assert counted["frames_received"] + counted["frames_dropped"] == len(span), (counted, len(span), image_stamps,
                                                                                   seen)
+
+
+def test_the_bag_keeps_each_topics_offered_qos_and_the_distro(recorded):
+    """As rosbag2 writes them: `ros2 bag play` re-latches camera_info only if the bag says it was latched."""
+    folder, _ = recorded
+    info = yaml.safe_load((folder / "closed_bag" / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert info["ros_distro"] == "kilted"
+    offered = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
+               for t in info["topics_with_message_count"]}
+    assert [q["durability"] for q in offered["/camera_info"]] == ["transient_local"]
+    assert [q["reliability"] for q in offered["/image_raw"]] == ["best_effort"]
+    assert all(q["reliability"] == "reliable" for q in offered["/projected_area"])
+
+
+def test_a_replayed_bag_is_measured_as_live(recorded, tmp_path):
+    """`veg-area play` of the recorded camera (image_raw, latched camera_info) to a fresh area node: Af of every
+    replayed frame equals the live node's, within the live run's std (exact where both started alike)."""
+    folder, _ = recorded
+    result = run_scenario("replay", tmp_path, bag=str(folder / "closed_bag"))
+    assert result["player_exit"] == 0 and result["area_alive"], result
+    store = get_typestore(Stores.ROS2_KILTED)
+    live, live_std = {}, {}
+    with Reader(folder / "closed_bag") as reader:
+        wanted = [c for c in reader.connections if c.topic == "/projected_area"]
+        for connection, _, data in reader.messages(connections=wanted):
+            message = store.deserialize_cdr(data, connection.msgtype)
+            key = f"{message.header.stamp.sec}.{message.header.stamp.nanosec:09d}"
+            live[key], live_std[key] = message.vector.x, message.vector.y
+    replayed = result["areas"]
+    common = set(live) & set(replayed)
+    assert len(live) >= 15 and len(common) >= 0.9 * len(live), (len(live), len(replayed), len(common))
+    for key in common:
+        assert abs(replayed[key] - live[key]) <= live_std[key], key
+
+
+def test_record_command_duration_all_and_a_mistyped_topic(tmp_path):
+    result = run_scenario("record_cli", tmp_path)
+    mistyped, everything = result["mistyped"], result["all"]
+    assert mistyped["exit"] == 1 and "never seen on the graph, not recorded: /image_rwa" in mistyped["stderr"]
+    assert everything["exit"] == 0, everything["stderr"]
+    assert everything["seconds"] < 30  # --duration 3 stopped it (start-up aside)
+    info = yaml.safe_load((Path(everything["bag"]) / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    topics = {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
+    assert topics.get("/image_raw", 0) >= 5 and "/rosout" not in topics, (topics, everything["stderr"])
 
 
 def test_killed_recording_is_recovered_but_for_the_last_chunk(recorded, tmp_path):

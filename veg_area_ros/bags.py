@@ -15,6 +15,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+import yaml
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
@@ -24,6 +26,23 @@ from .cdr import CameraInfoFields, ImageFields, decode_camera_info, decode_image
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 SQLITE_COMMIT_SECONDS = 1.0  # sqlite3 bags commit this often: a crash loses at most this much
+ROS_DISTRO = "kilted"  # the message definitions the bag's types come from (rosbags writes 'rosbags' here)
+
+
+@dataclass(frozen=True)
+class OfferedQos:
+    """What one publisher of a topic offered, as rosbag2 keeps it so that `ros2 bag play` offers it again
+    (a latched camera_info stays latched)."""
+
+    reliability: str = "reliable"  # reliable | best_effort
+    durability: str = "volatile"  # volatile | transient_local
+    history: str = "keep_last"
+    depth: int = 10
+
+    def to_rosbags(self) -> Qos:
+        never = QosTime(0x7FFFFFFF, 0xFFFFFFFF)  # rosbag2's "infinite" duration
+        return Qos(QosHistory[self.history.upper()], self.depth, QosReliability[self.reliability.upper()],
+                   QosDurability[self.durability.upper()], never, never, QosLiveliness.AUTOMATIC, never, False)
 
 
 class BagError(ValueError):
@@ -51,13 +70,15 @@ class BagRecorder:
         self._last_commit = time.monotonic()
         self.counts: dict[str, int] = {}
 
-    def add_topic(self, topic: str, msgtype: str) -> None:
-        """Register a topic of type `pkg/msg/Name`; its definition comes from ROS 2 Kilted's."""
+    def add_topic(self, topic: str, msgtype: str, offered: list[OfferedQos] = ()) -> None:
+        """Register a topic of type `pkg/msg/Name` (its definition comes from ROS 2 Kilted's) with the QoS its
+        publishers offered."""
         if topic in self._connections:
             return
         if msgtype not in self._types.types:
             raise BagError(f"message type {msgtype!r} of {topic} is not a ROS 2 Kilted standard type")
-        self._connections[topic] = self._writer.add_connection(topic, msgtype, typestore=self._types)
+        self._connections[topic] = self._writer.add_connection(
+            topic, msgtype, typestore=self._types, offered_qos_profiles=[q.to_rosbags() for q in offered])
         self.counts[topic] = 0
 
     def write(self, topic: str, timestamp_ns: int, data: bytes | memoryview) -> None:
@@ -74,6 +95,23 @@ class BagRecorder:
 
     def close(self) -> None:
         self._writer.close()  # MCAP summary and footer, metadata.yaml
+        _set_ros_distro(self.path / "metadata.yaml", ROS_DISTRO)
+
+
+def _set_ros_distro(metadata: Path, distro: str) -> None:
+    """metadata.yaml with the distribution the messages come from, replaced atomically (temp file + rename)."""
+    content = yaml.safe_load(metadata.read_text())
+    content["rosbag2_bagfile_information"]["ros_distro"] = distro
+    temporary = metadata.with_name(metadata.name + ".tmp")
+    temporary.write_text(yaml.safe_dump(content, sort_keys=False))
+    temporary.replace(metadata)
+
+
+def offered_qos(bag: str | Path) -> dict[str, list[dict]]:
+    """Each topic's offered QoS profiles as metadata.yaml records them."""
+    content = yaml.safe_load((Path(bag) / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    return {entry["topic_metadata"]["name"]: entry["topic_metadata"].get("offered_qos_profiles") or []
+            for entry in content["topics_with_message_count"]}
 
 
 def _read_record(data: memoryview, offset: int) -> tuple[int, memoryview, int] | None:
@@ -201,6 +239,52 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None,
                 continue
             yield BagFrame(index, timestamp, decode_image(data), camera_info)
             index += 1
+    finally:
+        reader.close()
+
+
+@dataclass(frozen=True)
+class PlayTopic:
+    name: str
+    msgtype: str
+    offered: list[OfferedQos]  # as recorded; empty when the bag does not say
+
+    def replay_qos(self) -> OfferedQos:
+        """The QoS to offer on replay, as `ros2 bag play` adapts it: latched if every recorded publisher was,
+        best effort if any was, else reliable volatile (depth 10)."""
+        if not self.offered:
+            return OfferedQos()
+        return OfferedQos("best_effort" if any(q.reliability == "best_effort" for q in self.offered) else "reliable",
+                          "transient_local" if all(q.durability == "transient_local" for q in self.offered)
+                          else "volatile", "keep_last", max(q.depth for q in self.offered))
+
+
+def play_topics(path: str | Path, names: list[str] | None = None) -> list[PlayTopic]:
+    """The bag's topics (all, or those named) with their type and recorded offered QoS."""
+    reader = _open_reader(path)
+    try:
+        topics = {}
+        for connection in reader.connections:
+            if names and connection.topic not in names and connection.topic.lstrip("/") not in names:
+                continue
+            offered = [OfferedQos(q.reliability.name.lower(), q.durability.name.lower(), q.history.name.lower(),
+                                  int(q.depth)) for q in getattr(connection.ext, "offered_qos_profiles", [])]
+            topics[connection.topic] = PlayTopic(connection.topic, connection.msgtype, offered)
+    finally:
+        reader.close()
+    missing = [n for n in names or [] if n not in topics and f"/{n.lstrip('/')}" not in topics]
+    if missing:
+        raise BagError(f"{path}: no topic {', '.join(missing)} in the bag (it has {', '.join(sorted(topics))})")
+    return list(topics.values())
+
+
+def play_messages(path: str | Path, topics: list[str]) -> Iterator[tuple[str, int, bytes]]:
+    """(topic, recorded time in ns, serialized message) of the named topics in recording order."""
+    reader = _open_reader(path)
+    try:
+        wanted = [c for c in reader.connections if c.topic in topics]
+        for connection, timestamp, data in reader.messages(connections=wanted):
+            yield connection.topic, timestamp, bytes(data)
     finally:
         reader.close()
 

@@ -503,7 +503,24 @@ def cmd_record(args: argparse.Namespace) -> int:
     if args.output:
         ros_args += ["-p", f"output:={args.output}"]
     ros_args += ["-p", "topics:=[" + ",".join(f"'{t}'" for t in args.topics) + "]"]
+    ros_args += ["-p", f"all:={'true' if args.all else 'false'}", "-p", f"duration:={float(args.duration or 0.0)}"]
     return record_main(["veg-area-record", *ros_args])
+
+
+def cmd_play(args: argparse.Namespace) -> int:
+    from .bags import BagError, play_topics
+    from .ros.play_node import main as play_main
+
+    try:
+        play_topics(args.bag, args.topics)  # a clear error before ROS starts
+    except BagError as exc:
+        raise CliError(str(exc)) from exc
+    if args.delay < 0:
+        raise CliError("--delay must be 0 or more", 2)
+    ros_args = ["--ros-args", "-p", f"bag:={args.bag}", "-p", f"rate:={args.rate}", "-p", f"delay:={args.delay}"]
+    if args.topics:
+        ros_args += ["-p", "topics:=[" + ",".join(f"'{t}'" for t in args.topics) + "]"]
+    return play_main(["veg-area-play", *ros_args])
 
 
 def cmd_bag_recover(args: argparse.Namespace) -> int:
@@ -659,10 +676,23 @@ def build_parser() -> argparse.ArgumentParser:
     rec = sub.add_parser("record", help="record topics into a rosbag2 bag (MCAP, or sqlite3) as they come, "
                          "serialized (ROS 2 node; Ctrl-C closes the bag)")
     rec.add_argument("topics", nargs="*", default=["image_raw", "camera_info", "projected_area",
-                                                   "projected_area/info"], help="topics (default: the graph's)")
+                                                   "projected_area/info"],
+                     help="topics (default: image_raw camera_info projected_area projected_area/info); a topic "
+                          "never seen is a warning and exit 1")
+    rec.add_argument("--all", action="store_true", help="every topic on the graph")
+    rec.add_argument("--duration", type=_positive_float, default=None, metavar="S", help="stop after S seconds")
     rec.add_argument("-o", "--output", help="bag folder to create (default veg_area_<date-time>)")
     rec.add_argument("--storage", default="mcap", choices=["mcap", "sqlite3"])
     rec.set_defaults(func=cmd_record)
+
+    play = sub.add_parser("play", help="replay a rosbag2 bag at the recorded pace with the recorded QoS, as "
+                          "'ros2 bag play' does (ROS 2 node; stops at the end)")
+    play.add_argument("bag", help="the bag folder")
+    play.add_argument("--topics", nargs="+", default=None, help="topics to replay (default: all)")
+    play.add_argument("--rate", type=_positive_float, default=1.0, help="pace, 1 = as recorded")
+    play.add_argument("--delay", type=float, default=1.0, metavar="S",
+                      help="seconds to wait before the first message, for subscribers to connect (default 1)")
+    play.set_defaults(func=cmd_play)
 
     recover = sub.add_parser("bag-recover", help="rebuild a readable bag from an MCAP recording that was killed")
     recover.add_argument("bag", help="the broken bag folder (or its .mcap file)")

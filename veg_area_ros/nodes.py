@@ -34,3 +34,7 @@ def record_main() -> int:
 
 def drag_main() -> int:
     return _run("drag_node")
+
+
+def play_main() -> int:
+    return _run("play_node")

@@ -162,4 +162,5 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
                 rclpy.try_shutdown()
         finally:
             stop.restore()
-    return code
+    # a node may end its run with a failure of its own (a recorder whose topics never appeared)
+    return code or max((getattr(node, "exit_code", 0) for node in nodes), default=0)

@@ -1,0 +1,79 @@
+"""play_node: replays a rosbag2 bag as `ros2 bag play` does, for users without the ros2 CLI: every topic (or
+those named) at the recorded pace (times `rate`), each offered with the QoS it was recorded with (a latched
+camera_info is replayed latched; a bag without offered QoS is replayed reliable and volatile). Messages are
+published serialized, never deserialized. Stops at the end of the bag."""
+
+from __future__ import annotations
+
+import time
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ..bags import OfferedQos, play_messages, play_topics
+from .common import declare
+from .record_node import message_class
+
+
+def qos_profile(offered: OfferedQos) -> QoSProfile:
+    return QoSProfile(history=HistoryPolicy.KEEP_ALL if offered.history == "keep_all" else HistoryPolicy.KEEP_LAST,
+                      depth=offered.depth,
+                      reliability=ReliabilityPolicy.BEST_EFFORT if offered.reliability == "best_effort"
+                      else ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL if offered.durability == "transient_local"
+                      else DurabilityPolicy.VOLATILE)
+
+
+class PlayNode(Node):
+    def __init__(self, name: str = "play_node", **kwargs):
+        super().__init__(name, **kwargs)
+        bag = declare(self, "bag", "", "The rosbag2 folder to replay.", read_only=True)
+        names = [t for t in declare(self, "topics", [""], "Topics to replay ([''] = all).", read_only=True) if t]
+        self.rate = declare(self, "rate", 1.0, "Pace: 1 = as recorded, 2 = twice as fast.", low=0.01, high=1000.0,
+                            read_only=True)
+        delay = declare(self, "delay", 1.0, "Seconds to wait before the first message (discovery).", low=0.0,
+                        high=3600.0, read_only=True)
+        self.stop_requested = False
+        self.exit_code = 0
+        topics = play_topics(bag, names or None)
+        self.publishers_by_topic = {}
+        for topic in topics:
+            offered = topic.replay_qos()
+            self.publishers_by_topic[topic.name] = self.create_publisher(message_class(topic.msgtype), topic.name,
+                                                                         qos_profile(offered))
+            self.get_logger().info(f"replaying {topic.name} ({topic.msgtype}) {offered.reliability}, "
+                                   f"{offered.durability}")
+        self.messages = play_messages(bag, list(self.publishers_by_topic))
+        self.pending = next(self.messages, None)
+        self.published = 0
+        self.first_recorded: int | None = None
+        self.start = time.monotonic() + delay
+        self.create_timer(0.001, self._play)
+
+    def _play(self) -> None:
+        now = time.monotonic()
+        while self.pending is not None and now >= self.start:
+            topic, recorded, data = self.pending
+            if self.first_recorded is None:
+                self.first_recorded = recorded
+            due = self.start + (recorded - self.first_recorded) * 1e-9 / self.rate
+            if due > now:
+                return
+            self.publishers_by_topic[topic].publish(data)
+            self.published += 1
+            self.pending = next(self.messages, None)
+        if self.pending is None and not self.stop_requested:
+            self.get_logger().info(f"end of the bag: {self.published} messages replayed")
+            self.stop_requested = True
+
+
+def main(args: list[str] | None = None) -> int:
+    from .common import run_nodes
+
+    return run_nodes([PlayNode], args)
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main(sys.argv))
