@@ -3,7 +3,8 @@ from glob import glob
 from setuptools import find_packages, setup
 
 PACKAGE = "veg_area_ros"
-NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node"]  # graph: 3 composed
+# graph_node: camera, calibration and area composed in one process
+NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node"]
 
 setup(
     name=PACKAGE,
