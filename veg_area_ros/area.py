@@ -72,12 +72,13 @@ class AreaResult:
     plane_offset_std_m2: float = 0.0  # the object's plane offset from the targets' plane
     edge_length_px: float = 0.0  # the object's boundary in raw pixels, from its mixed pixels
     count_area_m2: float = 0.0  # Af of the whole-pixel count (equals area_m2 in count mode)
+    subpixel_applied: bool = False  # sub-pixel mode used the shares (else it counted whole pixels)
 
     def summary(self) -> dict:
         return {
             "area_m2": self.area_m2, "area_std_m2": self.area_std_m2, "area_mode": self.area_mode,
-            # sub-pixel mode counts whole pixels where no band value tells an edge pixel's share
-            "subpixel_applied": self.area_mode == "subpixel" and self.levels is not None,
+            # sub-pixel mode counts whole pixels where the shares are less certain than whole pixels
+            "subpixel_applied": self.subpixel_applied,
             "pixel_count": self.pixel_count, "count_area_m2": self.count_area_m2,
             "scale_m_per_px": self.scale.metres_per_pixel, "scale_kind": self.scale.kind,
             "homography": self.scale.matrix.tolist() if self.scale.kind != "distance" else None,
@@ -366,12 +367,25 @@ class AreaMeasurer:
         area, counted, count, levels = measured(threshold)
         if levels is None:
             levels = self._levels(estimator, threshold)
+
+        def edge_terms(fractional: bool) -> _EdgeTerms:
+            return _edge_terms(roi_area, roi_count, levels, counted, count, fractional,
+                               lambda lv: float(roi_area @ lv.fractions()))
+
         delta = self.threshold_delta
-        sweep = [(float(level), measured(level)[0])
+
+        def threshold_term(pick: int) -> float:  # pick 0: Af from the shares, 1: counted
+            return abs(measured(min(threshold + delta, 255))[pick] - measured(max(threshold - delta, 0))[pick]) / 2
+
+        applied = subpixel and levels is not None
+        edge = edge_terms(applied)
+        threshold_std = threshold_term(0 if applied else 1)
+        if applied:  # shares less certain than whole pixels (uneven levels): the count is the better estimate
+            counting, counting_threshold_std = edge_terms(False), threshold_term(1)
+            if np.hypot(edge.levels, threshold_std) > np.hypot(counting.discretisation, counting_threshold_std):
+                applied, edge, area, threshold_std = False, counting, counted, counting_threshold_std
+        sweep = [(float(level), measured(level)[0 if applied else 1])
                  for level in threshold + delta * np.arange(-3, 4) if 0 <= level <= 255]
-        threshold_std = abs(measured(min(threshold + delta, 255))[0] - measured(max(threshold - delta, 0))[0]) / 2
-        edge = _edge_terms(roi_area, roi_count, levels, counted, subpixel,
-                           lambda lv: float(roi_area @ lv.fractions()))
         scale_std = area * weights.relative_scale_std
         offset_std = area * weights.relative_offset_std
         result = AreaResult(
@@ -381,6 +395,7 @@ class AreaMeasurer:
             scale_std_m2=scale_std, threshold_std_m2=threshold_std, missing_targets=located.missing, sweep=sweep,
             target_pixels=dict(zip(located.labels, located.pixels, strict=True)),
             weight_error_bound=weights.error_bound + carried, area_mode=self.area_mode, levels=levels,
+            subpixel_applied=applied,
             discretisation_std_m2=edge.discretisation, levels_std_m2=edge.levels, plane_offset_std_m2=offset_std,
             edge_length_px=edge.length_px, count_area_m2=counted)
         if keep_images:
@@ -437,23 +452,27 @@ class _EdgeTerms:
 
 
 def _edge_terms(roi_area: np.ndarray, roi_count: np.ndarray, levels: Levels | None, counted_area: float,
-                subpixel: bool, subpixel_area: Callable[[Levels], float]) -> _EdgeTerms:
+                counted_pixels: int, subpixel: bool, subpixel_area: Callable[[Levels], float]) -> _EdgeTerms:
     """The uncertainty that the object's edge adds, from its mixed pixels (band values strictly between the
     pure zones of the two levels): their number / (1 - both zones) bounds the edge length L in pixels (a
     blurred edge has more mixed pixels per unit length), w is their mean metric area.
     Count mode: an edge pixel covered by a fraction phi is counted whole or not at all. Where the edge crosses
     the pixel grid at random phases these errors are independent, sd w sqrt(L / 12); along an edge that follows
     the grid every pixel errs alike, a systematic error that the sub-pixel area of the same frame measures:
-    the term is the larger of |Af counted - Af sub-pixel| and the random part.
+    the term is the larger of |Af counted - Af sub-pixel| and the random part. Where no band value tells edge
+    pixels apart, L is taken as a disc's perimeter for the counted area (the least any shape has) and the
+    errors as alike along two halves of it: w L / sqrt(24).
     Sub-pixel mode: each level moved by its spread (Af's sensitivity to the levels), per-pixel noise of the
     background's spread over the contrast, and the pure zones: an edge pixel whose fraction lies within a zone
     is counted 0 or 1, error up to the zone (sd per pixel sqrt((eps_o³ + eps_b³) / 3), alike along an edge)."""
-    if levels is None:
-        return _EdgeTerms()
-    mixed = levels.mixed()
+    mixed = levels.mixed() if levels is not None else np.zeros(256, bool)
     mixed_count = float(roi_count[mixed].sum())
-    if mixed_count == 0:
-        return _EdgeTerms()
+    if mixed_count == 0:  # no value tells edge pixels apart (uneven levels): the least boundary the object has
+        if subpixel or counted_pixels == 0:
+            return _EdgeTerms()
+        length = 2 * float(np.sqrt(np.pi * counted_pixels))  # a disc's perimeter, px
+        return _EdgeTerms(discretisation=counted_area / counted_pixels * length / float(np.sqrt(24)),
+                          length_px=length)
     eps_object, eps_background = levels.pure_zones()
     length = mixed_count / max(1.0 - eps_object - eps_background, 0.1)
     weight = float(roi_area[mixed].sum()) / mixed_count
@@ -489,7 +508,7 @@ def draw_overlay(result: AreaResult) -> np.ndarray:
         cv2.drawMarker(canvas, centre, (0, 255, 0), cv2.MARKER_CROSS, 2 * size, 1, cv2.LINE_AA)
         cv2.putText(canvas, label, (centre[0] + size, centre[1] - size), cv2.FONT_HERSHEY_SIMPLEX,
                     size / 25, (0, 255, 0), 1, cv2.LINE_AA)
-    mode = "sub-pixel" if result.area_mode == "subpixel" and result.levels is not None else "count"
+    mode = "sub-pixel" if result.subpixel_applied else "count"
     text = (f"Af = {result.area_m2 * 1e4:.2f} +/- {result.area_std_m2 * 1e4:.2f} cm2 ({mode}), "
             f"T = {result.threshold:g}, "
             f"{'calibrated' if result.calibrated else 'UNCALIBRATED'}")

@@ -14,6 +14,8 @@ add up to area.
 from __future__ import annotations
 
 import bisect
+import functools
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -110,8 +112,9 @@ class Levels:
 
     def fractions(self, values: np.ndarray | None = None) -> np.ndarray:
         """The object fraction (0..1) of a pixel of each band value (all 256 by default)."""
-        values = BAND_VALUES if values is None else np.asarray(values, float)
-        fraction = (self.background - values) / (self.background - self.object)
+        if values is None:  # the same levels recur (threshold sweep): computed once per levels
+            return _fractions_of_every_value(self)
+        fraction = (self.background - np.asarray(values, float)) / (self.background - self.object)
         eps_object, eps_background = self.pure_zones()
         fraction[fraction <= eps_background] = 0.0
         fraction[fraction >= 1 - eps_object] = 1.0
@@ -125,6 +128,13 @@ class Levels:
     def to_dict(self) -> dict:
         return {"object": self.object, "background": self.background, "object_spread": self.object_spread,
                 "background_spread": self.background_spread, "estimated": self.estimated}
+
+
+@functools.lru_cache(maxsize=64)
+def _fractions_of_every_value(levels: Levels) -> np.ndarray:
+    fractions = levels.fractions(BAND_VALUES)
+    fractions.setflags(write=False)
+    return fractions
 
 
 class LevelEstimator:
@@ -155,20 +165,20 @@ class LevelEstimator:
     def _class(self, first: int, last: int, far_side: int, background: bool) -> tuple[float, float] | None:
         if last < first or self._sum(0, first, last) == 0:
             return None
-        mode = first + int(np.argmax(self.counts[first:last + 1]))
+        mode = first + int(self.counts[first:last + 1].argmax())
         far = (first, mode) if far_side < 0 else (mode, last)
         n, s1, s2 = (self._sum(power, *far) for power in range(3))
-        spread = max(float(np.sqrt(max(s2 - 2 * mode * s1 + mode * mode * n, 0.0) / n)), MIN_SPREAD_DN)
+        spread = max(math.sqrt(max(s2 - 2 * mode * s1 + mode * mode * n, 0.0) / n), MIN_SPREAD_DN)
         if background:  # uneven light spreads the background both ways; its few mixed pixels barely move quantiles
             spread = max(spread, abs(mode - self._quantile(first, last, 0.16 if far_side > 0 else 0.84)))
-        reach = int(np.floor(2 * spread + 0.5))
+        reach = math.floor(2 * spread + 0.5)
         near = (max(first, mode - reach), min(last, mode + reach))
         return self._sum(1, *near) / self._sum(0, *near), spread
 
     def at(self, threshold: float) -> Levels | None:
         """The levels with the classes split at `threshold` (low class: band <= threshold); None when either
         class is empty (nothing to take a level from)."""
-        split = min(max(int(np.floor(threshold)), -1), 255)
+        split = min(max(math.floor(threshold), -1), 255)
         low = self._class(0, split, -1, background=self.object_is_high)
         high = self._class(split + 1, 255, +1, background=not self.object_is_high)
         if low is None or high is None:
