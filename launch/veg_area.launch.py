@@ -6,18 +6,23 @@
 import os
 
 from ament_index_python.packages import get_package_share_directory
-from launch.actions import SetEnvironmentVariable
+from launch.actions import LogInfo, SetEnvironmentVariable
 from launch_ros.actions import Node
 
 from launch import LaunchDescription
+from veg_area_ros.transport import choose_transport
 
 
 def generate_launch_description():
     share = get_package_share_directory("veg_area_ros")
     config = os.path.join(share, "config")
+    # the nodes' own rule (VEG_AREA_TRANSPORT, a user's FASTDDS_DEFAULT_PROFILES_FILE kept), said once
+    transport = choose_transport(dict(os.environ))
+    chosen = [LogInfo(msg=f"veg_area_ros transport: {transport.description}")]
+    if transport.profile and "FASTDDS_DEFAULT_PROFILES_FILE" not in os.environ:
+        chosen.append(SetEnvironmentVariable("FASTDDS_DEFAULT_PROFILES_FILE", transport.profile))
     return LaunchDescription([
-        # camera-sized images between processes: shared memory with large segments (see README)
-        SetEnvironmentVariable("FASTDDS_DEFAULT_PROFILES_FILE", os.path.join(config, "fastdds_shm.xml")),
+        *chosen,
         Node(package="veg_area_ros", executable="camera_node", name="camera_node",
              parameters=[os.path.join(config, "camera_node.yaml")]),
         Node(package="veg_area_ros", executable="calibration_node", name="calibration_node",

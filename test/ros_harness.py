@@ -19,7 +19,10 @@ from pathlib import Path
 
 from helpers import REPO
 
-PROFILE = REPO / "config" / "fastdds_shm.xml"
+# the nodes' default profile (shared memory + UDP on every interface) where the namespace confines it; this
+# machine only (shared memory + UDP on 127.0.0.1) where there is no private namespace
+PROFILE = REPO / "config" / "fastdds.xml"
+LOCAL_PROFILE = REPO / "config" / "fastdds_local.xml"
 _domains = itertools.count((os.getpid() % 50) * 4 + 1)
 
 
@@ -34,10 +37,11 @@ def netns_available() -> bool:
 
 def ros_environment(home: Path, domain: int) -> dict[str, str]:
     """This environment without the caller's ROS/DDS settings, plus a log home, a domain, Fast DDS with the
-    shipped shared-memory profile, and this source tree on PYTHONPATH."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_"))}
+    shipped profile (the local one outside a private namespace), and this source tree on PYTHONPATH."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "VEG_AREA_"))}
     env.update(HOME=str(home), ROS_LOG_DIR=str(home / "ros_log"), PYTHONPATH=str(REPO), ROS_DOMAIN_ID=str(domain),
-               RMW_IMPLEMENTATION="rmw_fastrtps_cpp", FASTDDS_DEFAULT_PROFILES_FILE=str(PROFILE),
+               RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
+               FASTDDS_DEFAULT_PROFILES_FILE=str(PROFILE if netns_available() else LOCAL_PROFILE),
                PYTHONUNBUFFERED="1")
     return env
 

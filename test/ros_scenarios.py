@@ -196,7 +196,8 @@ def main() -> int:
         result = {"delivery": scenario_delivery, "graph": scenario_graph, "record": scenario_record,
                   "drag": scenario_drag, "interop": scenario_interop, "foreign": scenario_foreign,
                   "full_rate": scenario_full_rate, "driver_qos": scenario_driver_qos,
-                  "replay": scenario_replay, "record_cli": scenario_record_cli}[name](options, nodes)
+                  "replay": scenario_replay, "record_cli": scenario_record_cli,
+                  "two_machines": scenario_two_machines}[name](options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
         result["alive_at_end"] = nodes.alive()
@@ -468,6 +469,7 @@ def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
     return {"published_in_window": sum(1 for s in published if ns(first) < s <= ns(last)) if first else 0,
             "received_in_window": last["frames_received"] - first["frames_received"] if first else 0,
             "dropped_in_window": last["frames_dropped"] - first["frames_dropped"] if first else 0,
+            "lost_in_window": last["frames_lost"] - first["frames_lost"] if first else 0,
             "truth_m2": cube_scene().true_area_m2, "areas": [i["area_m2"] for i in window[-20:]]}
 
 
@@ -479,13 +481,24 @@ def scenario_foreign(options: dict, nodes: Nodes) -> dict:
     from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import Image
+    from std_msgs.msg import String
 
     rclpy.init()
     node = Node("force_balance")
     images: list[list[int]] = []
     areas: list[float] = []
-    node.create_subscription(Image, "image_raw", lambda m: images.append([m.width, m.height]), qos_profile_sensor_data)
-    node.create_subscription(Vector3Stamped, "projected_area", lambda m: areas.append(m.vector.x), 10)
+    area_stamps: list[str] = []
+    last_info: list[str] = []
+
+    def on_area(msg: Vector3Stamped) -> None:
+        areas.append(msg.vector.x)
+        area_stamps.append(f"{msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d}")
+
+    if options.get("images", True):
+        node.create_subscription(Image, "image_raw", lambda m: images.append([m.width, m.height]),
+                                 qos_profile_sensor_data)
+    node.create_subscription(Vector3Stamped, "projected_area", on_area, 10)
+    node.create_subscription(String, "projected_area/info", lambda m: last_info.append(m.data), 10)
     force = node.create_publisher(WrenchStamped, "force", 10)
     sent = []
 
@@ -503,6 +516,7 @@ def scenario_foreign(options: dict, nodes: Nodes) -> dict:
     node.destroy_node()
     rclpy.try_shutdown()
     return {"images": len(images), "image_sizes": sorted({tuple(size) for size in images}), "areas": areas,
+            "area_stamps": area_stamps, "last_info": json.loads(last_info[-1]) if last_info else None,
             "forces_sent": len(sent), "profile": os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")}
 
 
@@ -600,6 +614,64 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
         probe.destroy_node()
         rclpy.try_shutdown()
     return {"received": received, "true_cd": cd, "received_stamps": received_stamps, "area_stamps": area_stamps}
+
+
+def _two_pcs(shm_root: Path) -> dict[str, list[str]]:
+    """Two network namespaces joined by a veth pair (10.77.0.1 and .2, multicast routed over it), each with its
+    own /dev/shm: two PCs on one lab network. Returns the command prefix that runs a process on each."""
+    def ip(*args: str) -> None:
+        subprocess.run(["ip", *args], check=True, capture_output=True)
+
+    # the namespaces' names (/run/netns) live in a tmpfs of this private mount namespace: none on the host
+    subprocess.run(["mount", "-t", "tmpfs", "tmpfs", "/run"], check=True)
+    prefixes = {}
+    ip("link", "add", "veg_a", "type", "veth", "peer", "name", "veg_b")
+    for pc, address in (("a", "10.77.0.1/24"), ("b", "10.77.0.2/24")):
+        namespace = f"veg_pc_{pc}"
+        ip("netns", "add", namespace)
+        ip("link", "set", f"veg_{pc}", "netns", namespace)
+        ip("-n", namespace, "link", "set", "lo", "up")
+        ip("-n", namespace, "addr", "add", address, "dev", f"veg_{pc}")
+        ip("-n", namespace, "link", "set", f"veg_{pc}", "up")
+        ip("-n", namespace, "route", "add", "224.0.0.0/4", "dev", f"veg_{pc}")
+        shm = shm_root / f"shm_{pc}"
+        shm.mkdir(parents=True, exist_ok=True)
+        subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1g", "tmpfs", str(shm)], check=True)
+        prefixes[pc] = ["ip", "netns", "exec", namespace, "sh", "-c",
+                        f'mount --bind {shm} /dev/shm && exec "$@"', "sh"]
+    return prefixes
+
+
+def scenario_two_machines(options: dict, nodes: Nodes) -> dict:
+    """Camera PC: camera_node (640x480 bgr8, options["rate_hz"]) and an instrument node on Fast DDS's defaults;
+    measuring PC: area_node and another such node. Our nodes on the shipped default transport."""
+    from veg_area_ros.synthetic import cube_scene
+
+    pcs = _two_pcs(Path("pcs").resolve())
+    calibration = air_endoscope_calibration()
+    defaults = {k: v for k, v in os.environ.items() if not k.startswith(("FASTDDS_", "VEG_AREA_"))}
+    seconds = float(options["seconds"])
+    listeners = {}
+    for pc in ("a", "b"):
+        listeners[pc] = subprocess.Popen(
+            [*pcs[pc], sys.executable, __file__, "foreign", json.dumps({"seconds": seconds + 15, "images": False})],
+            env=defaults, stdout=subprocess.PIPE, stderr=sys.stderr, text=True)
+        nodes.processes.append((f"listener_{pc}", listeners[pc]))
+    ours = dict(os.environ)
+    for pc, module, parameters in (("b", "area_node", {}),
+                                   ("a", "camera_node", dict(rate_hz=float(options["rate_hz"]), synthetic_scene="cube",
+                                                             synthetic_medium="air",
+                                                             camera_info_url=f"file://{calibration}"))):
+        args = [*pcs[pc], sys.executable, "-m", f"veg_area_ros.ros.{module}", "--ros-args"]
+        for key, value in parameters.items():
+            args += ["-p", f"{key}:={value}"]
+        nodes.processes.append((module, subprocess.Popen(args, env=ours, stdout=sys.stderr, stderr=sys.stderr)))
+    results = {}
+    for pc, listener in listeners.items():
+        lines = [line for line in listener.communicate(timeout=seconds + 90)[0].splitlines()
+                 if line.startswith("RESULT ")]
+        results[pc] = json.loads(lines[-1][len("RESULT "):]) if lines else None
+    return {"camera_pc": results["a"], "measuring_pc": results["b"], "truth_m2": cube_scene().true_area_m2}
 
 
 def scenario_record_cli(options: dict, nodes: Nodes) -> dict:

@@ -76,3 +76,19 @@ def test_a_camera_info_heard_on_both_subscriptions_is_one_frame(frames):
     taken = [k for k, (t, _) in enumerate(frames, 1) if t]
     if taken:
         assert tally.skipped == taken[-1] - taken[0] + 1 - len(taken)
+
+
+def test_frames_missing_while_the_node_waited_are_lost_not_skipped():
+    """10 Hz camera_info (stamps 100 ms apart): frame 3's image never came while the node idled (lost); frames 6
+    and 7 came while it measured for 250 ms (skipped)."""
+    tally = FrameTally()
+    busy = [(600, 850)]  # ms: the node measured frame 5 from 600 to 850
+
+    def busy_between(start: int, end: int) -> bool:
+        return sum(max(0, min(e, end) - max(s, start)) for s, e in busy) >= 0.5 * (end - start)
+
+    for stamp in range(1, 10):
+        tally.announce(stamp, received_ns=stamp * 100)
+        if stamp not in (3, 6, 7):
+            tally.took(stamp, now_ns=stamp * 100 + 1, busy_between=busy_between)
+    assert (tally.skipped, tally.lost, tally.received) == (2, 1, 6)

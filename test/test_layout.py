@@ -57,14 +57,15 @@ def test_package_xml_is_an_ament_python_manifest():
 
 def test_config_and_launch_are_installed_and_the_launch_file_is_valid_python(prefix):
     share = prefix / "share" / "veg_area_ros"
-    for name in ("camera_node.yaml", "calibration_node.yaml", "area_node.yaml", "fastdds_shm.xml"):
+    for name in ("camera_node.yaml", "calibration_node.yaml", "area_node.yaml", "fastdds.xml", "fastdds_local.xml"):
         assert (share / "config" / name).is_file(), name
     launch = share / "launch" / "veg_area.launch.py"
     compile(launch.read_text(), str(launch), "exec")  # launch_ros is not installable here; it must parse
     for name in ("camera_node", "calibration_node", "area_node"):
         parameters = yaml.safe_load((share / "config" / f"{name}.yaml").read_text())
         assert list(parameters) == [name] and "ros__parameters" in parameters[name]
-    ET.parse(share / "config" / "fastdds_shm.xml")
+    ET.parse(share / "config" / "fastdds.xml")
+    ET.parse(share / "config" / "fastdds_local.xml")
 
 
 def test_installed_node_executable_starts_and_stops_cleanly(prefix, tmp_path):
@@ -74,7 +75,7 @@ def test_installed_node_executable_starts_and_stops_cleanly(prefix, tmp_path):
     import time
 
     env = dict(os.environ, HOME=str(tmp_path), ROS_DOMAIN_ID="199",
-               FASTDDS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_shm.xml"))
+               FASTDDS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_local.xml"))
     process = subprocess.Popen([str(prefix / "lib" / "veg_area_ros" / "area_node")], env=env,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:

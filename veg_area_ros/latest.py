@@ -6,12 +6,15 @@ every frame into Python and dropping it there fell well behind, bench/ros_pipeli
 skipped that way never reach the node; they are counted from `camera_info`, which ROS camera drivers (and
 camera_node) publish with every frame under that frame's stamp, from the first frame the node takes on. A
 camera_info that is not per frame (one latched calibration) leaves the count unknown (None), never a wrong
-number.
+number. A frame that never arrived is *skipped* when the node was busy measuring between its camera_info
+and the next one (its image waited in the depth-1 queue and a newer one replaced it), *lost* when the node
+was mostly waiting then and the image still did not come (the transport lost it).
 """
 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 
 REMEMBERED = 256  # stamps kept on each side: far more than frames in flight between the two topics
 
@@ -19,13 +22,15 @@ REMEMBERED = 256  # stamps kept on each side: far more than frames in flight bet
 class FrameTally:
     def __init__(self) -> None:
         self._announced: deque[int] = deque(maxlen=REMEMBERED)  # camera_info stamps not yet accounted for
+        self._received_at: dict[int, int] = {}  # announced stamp -> when its camera_info was received (ns)
         self._heard: deque[int] = deque(maxlen=REMEMBERED)  # every stamp announced (one frame heard twice is one)
         self._taken: deque[int] = deque(maxlen=REMEMBERED)  # frames whose camera_info may still come
         self._per_frame = False  # a taken frame's stamp was announced: camera_info comes with every frame
         self.received = 0  # frames taken
-        self._skipped = 0  # frames announced after the first frame taken, never taken
+        self._skipped = 0  # frames never taken while the node was busy, after the first frame taken
+        self._lost = 0  # frames never taken although the node was idle, after the first frame taken
 
-    def announce(self, stamp_ns: int) -> None:
+    def announce(self, stamp_ns: int, received_ns: int = 0) -> None:
         """A camera_info with this stamp: a frame the camera published. The same stamp again (the node listens
         on two subscriptions, a latched one and one any publisher matches) is the same frame."""
         if stamp_ns in self._heard:
@@ -35,24 +40,41 @@ class FrameTally:
             self._per_frame = True
             self._taken.remove(stamp_ns)
         elif not self._announced or stamp_ns > self._announced[-1]:  # a latched re-send is not a new frame
+            if len(self._announced) == self._announced.maxlen:
+                self._received_at.pop(self._announced[0], None)
             self._announced.append(stamp_ns)
+            self._received_at[stamp_ns] = received_ns
 
-    def took(self, stamp_ns: int) -> None:
-        """A frame with this stamp reached the node; announced frames older than it were skipped."""
+    def took(self, stamp_ns: int, now_ns: int = 0,
+             busy_between: Callable[[int, int], bool] = lambda start, end: True) -> None:
+        """A frame with this stamp reached the node (at `now_ns`); announced frames older than it never did:
+        skipped if `busy_between(their camera_info, the next one)` says the node was measuring meanwhile, else
+        lost."""
         self.received += 1
-        older = 0
+        skipped = lost = 0
         while self._announced and self._announced[0] < stamp_ns:
-            self._announced.popleft()
-            older += 1
+            missing = self._announced.popleft()
+            # until the next frame's camera_info (or now): the time this frame's image had to be taken
+            until = self._received_at.get(self._announced[0], now_ns) if self._announced else now_ns
+            if busy_between(self._received_at.pop(missing, 0), until):
+                skipped += 1
+            else:
+                lost += 1
         if self._announced and self._announced[0] == stamp_ns:
-            self._announced.popleft()
+            self._received_at.pop(self._announced.popleft(), None)
             self._per_frame = True
         else:
             self._taken.append(stamp_ns)
         if self.received > 1:  # before the first frame the node was not listening: nothing was skipped
-            self._skipped += older
+            self._skipped += skipped
+            self._lost += lost
 
     @property
     def skipped(self) -> int | None:
-        """Frames the camera announced that never reached the node; None while that cannot be known."""
+        """Frames the camera announced that were replaced while the node measured; None while unknown."""
         return self._skipped if self._per_frame else None
+
+    @property
+    def lost(self) -> int | None:
+        """Frames the camera announced while the node was idle that never arrived; None while unknown."""
+        return self._lost if self._per_frame else None

@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import time
+from collections import deque
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped
@@ -30,9 +32,10 @@ from ..idealize import FrameSizeError
 from ..latest import FrameTally
 from ..scale import TargetsError, TargetsSpec
 from ..synthetic import SCENE_DICTIONARY, SCENE_MARKERS
-from .common import ANY_INFO_QOS, IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS, declare, publish_safely
+from .common import ANY_INFO_QOS, IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS, InputWatch, declare, publish_safely
 from .messages import ImageMessageError, image_bytes
 
+BUSY_GAP_NS = 1_000_000  # callbacks closer than 1 ms: the node never waited for messages in between
 TUNABLE = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "targets_file",
            "area_mode", "levels")
 
@@ -69,6 +72,9 @@ class AreaNode(Node):
         self.frames = FrameTally()
         self.frames_measured = 0
         self._skipped_logged = 0
+        self._lost_logged = 0
+        self._busy: deque[tuple[int, int]] = deque(maxlen=64)  # recent measurements, (start, end) ns
+        self._measuring_since: int | None = None
         self.area_pub = self.create_publisher(Vector3Stamped, "projected_area", RESULT_QOS)
         self.info_pub = self.create_publisher(String, "projected_area/info", RESULT_QOS)
         self.mask_pub = self.create_publisher(Image, "mask", IMAGE_QOS)
@@ -90,10 +96,12 @@ class AreaNode(Node):
         # publisher matches (volatile drivers, bag replay); a camera_info heard on both is handled once
         quiet = SubscriptionEventCallbacks(incompatible_qos=lambda _: None)  # the other subscription hears those
         self._info_subscriptions = [
-            self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, PER_FRAME_INFO_QOS, raw=True,
-                                     event_callbacks=quiet),
-            self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, ANY_INFO_QOS, raw=True)]
+            self.create_subscription(CameraInfo, "camera_info", self._on_camera_info_received, PER_FRAME_INFO_QOS,
+                                     raw=True, event_callbacks=quiet),
+            self.create_subscription(CameraInfo, "camera_info", self._on_camera_info_received, ANY_INFO_QOS,
+                                     raw=True)]
         self.create_subscription(Image, "image_raw", self._on_frame, IMAGE_QOS, raw=True)
+        self.input_watch = InputWatch(self, "image_raw")
 
     @staticmethod
     def _load_targets(path: str) -> TargetsSpec:
@@ -139,9 +147,33 @@ class AreaNode(Node):
                 self.uncalibrated = parameter.value
         return SetParametersResult(successful=True)
 
-    def _on_camera_info(self, data: bytes) -> None:
+    def _busy_between(self, start_ns: int, end_ns: int) -> bool:
+        """Whether the node spent most of the time from start to end (ns, the system clock) in its callbacks:
+        then a frame's image that came meanwhile waited and was replaced (skipped); a node mostly waiting would
+        have taken it (lost)."""
+        if end_ns <= start_ns:
+            return True
+        measuring = sum(max(0, min(end, end_ns) - max(start, start_ns)) for start, end in self._busy)
+        return measuring >= 0.5 * (end_ns - start_ns)
+
+    def _on_camera_info_received(self, data: bytes, info: dict) -> None:  # two arguments: rclpy passes the info
+        started = time.time_ns()
+        try:
+            self._on_camera_info(data, info)
+        finally:
+            self._note_busy(started, time.time_ns())
+
+    def _note_busy(self, start_ns: int, end_ns: int) -> None:
+        """A stretch of time in this node's callbacks; stretches less than BUSY_GAP_NS apart are one (the
+        executor's dispatch between callbacks keeps the node as busy)."""
+        if self._busy and start_ns - self._busy[-1][1] < BUSY_GAP_NS:
+            self._busy[-1] = (self._busy[-1][0], end_ns)
+        else:
+            self._busy.append((start_ns, end_ns))
+
+    def _on_camera_info(self, data: bytes, info: dict | None = None) -> None:
         with contextlib.suppress(ImageMessageError):
-            self.frames.announce(stamp_ns(data))
+            self.frames.announce(stamp_ns(data), (info or {}).get("received_timestamp") or time.time_ns())
         content = unstamped(data)
         if content == self._info_seen:  # a camera republishing its calibration with every frame: nothing new
             return
@@ -175,24 +207,33 @@ class AreaNode(Node):
                     return
                 if taken is None:
                     break
-                self._on_camera_info(taken[0])
+                self._on_camera_info(*taken[:2])
 
     def _on_frame(self, data: bytes) -> None:
+        self.input_watch.frame()
         try:
             self._take_waiting_camera_info()
         except Exception as exc:  # a camera_info that cannot be taken or applied must not cost the frame
             self.get_logger().error(f"camera_info not taken: {exc.__class__.__name__}: {exc}",
                                     throttle_duration_sec=5.0)
+        self._measuring_since = time.time_ns()
         try:
             self._on_image(data)
         except Exception as exc:  # one bad frame must not end the node's measuring
             self.get_logger().error(f"frame not measured: {exc.__class__.__name__}: {exc}", throttle_duration_sec=5.0)
-        skipped = self.frames.skipped
+        finally:
+            self._note_busy(self._measuring_since, time.time_ns())
+            self._measuring_since = None
+        skipped, lost = self.frames.skipped, self.frames.lost
         if skipped is not None and skipped > self._skipped_logged:
             self.get_logger().warning(f"{skipped} frames skipped, {self.frames.received} measured or refused: the "
                                       "camera is faster than the measurement (the newest frame is measured)",
                                       throttle_duration_sec=10.0)
             self._skipped_logged = skipped
+        if lost is not None and lost > self._lost_logged:
+            self.get_logger().warning(f"{lost} frames lost in transport ({self.input_watch.transport}): their "
+                                      "camera_info came, the image did not", throttle_duration_sec=10.0)
+            self._lost_logged = lost
 
     def _on_image(self, data: bytes) -> None:
         log = self.get_logger()
@@ -203,7 +244,7 @@ class AreaNode(Node):
             log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
             return
         header = fields.header
-        self.frames.took(header.nanoseconds)
+        self.frames.took(header.nanoseconds, time.time_ns(), self._busy_between)
         if self.camera is None and self.uncalibrated == "drop":
             log.warning("no calibration yet (camera_info or calibration_file): frames dropped; set "
                         "uncalibrated_frames:=measure to measure them uncalibrated", throttle_duration_sec=10.0)
@@ -226,6 +267,7 @@ class AreaNode(Node):
         summary = result.summary()
         summary.update(stamp={"sec": header.sec, "nanosec": header.nanosec}, frame_id=header.frame_id,
                        frames_received=self.frames.received, frames_dropped=self.frames.skipped,
+                       frames_lost=self.frames.lost,
                        frames_measured=self.frames_measured)
         publish_safely(self, self.info_pub, String(data=json.dumps(summary)))
         # the images cost a remap each: made only for topics somebody listens to (rosbag2 counts)

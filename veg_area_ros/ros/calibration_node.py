@@ -23,7 +23,7 @@ from ..camera_model import BrownCamera
 from ..cdr import decode_image
 from ..sources import SYNTHETIC_BOARD
 from .camera_node import url_to_path
-from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, declare, publish_safely
+from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, InputWatch, declare, publish_safely
 from .messages import ImageMessageError, camera_to_info, info_to_camera
 
 NEW_POSE_DISTANCE = 0.08  # pose signature distance below which a view adds nothing new
@@ -72,6 +72,7 @@ class CalibrationNode(Node):
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
         self.progress_pub = self.create_publisher(String, "~/progress", RESULT_QOS)
         self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS, raw=True)  # a view, no copy
+        self.input_watch = InputWatch(self, "image_raw")
         self.create_service(Trigger, "~/calibrate", self._on_calibrate)
         self.create_service(SetCameraInfo, "set_camera_info", self._on_set_camera_info)
         if self.path is not None and self.path.exists():
@@ -85,6 +86,7 @@ class CalibrationNode(Node):
 
     # --- views -----------------------------------------------------------------------------------------
     def _on_image(self, data: bytes) -> None:
+        self.input_watch.frame()
         self.frames_seen += 1
         if self.fitted and not self.auto_calibrate:
             return

@@ -15,6 +15,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 
 from ..latest import REMEMBERED
+from ..transport import Transport, buffer_warning, choose_transport
 
 # images: what camera drivers use (best effort, newest frame only); a slow consumer never queues frames
 IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT,
@@ -63,33 +64,55 @@ def publish_safely(node: Node, publisher, msg) -> bool:
         return False
 
 
-def transport_profile() -> str | None:
-    """The shipped shared-memory Fast DDS profile (config/fastdds_shm.xml): installed share/ or the source tree."""
-    from pathlib import Path
-
-    candidates = [Path(__file__).resolve().parents[2] / "config" / "fastdds_shm.xml"]
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        candidates.insert(0, Path(get_package_share_directory("veg_area_ros")) / "config" / "fastdds_shm.xml")
-    except Exception:  # not in an ament prefix (PackageNotFoundError) or no ament_index_python
-        pass
-    return next((str(p) for p in candidates if p.is_file()), None)
-
-
-def ensure_ros_environment() -> None:
-    """Before rclpy.init(): HOME or ROS_LOG_DIR (rclpy needs one; a service manager may give neither), and
-    the shared-memory transport for camera-sized images unless the user chose a profile, another rmw, or
-    VEG_AREA_TRANSPORT=default (keep Fast DDS's UDP + small-segment SHM defaults, e.g. for multi-machine)."""
+def ensure_ros_environment() -> Transport:
+    """Before rclpy.init(): HOME or ROS_LOG_DIR (rclpy needs one; a service manager may give neither), and the
+    transport (veg_area_ros.transport's rule), which is returned to be logged once the node is up."""
     if "HOME" not in os.environ and "ROS_LOG_DIR" not in os.environ:
         os.environ["ROS_LOG_DIR"] = "/tmp/veg_area_ros_log"
-    if os.environ.get("VEG_AREA_TRANSPORT", "shm") == "default" or "FASTDDS_DEFAULT_PROFILES_FILE" in os.environ:
-        return
-    if os.environ.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp") != "rmw_fastrtps_cpp":
-        return
-    profile = transport_profile()
-    if profile:
-        os.environ["FASTDDS_DEFAULT_PROFILES_FILE"] = profile
+    transport = choose_transport(dict(os.environ))
+    transport.apply(os.environ)
+    return transport
+
+
+def log_transport(transport: Transport) -> None:
+    """The transport in use, once per process, and what may keep images from other machines."""
+    from rclpy.logging import get_logger
+
+    logger = get_logger("veg_area_ros")
+    logger.info(f"transport: {transport.description}")
+    warning = buffer_warning(transport)
+    if warning:
+        logger.warning(warning)
+
+
+QUIET_INPUT_S = 10.0  # a node without frames for this long says why it may be
+
+
+class InputWatch:
+    """Says in the log, every QUIET_INPUT_S without a frame, whether a publisher of the node's image topic has
+    matched at all, with the transport in use: the first thing to check when a camera gives no Af."""
+
+    def __init__(self, node: Node, topic: str):
+        self.node, self.topic = node, node.resolve_topic_name(topic)
+        self.transport = choose_transport(dict(os.environ)).description
+        self.frames = 0
+        self._seen_at_last_check = 0
+        node.create_timer(QUIET_INPUT_S, self._check)
+
+    def frame(self) -> None:
+        self.frames += 1
+
+    def _check(self) -> None:
+        if self.frames > self._seen_at_last_check:
+            self._seen_at_last_check = self.frames
+            return
+        publishers = self.node.count_publishers(self.topic)
+        if publishers == 0:
+            reason = f"no publisher of {self.topic} matched"
+        else:
+            reason = f"{publishers} publisher(s) of {self.topic} matched but no frame arrived"
+        self.node.get_logger().warning(f"{reason} in the last {QUIET_INPUT_S:g} s (transport: {self.transport}; "
+                                       "another machine's nodes need the same transport and ROS_DOMAIN_ID)")
 
 
 class StopOnSignal:
@@ -127,10 +150,15 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
     from rclpy.logging import get_logger
     from rclpy.signals import SignalHandlerOptions
 
-    ensure_ros_environment()
+    try:
+        transport = ensure_ros_environment()
+    except ValueError as exc:  # a mistyped VEG_AREA_TRANSPORT
+        print(f"veg_area_ros: {exc}", file=sys.stderr)
+        return 2
     # rclpy's handlers stay out; ours go in after init, so a slow rcl_init is still interrupted as usual
     rclpy.init(args=args if args is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopOnSignal()
+    log_transport(transport)
     executor = SingleThreadedExecutor()
     nodes: list[Node] = []
     code = 0

@@ -18,18 +18,19 @@ from std_msgs.msg import String
 from .area_node import AreaNode
 from .calibration_node import CalibrationNode
 from .camera_node import CameraNode
-from .common import RESULT_QOS, ensure_ros_environment
+from .common import RESULT_QOS, ensure_ros_environment, log_transport
 
 
 def run_graph(output: Path, measurements: int = 10, timeout_s: float = 300.0, rate_hz: float = 10.0,
               say=print) -> int:
     """Run camera -> calibration -> area until `measurements` calibrated Af values are in; print them
     against the rendered cube's true area. 0 on success, 1 on timeout."""
-    ensure_ros_environment()
+    transport = ensure_ros_environment()
     output.mkdir(parents=True, exist_ok=True)
     calibration_file = output / "graph_calibration.yaml"
     calibration_file.unlink(missing_ok=True)  # the demo calibrates from scratch every run
     rclpy.init(args=[])
+    log_transport(transport)
     executor = SingleThreadedExecutor()
     nodes: list[Node] = []
     try:
