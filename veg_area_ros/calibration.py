@@ -10,6 +10,7 @@ warnings about weak geometry.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -76,6 +77,11 @@ class CalibrationResult:
     seconds: float
     coverage: float  # fraction of an 8x6 grid over the image that holds detected points
     radial_profile: list[dict] = field(default_factory=list)  # per ring: mean radial residual, rms (radial_profile())
+    std_covariance: dict[str, float] = field(default_factory=dict)  # from the covariance, corner errors independent
+    std_views: dict[str, float] = field(default_factory=dict)  # from resampling views (infinitesimal jackknife)
+    halves: dict = field(default_factory=dict)  # two disjoint halves of the views fitted apart (cross-validation)
+    projection_std_px: dict = field(default_factory=dict)  # a direction's pixel uncertainty over the image
+    poses: list[np.ndarray] = field(repr=False, default_factory=list)  # (rvec, tvec) of each used view, 6 values
     image_points: list[np.ndarray] = field(repr=False, default_factory=list)
     residuals: list[np.ndarray] = field(repr=False, default_factory=list)  # detected - projected, px
     inliers: list[np.ndarray] = field(repr=False, default_factory=list)
@@ -102,6 +108,10 @@ class CalibrationResult:
             **{k: v for k, v in cam.parameters().items() if k in ("fx", "fy", "cx", "cy")},
             "dist": cam.dist.tolist(),
             "std": dict(self.std),
+            "std_covariance": dict(self.std_covariance),
+            "std_views": dict(self.std_views),
+            "halves": dict(self.halves),
+            "projection_std_px": dict(self.projection_std_px),
             "correlations": {f"{PARAM_NAMES[i]}-{PARAM_NAMES[j]}": float(self.correlation[i, j])
                              for i in range(N_INTRINSIC) for j in range(i + 1, N_INTRINSIC)},
             "coverage": self.coverage,
@@ -215,6 +225,35 @@ def _systematic_residual_warning(rings: list[dict]) -> list[str]:
             "positions carry errors of about that size"]
 
 
+NEW_POSE_DISTANCE = 0.08  # pose signature distance below which a view adds nothing new (a video's next frames)
+
+
+def pose_signature(points: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """Where the board is (centre), how big (sqrt of its hull area), and how it is turned (doubled angle of
+    its principal axis, so a 180° turn is the same pose): all scaled to about 0..1."""
+    width, height = image_size
+    centre = points.mean(axis=0)
+    spread = points - centre
+    _, s, vt = np.linalg.svd(spread, full_matrices=False)
+    angle = math.atan2(vt[0, 1], vt[0, 0])
+    size = math.sqrt(max(s[0] * s[1], 1e-9) / len(points)) / width
+    return np.array([centre[0] / width, centre[1] / height, 2 * size, 0.25 * math.cos(2 * angle),
+                     0.25 * math.sin(2 * angle), s[1] / max(s[0], 1e-9) * 0.3])
+
+
+HELD_POSE_FRACTION = 0.01  # board points moving less than this share of the image diagonal: the same pose
+
+
+def same_pose(a: Detection, b: Detection, image_size: tuple[int, int]) -> bool:
+    """Whether two detections show the board where it was (a video of a pose held still): most points in common
+    and their mean displacement under 1 % of the image diagonal."""
+    common, in_a, in_b = np.intersect1d(a.ids, b.ids, return_indices=True)
+    if len(common) < 0.5 * max(len(a.ids), len(b.ids)):
+        return False
+    moved = np.hypot(*(a.image_points[in_a] - b.image_points[in_b]).T).mean()
+    return bool(moved < HELD_POSE_FRACTION * math.hypot(*image_size))
+
+
 def _weak_geometry_warnings(
     views: list[ViewReport], image_points: list[np.ndarray], correlation: np.ndarray, width: int, height: int,
 ) -> list[str]:
@@ -246,16 +285,113 @@ def _weak_geometry_warnings(
     return warnings
 
 
+def _view_resampling_covariance(J: np.ndarray, residuals: np.ndarray, normal: np.ndarray,
+                                row_starts: np.ndarray) -> np.ndarray:
+    """Covariance of the camera parameters when views, not corners, are the independent samples: the
+    infinitesimal jackknife over views (cluster-robust sandwich H^-1 (sum_v g_v g_v^T) H^-1 with g_v = J_v^T r_v,
+    scaled by G / (G - 1)), what a bootstrap over views measures, without refitting."""
+    views = len(row_starts) - 1
+    gradients = np.array([J[row_starts[v]:row_starts[v + 1]].T @ residuals[row_starts[v]:row_starts[v + 1]]
+                          for v in range(views)])
+    inverse = np.linalg.inv(normal)
+    meat = gradients.T @ gradients * views / max(views - 1, 1)
+    return (inverse @ meat @ inverse)[:N_INTRINSIC, :N_INTRINSIC]
+
+
+def _refit(object_points: list[np.ndarray], image_points: list[np.ndarray], start: np.ndarray) -> np.ndarray:
+    """The joint least squares from a start near the solution (a subset of the views): camera and poses."""
+    problem = _Problem(object_points, image_points)
+    fit = least_squares(problem.residuals, start, jac=problem.jacobian, method="trf", x_scale="jac",
+                        tr_solver="lsmr", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=100)
+    return fit.x
+
+
+def _halves(object_points: list[np.ndarray], image_points: list[np.ndarray], x: np.ndarray, camera: BrownCamera,
+            std: dict[str, float]) -> dict:
+    """The views split into two disjoint halves (alternately, so both span the session), each fitted apart:
+    the camera parameters' differences in combined std (each half's std is sqrt(2) x the whole's) and the
+    largest difference in projection over the image (px)."""
+    fitted = []
+    for half in (0, 1):
+        chosen = list(range(half, len(object_points), 2))
+        start = np.concatenate([x[:N_INTRINSIC]] + [x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6] for v in chosen])
+        fitted.append(_refit([object_points[v] for v in chosen], [image_points[v] for v in chosen], start))
+    difference = fitted[0][:N_INTRINSIC] - fitted[1][:N_INTRINSIC]
+    combined = np.array([std[name] for name in PARAM_NAMES]) * 2  # sqrt(2 std_half^2), std_half = sqrt(2) std
+    z = np.abs(difference) / np.maximum(combined, 1e-300)
+    grid = _image_grid(camera)
+    directions = camera.pixels_to_normalized(grid)
+    projected = [_camera_from(f, camera).normalized_to_pixels(directions) for f in fitted]
+    shift = np.hypot(*(projected[0] - projected[1]).T)
+    worst = int(np.argmax(z))
+    return {"z": dict(zip(PARAM_NAMES, map(float, z), strict=True)), "max_z": float(z.max()),
+            "worst": f"{PARAM_NAMES[worst]} {difference[worst]:+.3g}", "projection_difference_px":
+            {"median": float(np.median(shift)), "max": float(shift.max())}}
+
+
+def _camera_from(x: np.ndarray, like: BrownCamera) -> BrownCamera:
+    return BrownCamera.from_opencv(np.array([[x[0], 0, x[2]], [0, x[1], x[3]], [0, 0, 1]]), x[4:9], like.image_size)
+
+
+def _image_grid(camera: BrownCamera, n: int = 9) -> np.ndarray:
+    u, v = np.meshgrid(np.linspace(0, camera.width - 1, n + 2)[1:-1], np.linspace(0, camera.height - 1, n + 2)[1:-1])
+    return np.column_stack([u.ravel(), v.ravel()])
+
+
+def projection_std(camera: BrownCamera, covariance: np.ndarray, covered: np.ndarray | None = None) -> dict:
+    """How far (px, 1 std) the image of a fixed viewing direction is uncertain, over a grid on the image (the
+    part inside the board points' hull, `covered`, where the model is not extrapolated), from the camera
+    parameters' covariance: median and max, and the grid's values."""
+    grid = _image_grid(camera)
+    if covered is not None and len(covered) >= 3:
+        hull = cv2.convexHull(covered.astype(np.float32))
+        inside = [cv2.pointPolygonTest(hull, (float(u), float(v)), False) >= 0 for u, v in grid]
+        grid = grid[np.array(inside)] if any(inside) else grid
+    directions = camera.pixels_to_normalized(grid)
+    base = camera.parameters()
+    values = np.array(list(base.values()))
+    jac = np.zeros((len(grid), 2, N_INTRINSIC))
+    for i in range(N_INTRINSIC):
+        step = 1e-6 * max(abs(values[i]), 1.0)
+        moved = values.copy()
+        moved[i] += step
+        shifted = _camera_from(moved, camera).normalized_to_pixels(directions)
+        jac[:, :, i] = (shifted - camera.normalized_to_pixels(directions)) / step
+    variances = np.einsum("pij,jk,pik->pi", jac, covariance, jac)
+    std = np.sqrt(np.clip(variances.sum(axis=1), 0, None))
+    return {"median": float(np.median(std)), "max": float(std.max()), "points": grid.round(1).tolist(),
+            "std_px": std.round(4).tolist()}
+
+
+def _uncertainty_warnings(std: dict[str, float], views: list[ViewReport], width: int, height: int) -> list[str]:
+    """Warnings from the measured uncertainties and the views' residuals."""
+    warnings = []
+    principal = max(std["cx"], std["cy"])
+    if principal > 0.005 * min(width, height):  # 2.4 px at 640x480, 5.4 px at 1440x1080
+        warnings.append(f"principal point uncertain by ±{principal:.1f} px: add views rotated by 90 deg and views "
+                        "that fill the corners")
+    if len(views) >= 4:
+        typical = float(np.median([v.rms_px for v in views]))
+        outliers = [v for v in views if v.rms_px > max(3 * typical, typical + 0.3)]
+        if outliers:
+            names = ", ".join(f"{v.name} ({v.rms_px:.2f} px)" for v in outliers)
+            warnings.append(f"views far worse than the others (median {typical:.2f} px): {names}; "
+                            "check them (blur, a bent board, a wrong detection) or leave them out")
+    return warnings
+
+
 def calibrate(
     views: Sequence[View],
     image_size: tuple[int, int],
     robust_loss: str = "linear",
     outlier_sigma: float | None = 4.0,
     progress: Callable[[str], None] | None = None,
+    cross_validate: bool = True,
 ) -> CalibrationResult:
     """Fit the Brown model to the views. `robust_loss` is a scipy loss ('linear', 'huber', 'soft_l1', ...);
     points whose residual exceeds `outlier_sigma` robust standard deviations are rejected and the fit
-    repeated (None disables rejection)."""
+    repeated (None disables rejection). `std` is the larger of the covariance's and the view-resampling
+    std; `cross_validate` also fits two disjoint halves of the views and compares them."""
     started = time.perf_counter()
     say = progress or (lambda _msg: None)
     width, height = image_size
@@ -340,9 +476,14 @@ def calibrate(
         covariance = np.linalg.inv(normal) * sigma0**2
     except np.linalg.LinAlgError as exc:
         raise CalibrationError("the normal equations are singular: the views do not determine the camera") from exc
-    cov_i = covariance[:N_INTRINSIC, :N_INTRINSIC]
-    std_values = np.sqrt(np.clip(np.diag(cov_i), 0, None))
-    correlation = cov_i / np.outer(std_values, std_values)
+    covariance_std = np.sqrt(np.clip(np.diag(covariance[:N_INTRINSIC, :N_INTRINSIC]), 0, None))
+    view_cov = _view_resampling_covariance(J, residuals, normal, problem.row_starts)
+    # the honest std: corner errors are not independent within a view (board flatness, lighting, blur), so
+    # resampling views spreads the camera more than the covariance says; the larger of the two
+    view_std = np.sqrt(np.clip(np.diag(view_cov), 0, None))
+    cov_i = view_cov if np.all(view_std >= covariance_std) else covariance[:N_INTRINSIC, :N_INTRINSIC]
+    std_values = np.maximum(view_std, covariance_std)
+    correlation = cov_i / np.outer(np.sqrt(np.diag(cov_i)), np.sqrt(np.diag(cov_i)))
     camera = BrownCamera.from_opencv(
         np.array([[x_final[0], 0, x_final[2]], [0, x_final[1], x_final[3]], [0, 0, 1]]), x_final[4:9],
         (width, height))
@@ -371,11 +512,26 @@ def calibrate(
                                                                           strict=True)])
     warnings += _systematic_residual_warning(profile)
     coverage = float(coverage_grid(used_points, width, height, 8, 6).mean())
+    honest = dict(zip(PARAM_NAMES, map(float, std_values), strict=True))
+    projection = projection_std(camera, view_cov if np.all(view_std >= covariance_std) else cov_i,
+                                np.vstack(used_points))
+    halves = {}
+    if cross_validate and len(active) >= 2 * MIN_VIEWS + 2:
+        say("cross-validation: the two halves of the views fitted apart")
+        halves = _halves(obj, [image_points[v][keep[v]] for v in active], x_final, camera, honest)
+        if halves["max_z"] > 3:
+            warnings.append(f"two halves of the views disagree by up to {halves['max_z']:.1f} combined std "
+                            f"({halves['worst']}): some views are not like the others (moved board, refocus, "
+                            "another distance); check the per-view residuals")
+    warnings += _uncertainty_warnings(honest, reports, width, height)
     say(f"done: RMS {np.sqrt(np.mean(err**2)):.4f} px over {len(active)} views")
     return CalibrationResult(
         camera=camera, std=dict(zip(PARAM_NAMES, map(float, std_values), strict=True)), correlation=correlation,
         rms_px=float(np.sqrt(np.mean(err**2))), mean_px=float(err.mean()), max_residual_px=float(err.max()),
         views=reports, rejected_views=rejected_views, warnings=warnings, opencv_rms_px=float(opencv_rms),
         sigma0_px=sigma0, iterations=iterations, seconds=time.perf_counter() - started, coverage=coverage,
-        radial_profile=profile,
+        radial_profile=profile, std_covariance=dict(zip(PARAM_NAMES, map(float, covariance_std), strict=True)),
+        std_views=dict(zip(PARAM_NAMES, map(float, view_std), strict=True)), halves=halves,
+        projection_std_px=projection,
+        poses=[x_final[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6].copy() for k in range(len(active))],
         image_points=per_view_points, residuals=per_view_residuals, inliers=per_view_inliers)

@@ -48,9 +48,10 @@ def _positive_float(text: str) -> float:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
+
     from .board import BoardSpec, BoardSpecError
     from .calib_io import CalibrationFileError, quality_rms, read_calibration, write_calibration
-    from .calibration import CalibrationError, View, calibrate
+    from .calibration import CalibrationError, View, calibrate, same_pose
     from .frames import VIDEO_SUFFIXES, InputError, expand_inputs, iter_frames, video_frame_count
 
     say = _progress(args.quiet)
@@ -82,6 +83,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     unreadable: list[str] = []
     no_board: list[str] = []
     wrong_size: list[str] = []
+    repeated: list[str] = []
+    last_kept: dict[str, object] = {}  # per video: the last view kept, so a pose held still counts once
     seen = 0
     for frame in iter_frames(files, step):
         seen += 1
@@ -101,6 +104,13 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             no_board.append(frame.name)
             say(f"[{seen}] {frame.name}: no {board.kind} board found")
             continue
+        if frame.time_s is not None:  # a video frame: the board held still for a while is one view, not many
+            video = frame.name.rsplit("#", 1)[0]
+            if video in last_kept and same_pose(detection, last_kept[video], image_size):
+                repeated.append(frame.name)
+                say(f"[{seen}] {frame.name}: same pose as the view before it, counted once")
+                continue
+            last_kept[video] = detection
         views.append(View(frame.name, detection))
         say(f"[{seen}] {frame.name}: {len(detection)} board points")
 
@@ -115,7 +125,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from exc
 
     summary = result.summary()
-    summary.update(unreadable=unreadable, no_board=no_board, wrong_size=wrong_size, output=str(output))
+    summary.update(unreadable=unreadable, no_board=no_board, wrong_size=wrong_size, repeated_poses=repeated,
+                   output=str(output))
     metadata = {
         "medium": args.medium,
         "calibration_distance_m": args.distance,
@@ -123,7 +134,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
         "software": f"veg_area_ros {__version__}",
         **{k: summary[k] for k in ("rms_px", "mean_px", "max_residual_px", "sigma0_px", "views_used",
-                                   "views_rejected", "std", "coverage", "warnings")},
+                                   "views_rejected", "std", "std_covariance", "std_views", "coverage", "warnings")},
+        "halves": {k: v for k, v in summary["halves"].items() if k != "z"},
+        "projection_std_px": {k: summary["projection_std_px"][k] for k in ("median", "max")},
     }
 
     if previous is not None and previous.camera.image_size == result.camera.image_size \
@@ -152,8 +165,14 @@ def _format_calibration(result, output: Path) -> str:
     lines = [f"calibration written to {output}",
              f"views used {result.views_used}, rejected {len(result.rejected_views)}; "
              f"RMS {result.rms_px:.4f} px, mean {result.mean_px:.4f} px, max {result.max_residual_px:.4f} px",
-             f"{'param':>6} {'value':>14} {'std':>12}"]
-    lines += [f"{name:>6} {value:14.6g} {std[name]:12.3g}" for name, value in cam.parameters().items()]
+             f"{'param':>6} {'value':>14} {'std':>12} {'(covariance':>12} {'views)':>10}"]
+    lines += [f"{name:>6} {value:14.6g} {std[name]:12.3g} {result.std_covariance[name]:12.3g} "
+              f"{result.std_views[name]:10.3g}" for name, value in cam.parameters().items()]
+    if result.halves:
+        lines.append(f"two halves of the views: parameters differ by up to {result.halves['max_z']:.1f} combined "
+                     f"std; projection by {result.halves['projection_difference_px']['max']:.2f} px at most")
+    lines.append(f"projection uncertainty over the covered image: median "
+                 f"{result.projection_std_px['median']:.3f} px, max {result.projection_std_px['max']:.3f} px")
     lines += [f"warning: {w}" for w in result.warnings]
     return "\n".join(lines)
 

@@ -23,7 +23,8 @@ def _pyplot():
 
 
 def write_calibration_report(result: CalibrationResult, folder: str | Path) -> list[Path]:
-    """Write residuals.png, per_view.png, coverage.png, radial.png and calibration.json into `folder`."""
+    """Write residuals.png, per_view.png, coverage.png, radial.png, uncertainty.png and calibration.json into
+    `folder`."""
     plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -93,6 +94,30 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path) -> l
     written.append(folder / "radial.png")
     fig.savefig(written[-1], dpi=110, bbox_inches="tight")
     plt.close(fig)
+
+    # how well the calibration pins each viewing direction's pixel, and the std of each parameter two ways
+    projection = result.projection_std_px
+    if projection.get("points"):
+        grid, std = np.array(projection["points"]), np.array(projection["std_px"])
+        fig, (left, right) = plt.subplots(1, 2, figsize=(13, 5), gridspec_kw={"width_ratios": [1.4, 1]})
+        shown = left.scatter(grid[:, 0], grid[:, 1], c=std, s=120, cmap="magma_r", marker="s")
+        fig.colorbar(shown, ax=left, label="projection std [px]")
+        left.set_xlim(0, width)
+        left.set_ylim(height, 0)
+        left.set_aspect("equal")
+        left.set_title(f"Projection uncertainty (median {projection['median']:.2f} px, max {projection['max']:.2f} px)")
+        names = ["fx", "fy", "cx", "cy"]
+        spots = np.arange(len(names))
+        right.bar(spots - 0.2, [result.std_covariance.get(n, 0) for n in names], 0.4, label="covariance")
+        right.bar(spots + 0.2, [result.std_views.get(n, 0) for n in names], 0.4, label="resampling views")
+        right.set_xticks(spots, names)
+        right.set_ylabel("std [px]")
+        halves = result.halves
+        right.set_title("Parameter std" + (f"; halves differ by up to {halves['max_z']:.1f} std" if halves else ""))
+        right.legend()
+        written.append(folder / "uncertainty.png")
+        fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+        plt.close(fig)
 
     written.append(folder / "calibration.json")
     written[-1].write_text(json.dumps(result.summary(), indent=2))

@@ -18,28 +18,13 @@ from std_srvs.srv import Trigger
 from .. import __version__
 from ..board import BoardSpec, BoardSpecError
 from ..calib_io import CalibrationFileError, quality_rms, read_calibration, write_calibration
-from ..calibration import CalibrationError, View, calibrate, coverage_grid
+from ..calibration import NEW_POSE_DISTANCE, CalibrationError, View, calibrate, coverage_grid, pose_signature
 from ..camera_model import BrownCamera
 from ..cdr import decode_image
 from ..sources import SYNTHETIC_BOARD
 from .camera_node import url_to_path
 from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, InputWatch, declare, publish_safely
 from .messages import ImageMessageError, camera_to_info, info_to_camera
-
-NEW_POSE_DISTANCE = 0.08  # pose signature distance below which a view adds nothing new
-
-
-def pose_signature(points: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
-    """Where the board is (centre), how big (sqrt of its hull area), and how it is turned (doubled angle of
-    its principal axis, so a 180° turn is the same pose): all scaled to about 0..1."""
-    width, height = image_size
-    centre = points.mean(axis=0)
-    spread = points - centre
-    _, s, vt = np.linalg.svd(spread, full_matrices=False)
-    angle = math.atan2(vt[0, 1], vt[0, 0])
-    size = math.sqrt(max(s[0] * s[1], 1e-9) / len(points)) / width
-    return np.array([centre[0] / width, centre[1] / height, 2 * size, 0.25 * math.cos(2 * angle),
-                     0.25 * math.sin(2 * angle), s[1] / max(s[0], 1e-9) * 0.3])
 
 
 class CalibrationNode(Node):
