@@ -31,6 +31,7 @@ def test_bad_specs_say_what_is_wrong(text):
     ("chessboard:9x6:0.03", 0.1),
     ("charuco:7x5:0.04:0.03:DICT_4X4_50", 0.15),
     ("circles:4x11:0.02", 0.1),
+    ("circles:6x6:0.03:symmetric", 0.1),
 ])
 def test_detection_is_subpixel_accurate_on_renders(spec, tolerance):
     board, poses, images = render_views(seed=5, count=4, spec=spec)
@@ -38,6 +39,11 @@ def test_detection_is_subpixel_accurate_on_renders(spec, tolerance):
     for (rvec, tvec), image in zip(poses, images, strict=True):
         detection = board.detect(image)
         assert detection is not None, f"{spec} not found"
+        if board.symmetric:  # a symmetric grid looks the same turned by 180° (or 90°): its numbering may turn too
+            every = ENDOSCOPE.project(board.object_points(), rvec, tvec)
+            gaps = np.hypot(*(detection.image_points[:, None] - every[None]).transpose(2, 0, 1))
+            errors.append(gaps.min(axis=1))
+            continue
         truth = ENDOSCOPE.project(detection.object_points, rvec, tvec)
         errors.append(np.hypot(*(detection.image_points - truth).T))
     errors = np.concatenate(errors)
@@ -63,6 +69,16 @@ def test_white_on_black_charuco_is_found_inverted():
     assert detection is not None and detection.inverted
     truth = ENDOSCOPE.project(detection.object_points, *poses[0])
     assert np.abs(detection.image_points - truth).max() < 0.5
+
+
+def test_symmetric_circle_grid_spec_and_the_kind_not_found():
+    symmetric = BoardSpec.parse("circles:6x6:0.03:symmetric")
+    assert symmetric.symmetric and str(symmetric) == "circles:6x6:0.03:symmetric"
+    assert symmetric.object_points()[7, :2] == pytest.approx([0.03, 0.03])  # no offset between rows
+    _, _, images = render_views(seed=5, count=1, spec="circles:6x6:0.03:symmetric")
+    assert BoardSpec.parse("circles:6x6:0.03").detect(images[0]) is None  # an asymmetric search misses it
+    with pytest.raises(BoardSpecError, match="symmetric"):
+        BoardSpec.parse("circles:6x6:0.03:sym")
 
 
 @pytest.mark.parametrize("spec", ["chessboard:9x6:0.03", "charuco:7x5:0.04:0.03:DICT_4X4_50",

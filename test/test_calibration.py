@@ -190,3 +190,11 @@ def test_a_bad_view_is_named_and_uncertain_geometry_is_said():
     std = dict(result.std, cx=8.0)  # as the bootstrap showed for a set with too few rotated views
     warned = _uncertainty_warnings(std, result.views, 1440, 1080)
     assert any("principal point uncertain by ±8.0 px" in w for w in warned), warned
+
+
+def test_a_symmetric_circle_grid_calibrates():
+    board, _, images = render_views(seed=6, count=12, spec="circles:7x5:0.03:symmetric")
+    views = [View(f"v{i}", d) for i, im in enumerate(images) if (d := board.detect(im)) is not None]
+    assert len(views) >= 10
+    result = calibrate(views, ENDOSCOPE.image_size)
+    assert abs(result.camera.fx / ENDOSCOPE.fx - 1) < 0.005 and result.rms_px < 0.2

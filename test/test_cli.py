@@ -82,6 +82,17 @@ def test_a_pose_held_for_several_video_frames_counts_once(tmp_path, air_views):
     assert "same pose as the view before it" in result.stderr
 
 
+def test_a_symmetric_grid_searched_as_asymmetric_says_what_to_write(tmp_path):
+    from helpers import render_views
+
+    _, _, images = render_views(seed=5, count=3, spec="circles:6x6:0.03:symmetric")
+    for k, image in enumerate(images):
+        cv2.imwrite(str(tmp_path / f"grid{k}.png"), image)
+    result = run_cli("calibrate", str(tmp_path), "--board", "circles:6x6:0.03", "-o", str(tmp_path / "c.yaml"))
+    assert result.returncode == 1 and "circles:6x6:0.03:symmetric" in result.stderr, result.stderr
+    assert "medium 'unspecified'" in result.stderr
+
+
 def test_empty_folder(tmp_path):
     (tmp_path / "empty").mkdir()
     result = run_cli("calibrate", str(tmp_path / "empty"), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))

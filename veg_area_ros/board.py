@@ -6,6 +6,7 @@ No ROS here. A board spec is a string a user types:
     charuco:SXxSY:SQUARE_M:MARKER_M:DICT     squares, square and marker side, ArUco dictionary
     circles:COLSxROWS:SPACING_M              asymmetric circle grid; circle (i, j) sits at
                                              ((2j + i mod 2)·s, i·s), OpenCV's convention
+    circles:COLSxROWS:SPACING_M:symmetric    symmetric circle grid; circle (i, j) at (j·s, i·s)
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ class BoardSpec:
     square: float  # square side (chessboard, charuco) or grid spacing (circles), metres
     marker: float = 0.0
     dictionary: str = ""
+    symmetric: bool = False  # circles: a symmetric grid (else OpenCV's asymmetric one)
 
     @classmethod
     def parse(cls, text: str) -> BoardSpec:
@@ -56,8 +58,12 @@ class BoardSpec:
         if kind not in usage:
             raise BoardSpecError(f"unknown board kind {parts[0]!r} in {text!r}; use one of {', '.join(KINDS)}")
         expected = usage[kind].count(":") + 1
+        symmetric = kind == "circles" and len(parts) == expected + 1 and parts[-1].lower() == "symmetric"
+        if symmetric:
+            parts = parts[:-1]
         if len(parts) != expected:
-            raise BoardSpecError(f"board spec {text!r} should look like {usage[kind]}")
+            hint = " (or circles:COLSxROWS:SPACING_M:symmetric)" if kind == "circles" else ""
+            raise BoardSpecError(f"board spec {text!r} should look like {usage[kind]}{hint}")
         try:
             cols, rows = (int(n) for n in parts[1].lower().split("x"))
             square = float(parts[2])
@@ -75,12 +81,12 @@ class BoardSpec:
                 raise BoardSpecError(f"unknown ArUco dictionary {parts[4]!r} in {text!r}")
             if not 0 < marker < square:
                 raise BoardSpecError(f"the marker must be smaller than the square in {text!r}")
-        return cls(kind, cols, rows, square, marker, dictionary)
+        return cls(kind, cols, rows, square, marker, dictionary, symmetric)
 
     def __str__(self) -> str:
         if self.kind == "charuco":
             return f"charuco:{self.cols}x{self.rows}:{self.square:g}:{self.marker:g}:{self.dictionary}"
-        return f"{self.kind}:{self.cols}x{self.rows}:{self.square:g}"
+        return f"{self.kind}:{self.cols}x{self.rows}:{self.square:g}" + (":symmetric" if self.symmetric else "")
 
     # --- geometry -----------------------------------------------------------------------------------
     def object_points(self) -> np.ndarray:
@@ -88,7 +94,7 @@ class BoardSpec:
         if self.kind == "charuco":
             return np.asarray(self._charuco_board().getChessboardCorners(), dtype=np.float64).reshape(-1, 3)
         i, j = np.meshgrid(np.arange(self.rows), np.arange(self.cols), indexing="ij")
-        if self.kind == "chessboard":
+        if self.kind == "chessboard" or self.symmetric:
             xy = np.column_stack([j.ravel(), i.ravel()]) * self.square
         else:
             xy = np.column_stack([(2 * j + i % 2).ravel(), i.ravel()]) * self.square
@@ -101,7 +107,8 @@ class BoardSpec:
             return (-1.5 * s, -1.5 * s, (self.cols + 0.5) * s, (self.rows + 0.5) * s)
         if self.kind == "charuco":
             return (-0.5 * s, -0.5 * s, (self.cols + 0.5) * s, (self.rows + 0.5) * s)
-        return (-1.5 * s, -1.5 * s, (2 * self.cols + 0.5) * s, (self.rows + 0.5) * s)
+        columns = self.cols if self.symmetric else 2 * self.cols
+        return (-1.5 * s, -1.5 * s, (columns + 0.5) * s, (self.rows + 0.5) * s)
 
     def _charuco_board(self) -> cv2.aruco.CharucoBoard:
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
@@ -170,7 +177,8 @@ class BoardSpec:
         return self._detection(corners, np.arange(self.cols * self.rows))
 
     def _detect_circles(self, grey: np.ndarray) -> Detection | None:
-        found, centres = cv2.findCirclesGrid(grey, (self.cols, self.rows), flags=cv2.CALIB_CB_ASYMMETRIC_GRID)
+        grid = cv2.CALIB_CB_SYMMETRIC_GRID if self.symmetric else cv2.CALIB_CB_ASYMMETRIC_GRID
+        found, centres = cv2.findCirclesGrid(grey, (self.cols, self.rows), flags=grid)
         if not found:
             return None
         return self._detection(centres, np.arange(self.cols * self.rows))

@@ -114,10 +114,19 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         views.append(View(frame.name, detection))
         say(f"[{seen}] {frame.name}: {len(detection)} board points")
 
+    if args.medium == "unspecified":
+        say("warning: --medium not given: the calibration is recorded with medium 'unspecified' (say air or water: "
+            "a calibration holds only in the medium it was made in)")
     if not views:
         if image_size is None:
             raise CliError(f"no readable image among the inputs ({len(unreadable)} unreadable)")
-        raise CliError(f"no {board} board found in any of {seen} images")
+        hint = ""
+        if board.kind == "circles":
+            hint = (f" (looked for {'a symmetric' if board.symmetric else 'an asymmetric'} grid; for the other "
+                    f"kind write circles:{board.cols}x{board.rows}:{board.square:g}"
+                    f"{'' if board.symmetric else ':symmetric'})")
+        raise CliError(f"no {board} board found in any of {seen} images{hint}; supported boards: chessboard, "
+                       "charuco, circles (asymmetric, or :symmetric)")
     try:
         result = calibrate(views, image_size, robust_loss=args.loss,
                            outlier_sigma=None if args.no_outlier_rejection else args.outlier_sigma, progress=say)
@@ -635,11 +644,12 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("inputs", nargs="+", help="images, folders of images, videos")
     cal.add_argument("--board", required=True,
                      help="chessboard:COLSxROWS:SQUARE_M | charuco:SXxSY:SQUARE_M:MARKER_M:DICT | "
-                          "circles:COLSxROWS:SPACING_M")
+                          "circles:COLSxROWS:SPACING_M (asymmetric grid) | circles:COLSxROWS:SPACING_M:symmetric")
     cal.add_argument("-o", "--output", required=True, help="camera_info YAML to write")
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
     cal.add_argument("--report", metavar="DIR", help="write residual and coverage plots (PNG) here")
-    cal.add_argument("--medium", default="air", choices=["air", "water"], help="medium of the calibration")
+    cal.add_argument("--medium", default="unspecified", choices=["air", "water", "unspecified"],
+                     help="medium of the calibration: say it (recorded as 'unspecified' otherwise)")
     cal.add_argument("--distance", type=_positive_float, default=None,
                      help="camera-to-board distance of the calibration, metres (recorded in the file)")
     cal.add_argument("--camera-name", default="camera")
