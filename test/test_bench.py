@@ -38,12 +38,14 @@ def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
 
 
 def test_calibration_speed_ours_fits_no_worse_than_opencv():
-    out = run_bench("calibration_speed.py", "--repeats", "1")
+    out = run_bench("calibration_speed.py", "--repeats", "1", "--large-views", "20")
     rows = [numbers(line) for line in out.splitlines() if re.match(r"\s+\d+\s+\d", line)]
     assert [int(r[0]) for r in rows] == [15, 50], out
     for views, opencv_s, ours_s, _, opencv_rms, ours_rms in rows:
         assert opencv_s > 0 and ours_s > 0
         assert ours_rms <= opencv_rms + 1e-4, (views, opencv_rms, ours_rms)
+    large = next(line for line in out.splitlines() if "whole command" in line)
+    assert "every fit converged: True" in large and numbers(large.split("(")[1])[0] > 0, large
 
 
 @pytest.mark.skipif(not netns_available(), reason="the ROS benches' fixed domains need a private network namespace")

@@ -165,6 +165,10 @@ class BoardSpec:
 
     def _detect_chessboard(self, grey: np.ndarray) -> Detection | None:
         size = (self.cols, self.rows)
+        # both detectors cost seconds on a large frame without a board: only where OpenCV's quick check (tens
+        # of ms) sees one at all
+        if not cv2.checkChessboard(grey, size):
+            return None
         flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
         found, corners = cv2.findChessboardCorners(grey, size, flags=flags)
         if not found:

@@ -35,6 +35,7 @@ RING_MIN_POINTS = 30
 SYSTEMATIC_PX = 0.05  # and 5 standard errors: synthetic and real cameras the model fits stay below 0.01 px
 RADIAL = {"k1", "k2", "k3"}
 MAX_REJECTION_ROUNDS = 5
+INIT_VIEWS = 40  # views OpenCV's initial estimate is made from (all of a smaller set)
 
 
 class CalibrationError(RuntimeError):
@@ -77,6 +78,7 @@ class CalibrationResult:
     seconds: float
     coverage: float  # fraction of an 8x6 grid over the image that holds detected points
     radial_profile: list[dict] = field(default_factory=list)  # per ring: mean radial residual, rms (radial_profile())
+    converged: bool = True  # every bundle adjustment converged (none stopped at its iteration limit)
     std_covariance: dict[str, float] = field(default_factory=dict)  # from the covariance, corner errors independent
     std_views: dict[str, float] = field(default_factory=dict)  # from resampling views (infinitesimal jackknife)
     halves: dict = field(default_factory=dict)  # two disjoint halves of the views fitted apart (cross-validation)
@@ -119,6 +121,7 @@ class CalibrationResult:
             "per_view": [vars(v) for v in self.views],
             "warnings": list(self.warnings),
             "iterations": self.iterations,
+            "converged": self.converged,
             "seconds": self.seconds,
         }
 
@@ -285,25 +288,112 @@ def _weak_geometry_warnings(
     return warnings
 
 
-def _view_resampling_covariance(J: np.ndarray, residuals: np.ndarray, normal: np.ndarray,
-                                row_starts: np.ndarray) -> np.ndarray:
-    """Covariance of the camera parameters when views, not corners, are the independent samples: the
-    infinitesimal jackknife over views (cluster-robust sandwich H^-1 (sum_v g_v g_v^T) H^-1 with g_v = J_v^T r_v,
-    scaled by G / (G - 1)), what a bootstrap over views measures, without refitting."""
-    views = len(row_starts) - 1
-    gradients = np.array([J[row_starts[v]:row_starts[v + 1]].T @ residuals[row_starts[v]:row_starts[v + 1]]
-                          for v in range(views)])
-    inverse = np.linalg.inv(normal)
-    meat = gradients.T @ gradients * views / max(views - 1, 1)
-    return (inverse @ meat @ inverse)[:N_INTRINSIC, :N_INTRINSIC]
+def _camera_block(object_points: list[np.ndarray], x: np.ndarray, problem: _Problem
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """From each view's blocks of the Jacobian (A: camera, B: pose): the camera block of the inverse normal
+    matrix, S^-1 with S = sum A^T A - sum W V^-1 W^T (W = A^T B, V = B^T B), and each view's influence on the
+    camera, S^-1 (A^T r - W V^-1 B^T r) (rows). The covariance of the camera when views, not corners, are the
+    independent samples is the sum of the influences' outer products (G / (G - 1) aside): the infinitesimal
+    jackknife over views, what a bootstrap over views measures, without refitting."""
+    reduced = np.zeros((N_INTRINSIC, N_INTRINSIC))
+    gradients = []
+    for v, points in enumerate(object_points):
+        uv, jac = _project_with_jacobian(x[:N_INTRINSIC], x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6], points)
+        r = uv - problem.observed[problem.row_starts[v]:problem.row_starts[v + 1]]
+        a, b = jac[:, 6:6 + N_INTRINSIC], jac[:, :6]
+        w, pose_inverse = a.T @ b, np.linalg.inv(b.T @ b)
+        reduced += a.T @ a - w @ pose_inverse @ w.T
+        gradients.append(a.T @ r - w @ pose_inverse @ (b.T @ r))
+    camera_inverse = np.linalg.inv(reduced)
+    return camera_inverse, np.array(gradients) @ camera_inverse.T
 
 
 def _refit(object_points: list[np.ndarray], image_points: list[np.ndarray], start: np.ndarray) -> np.ndarray:
     """The joint least squares from a start near the solution (a subset of the views): camera and poses."""
-    problem = _Problem(object_points, image_points)
-    fit = least_squares(problem.residuals, start, jac=problem.jacobian, method="trf", x_scale="jac",
-                        tr_solver="lsmr", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=100)
-    return fit.x
+    return _bundle_lm(object_points, image_points, start)[0]
+
+
+LM_MAX_ITERATIONS = 200
+LM_TOLERANCE = 1e-12  # relative decrease of the cost, and relative step, below which the fit has converged
+
+
+def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], start: np.ndarray
+               ) -> tuple[np.ndarray, bool, int]:
+    """Levenberg-Marquardt bundle adjustment exploiting its structure: the nine camera parameters are solved
+    from the reduced camera system (Schur complement of each view's 6x6 pose block), then every pose from its
+    own block. (solution, converged, iterations). Each iteration costs one projection per view."""
+    x = np.array(start, float)
+    views = len(object_points)
+    observed = [p.reshape(-1) for p in image_points]
+    every_point = np.vstack(object_points)
+    every_observed = np.concatenate(observed)
+    owner = np.repeat(np.arange(views), [len(p) for p in object_points])
+
+    def cost_at(x: np.ndarray) -> float:
+        """The sum of squared residuals, all views projected at once (no Jacobian)."""
+        poses = x[N_INTRINSIC:].reshape(views, 6)
+        rotations = np.array([cv2.Rodrigues(pose[:3])[0] for pose in poses])
+        camera = np.einsum("nij,nj->ni", rotations[owner], every_point) + poses[owner, 3:]
+        fx, fy, cx, cy, k1, k2, p1, p2, k3 = x[:N_INTRINSIC]
+        u, v = camera[:, 0] / camera[:, 2], camera[:, 1] / camera[:, 2]
+        r2 = u * u + v * v
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        ud = u * radial + 2 * p1 * u * v + p2 * (r2 + 2 * u * u)
+        vd = v * radial + p1 * (r2 + 2 * v * v) + 2 * p2 * u * v
+        projected = np.column_stack([fx * ud + cx, fy * vd + cy]).ravel()
+        difference = projected - every_observed
+        return float(difference @ difference)
+
+    def evaluate(x: np.ndarray, jacobians: bool):
+        residuals, blocks = [], []
+        for v in range(views):
+            uv, jac = _project_with_jacobian(x[:N_INTRINSIC], x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6],
+                                             object_points[v])
+            residuals.append(uv - observed[v])
+            if jacobians:
+                blocks.append((jac[:, 6:6 + N_INTRINSIC], jac[:, :6]))
+        return residuals, blocks
+
+    residuals, blocks = evaluate(x, True)
+    cost = sum(float(r @ r) for r in residuals)
+    damping = 1e-3
+    for iteration in range(1, LM_MAX_ITERATIONS + 1):
+        # per view: camera block A, pose block B; all views' small matrices at once (views x 9 x 6, ...)
+        cross = np.array([a.T @ b for a, b in blocks])
+        pose_normal = np.array([b.T @ b for _, b in blocks])
+        pose_gradient = np.array([b.T @ r for (_, b), r in zip(blocks, residuals, strict=True)])
+        camera_normal = sum(a.T @ a for a, _ in blocks)
+        camera_gradient = sum(a.T @ r for (a, _), r in zip(blocks, residuals, strict=True))
+        diagonal = np.einsum("vii->vi", pose_normal)
+        while True:
+            damped = camera_normal + damping * np.diag(np.diag(camera_normal))
+            inverses = np.linalg.inv(pose_normal + damping * diagonal[:, :, None] * np.eye(6))
+            w_inv = cross @ inverses  # views x 9 x 6
+            reduced = damped - np.einsum("vij,vkj->ik", w_inv, cross)
+            rhs = -(camera_gradient - np.einsum("vij,vj->i", w_inv, pose_gradient))
+            try:
+                camera_step = np.linalg.solve(reduced, rhs)
+            except np.linalg.LinAlgError:
+                damping *= 10
+                continue
+            pose_steps = np.einsum("vij,vj->vi", inverses, -pose_gradient - np.einsum("vji,j->vi", cross,
+                                                                                        camera_step))
+            step = np.concatenate([camera_step, pose_steps.ravel()])
+            trial = x + step
+            trial_cost = cost_at(trial)
+            if np.isfinite(trial_cost) and trial_cost <= cost:
+                small_step = np.linalg.norm(step) <= LM_TOLERANCE * (np.linalg.norm(x) + LM_TOLERANCE)
+                small_gain = cost - trial_cost <= LM_TOLERANCE * cost
+                x, cost = trial, trial_cost
+                damping = max(damping / 3, 1e-15)
+                if small_step or small_gain:
+                    return x, True, iteration
+                residuals, blocks = evaluate(x, True)
+                break
+            damping *= 4
+            if damping > 1e12:  # no step lowers the cost: at the minimum to machine precision
+                return x, True, iteration
+    return x, False, LM_MAX_ITERATIONS
 
 
 def _halves(object_points: list[np.ndarray], image_points: list[np.ndarray], x: np.ndarray, camera: BrownCamera,
@@ -401,15 +491,25 @@ def calibrate(
                                f"({RECOMMENDED_VIEWS}+ recommended)")
     object_points = [v.detection.object_points.astype(np.float64) for v in views]
     image_points = [v.detection.image_points.astype(np.float64) for v in views]
-    say(f"initial estimate (OpenCV) from {len(views)} views")
+    # OpenCV's estimate from at most INIT_VIEWS views spread over the set (its cost grows with the views; the
+    # joint refinement uses them all), then every view's pose from that camera
+    chosen = np.unique(np.linspace(0, len(views) - 1, min(len(views), INIT_VIEWS)).round().astype(int))
+    say(f"initial estimate (OpenCV) from {len(chosen)} of {len(views)} views")
     try:
-        opencv_rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
-            [p.astype(np.float32) for p in object_points], [p.astype(np.float32) for p in image_points],
+        opencv_rms, K, dist, _, _ = cv2.calibrateCamera(
+            [object_points[v].astype(np.float32) for v in chosen], [image_points[v].astype(np.float32) for v in chosen],
             (width, height), None, None)
     except cv2.error as exc:
         raise CalibrationError(f"OpenCV could not initialise the calibration: {exc.err}") from exc
     if not np.isfinite(opencv_rms):
         raise CalibrationError("OpenCV's initial calibration did not converge")
+    rvecs, tvecs = [], []
+    for points, pixels in zip(object_points, image_points, strict=True):
+        found, rvec, tvec = cv2.solvePnP(points, pixels, K, dist)
+        if not found:
+            raise CalibrationError("OpenCV could not place a view from the initial camera")
+        rvecs.append(rvec)
+        tvecs.append(tvec)
     dist = np.asarray(dist, float).ravel()[:5]
     x = np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], dist]
                        + [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs, strict=True)])
@@ -422,20 +522,29 @@ def calibrate(
     active = list(range(len(views)))
     iterations = 0
 
+    unconverged = 0
+
     def refine() -> np.ndarray:
         """Joint least squares over the active views' kept points; updates x, returns the residuals."""
-        nonlocal iterations
-        problem = _Problem([object_points[v][keep[v]] for v in active], [image_points[v][keep[v]] for v in active])
+        nonlocal iterations, unconverged
+        active_objects = [object_points[v][keep[v]] for v in active]
+        active_images = [image_points[v][keep[v]] for v in active]
         x_active = np.concatenate([x[:N_INTRINSIC]] + [x[pose_of(v)] for v in active])
-        say(f"bundle adjustment: {len(active)} views, {problem.shape[0] // 2} points")
-        fit = least_squares(problem.residuals, x_active, jac=problem.jacobian, method="trf", x_scale="jac",
-                            loss=robust_loss, f_scale=1.0, tr_solver="lsmr", ftol=1e-12, xtol=1e-12,
-                            gtol=1e-12, max_nfev=200)
-        iterations += fit.nfev
-        x[:N_INTRINSIC] = fit.x[:N_INTRINSIC]
+        say(f"bundle adjustment: {len(active)} views, {sum(len(o) for o in active_objects)} points")
+        if robust_loss == "linear":
+            solution, converged, nfev = _bundle_lm(active_objects, active_images, x_active)
+        else:  # robust losses: scipy's trust region on the sparse Jacobian
+            problem = _Problem(active_objects, active_images)
+            fit = least_squares(problem.residuals, x_active, jac=problem.jacobian, method="trf", x_scale="jac",
+                                loss=robust_loss, f_scale=1.0, tr_solver="lsmr", ftol=1e-12, xtol=1e-12,
+                                gtol=1e-12, max_nfev=200)
+            solution, converged, nfev = fit.x, fit.status > 0, fit.nfev
+        iterations += nfev
+        unconverged += not converged
+        x[:N_INTRINSIC] = solution[:N_INTRINSIC]
         for k, v in enumerate(active):
-            x[pose_of(v)] = fit.x[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6]
-        return fit.fun
+            x[pose_of(v)] = solution[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6]
+        return _Problem(active_objects, active_images).residuals(solution)
 
     residuals = refine()
     for _ in range(MAX_REJECTION_ROUNDS if outlier_sigma is not None else 0):
@@ -466,22 +575,21 @@ def calibrate(
     problem = _Problem(obj, [image_points[v][keep[v]] for v in active])
     x_final = np.concatenate([x[:N_INTRINSIC]] + [x[pose_of(v)] for v in active])
     residuals = problem.residuals(x_final)
-    J = problem.jacobian(x_final).toarray()
     dof = len(residuals) - len(x_final)
     if dof <= 0:
         raise CalibrationError("more unknowns than observations; add views or board points")
     sigma0 = float(np.sqrt(residuals @ residuals / dof))
-    normal = J.T @ J
     try:
-        covariance = np.linalg.inv(normal) * sigma0**2
+        camera_inverse, view_terms = _camera_block(obj, x_final, problem)
     except np.linalg.LinAlgError as exc:
         raise CalibrationError("the normal equations are singular: the views do not determine the camera") from exc
-    covariance_std = np.sqrt(np.clip(np.diag(covariance[:N_INTRINSIC, :N_INTRINSIC]), 0, None))
-    view_cov = _view_resampling_covariance(J, residuals, normal, problem.row_starts)
+    covariance = camera_inverse * sigma0**2  # the camera block of the inverse normal matrix, scaled
+    covariance_std = np.sqrt(np.clip(np.diag(covariance), 0, None))
+    view_cov = view_terms.T @ view_terms * len(obj) / max(len(obj) - 1, 1)
     # the honest std: corner errors are not independent within a view (board flatness, lighting, blur), so
     # resampling views spreads the camera more than the covariance says; the larger of the two
     view_std = np.sqrt(np.clip(np.diag(view_cov), 0, None))
-    cov_i = view_cov if np.all(view_std >= covariance_std) else covariance[:N_INTRINSIC, :N_INTRINSIC]
+    cov_i = view_cov if np.all(view_std >= covariance_std) else covariance
     std_values = np.maximum(view_std, covariance_std)
     correlation = cov_i / np.outer(np.sqrt(np.diag(cov_i)), np.sqrt(np.diag(cov_i)))
     camera = BrownCamera.from_opencv(
@@ -524,13 +632,16 @@ def calibrate(
                             f"({halves['worst']}): some views are not like the others (moved board, refocus, "
                             "another distance); check the per-view residuals")
     warnings += _uncertainty_warnings(honest, reports, width, height)
+    if unconverged:
+        warnings.append(f"{unconverged} of the bundle adjustments stopped at the iteration limit before converging")
     say(f"done: RMS {np.sqrt(np.mean(err**2)):.4f} px over {len(active)} views")
     return CalibrationResult(
         camera=camera, std=dict(zip(PARAM_NAMES, map(float, std_values), strict=True)), correlation=correlation,
         rms_px=float(np.sqrt(np.mean(err**2))), mean_px=float(err.mean()), max_residual_px=float(err.max()),
         views=reports, rejected_views=rejected_views, warnings=warnings, opencv_rms_px=float(opencv_rms),
         sigma0_px=sigma0, iterations=iterations, seconds=time.perf_counter() - started, coverage=coverage,
-        radial_profile=profile, std_covariance=dict(zip(PARAM_NAMES, map(float, covariance_std), strict=True)),
+        converged=not unconverged, radial_profile=profile,
+        std_covariance=dict(zip(PARAM_NAMES, map(float, covariance_std), strict=True)),
         std_views=dict(zip(PARAM_NAMES, map(float, view_std), strict=True)), halves=halves,
         projection_std_px=projection,
         poses=[x_final[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6].copy() for k in range(len(active))],
