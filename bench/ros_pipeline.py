@@ -6,6 +6,7 @@ reaching a third process, mean/p99 latency from the camera's stamp to that arriv
 dropped, and the memory each node holds (RSS, and PSS: shared pages split among the processes using them).
 
     .venv/bin/python bench/ros_pipeline.py [--seconds 5] [--transports shm,default] [--sizes 640x480,3872x2592]
+        [--noise 0,2,4]
 
 The camera publishes as fast as it can (timer at 1000 Hz for 640x480, 30 Hz for 3872x2592) a still frame of
 the synthetic cube in air with the true calibration, so every frame is measurable.
@@ -136,8 +137,9 @@ def probe(spec: dict) -> dict:
     if first_info and infos:
         last_info = info(infos[-1])
         received = last_info["frames_received"] - first_info["frames_received"]
-        skipped = last_info["frames_dropped"] - first_info["frames_dropped"]
-        out.update(frames_in_per_s=received / elapsed, dropped_share=skipped / max(received + skipped, 1))
+        skipped = sum((last_info[k] or 0) - (first_info[k] or 0) for k in ("frames_dropped", "frames_lost"))
+        out.update(frames_in_per_s=received / elapsed, dropped_share=skipped / max(received + skipped, 1),
+                   rebuilds=last_info["weights_rebuilt"] - first_info["weights_rebuilt"], frames=received)
     return out
 
 
@@ -159,20 +161,36 @@ def role_main(role: str, spec: dict) -> int:
     return 0
 
 
-def prepare_inputs(folder: Path) -> dict[str, dict[str, str]]:
-    """A still frame of the cube in air and the camera's true calibration, per size."""
+NOISY_FRAMES = 8  # a looped folder of this many frames, each with its own sensor noise (decoded once)
+
+
+def prepare_inputs(folder: Path, noise: list[float]) -> dict[str, dict[str, str]]:
+    """A still frame of the cube in air and the camera's true calibration, per size; and per noise level a
+    folder of frames of that still with fresh Gaussian sensor noise each (the camera loops it)."""
     import cv2
+    import numpy as np
 
     from veg_area_ros.calib_io import write_calibration
     from veg_area_ros.synthetic import DSLR, ENDOSCOPE, cube_scene, render_scene
 
     inputs = {}
+    rng = np.random.default_rng(0)
     for camera in (ENDOSCOPE, DSLR):
         size = f"{camera.width}x{camera.height}"
         still, calibration = folder / f"cube_{size}.png", folder / f"camera_{size}.yaml"
-        cv2.imwrite(str(still), render_scene(camera, cube_scene(), 0.7, None, supersample=1 if camera is DSLR else 3))
+        clean = render_scene(camera, cube_scene(), 0.7, None, noise_sigma=0.0, supersample=1 if camera is DSLR else 3)
+        cv2.imwrite(str(still), clean)
         write_calibration(calibration, camera, f"bench_{size}", {"medium": "air"})
         inputs[size] = {"still": str(still), "calibration": str(calibration)}
+        for sigma in noise:
+            if sigma == 0:
+                continue
+            frames = folder / f"noise_{sigma:g}_{size}"
+            frames.mkdir()
+            for k in range(NOISY_FRAMES):
+                noisy = clean + rng.normal(0.0, sigma, clean.shape[:2]).astype(np.float32)[..., None]
+                cv2.imwrite(str(frames / f"frame{k}.png"), np.clip(np.rint(noisy), 0, 255).astype(np.uint8))
+            inputs[f"{size} noise {sigma:g}"] = {"still": str(frames), "calibration": str(calibration)}
     return inputs
 
 
@@ -212,20 +230,22 @@ def inside(args) -> int:
     import tempfile
 
     with tempfile.TemporaryDirectory() as folder:
+        noise = [float(v) for v in args.noise.split(",")]
         print("rendering the still frames ...", flush=True)
-        inputs = prepare_inputs(Path(folder))
-        print(f"{'pipeline':12} {'transport':9} {'size':9} {'cam Hz':>6} {'Af/s':>6} {'in/s':>6} {'drop':>5} "
-              f"{'mean ms':>8} {'p99 ms':>8}  memory MB (RSS / PSS)", flush=True)
+        inputs = prepare_inputs(Path(folder), noise)
+        print(f"{'pipeline':12} {'transport':9} {'size':9} {'noise':>5} {'cam Hz':>6} {'Af/s':>6} {'in/s':>6} "
+              f"{'drop':>5} {'mean ms':>8} {'p99 ms':>8} {'rebuilt':>9}  memory MB (RSS / PSS)", flush=True)
         domain = 100
         for transport in args.transports.split(","):
             for width, height, rate in LOADS:
                 if f"{width}x{height}" not in args.sizes.split(","):
                     continue
-                for pipeline in PIPELINES:
+                for sigma, pipeline in [(s, p) for s in noise for p in PIPELINES if s == 0 or p == "veg_area_ros"]:
                     domain += 1
-                    spec = dict(inputs[f"{width}x{height}"], rate=rate, seconds=args.seconds)
+                    key = f"{width}x{height}" + (f" noise {sigma:g}" if sigma else "")
+                    spec = dict(inputs[key], rate=rate, seconds=args.seconds)
                     result, memory = run_case(pipeline, transport, spec, domain)
-                    row = f"{pipeline:12} {transport:9} {f'{width}x{height}':9} {rate:6g}"
+                    row = f"{pipeline:12} {transport:9} {f'{width}x{height}':9} {sigma:5g} {rate:6g}"
                     if not result or not result["results"]:
                         print(f"{row}  no Af arrived within {FIRST_RESULT_TIMEOUT_S:g} s", flush=True)
                         continue
@@ -233,9 +253,10 @@ def inside(args) -> int:
                     dropped = result.get("dropped_share")
                     held = "  ".join(f"{name} {m['rss']:.0f}/{m['pss']:.0f}" if name != "/dev/shm"
                                      else f"{name} {m['rss']:.0f}" for name, m in memory.items())
+                    rebuilt = f"{result['rebuilds']}/{result['frames']}" if "rebuilds" in result else "-"
                     print(f"{row} {result['per_s']:6.1f} {figure(result.get('frames_in_per_s')):>6} "
                           f"{'-' if dropped is None else f'{dropped:.0%}':>5} {figure(latency['mean']):>8} "
-                          f"{figure(latency['p99']):>8}  {held}", flush=True)
+                          f"{figure(latency['p99']):>8} {rebuilt:>9}  {held}", flush=True)
     print("Af/s: results reaching a third process; in/s: frames the area node took (ours reports it); drop: share\n"
           "of the camera's frames skipped while measuring (ours counts them); latency: camera stamp -> Af arrival.")
     return 0
@@ -246,6 +267,7 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=5.0, help="measuring window per case")
     parser.add_argument("--transports", default="shm,default")
     parser.add_argument("--sizes", default=",".join(f"{w}x{h}" for w, h, _ in LOADS), help="e.g. 640x480")
+    parser.add_argument("--noise", default="0,2,4", help="sensor noise of the camera's frames, DN (0: one still)")
     return bench_main(SCRIPT, ("probe", "plain_camera", "plain_area"), role_main, parser, inside)
 
 

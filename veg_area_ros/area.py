@@ -45,7 +45,8 @@ WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per fr
 ROI_TOLERANCE_PX = 0.5  # targets moved further than this (idealized px) since the weights were built: rebuild
 NO_CALIBRATION_FOR_OFFSET = ("an object plane offset needs a calibration (the camera's pinhole); measure with "
                              "one, or put the targets in the object's plane")
-SCALE_TOLERANCE = 2e-4  # the scale changed unevenly by more than this (relative) over the ROI: rebuild
+SCALE_TOLERANCE = 2e-4  # the scale changed unevenly by more than this (relative) over the ROI: rebuild...
+CARRY_SHARE = 1.0  # ...unless that is within Af's relative scale std: sensor noise jitters the fit by about that
 
 
 @dataclass
@@ -288,7 +289,11 @@ class AreaMeasurer:
     def _weights_for(self, frame: np.ndarray, located: _Located) -> tuple[_Weights, float, float]:
         """The weights for this frame's targets, the factor that carries them to this frame's scale and the
         relative error bound of that factor; rebuilt when the target layout changed, the targets moved, or
-        the scale changed unevenly over the ROI (sensor noise moves the targets by ~0.01 px: no rebuild)."""
+        the scale changed unevenly over the ROI by more than matters: 2e-4, or up to Af's relative scale std
+        (the targets' localisation, 0.1 px by default), which the fit's own jitter under sensor noise reaches
+        (4 DN: up to 8e-4 at 640x480; 3 DN in an MJPG video: 1.4e-3; a rebuild at most frames before). Weights
+        built afresh carry that same frame's fit error, so carrying is no worse in kind; the carried error
+        enters the scale std (in quadrature) and the bound."""
         weights = self._weights
         if (weights is not None and weights.labels == located.labels
                 and np.max(np.abs(weights.pixels - np.array(located.pixels))) <= ROI_TOLERANCE_PX):
@@ -296,7 +301,7 @@ class AreaMeasurer:
             points = np.vstack([weights.centre, weights.corners])
             ratio = located.scale.pixel_area(points) / weights.scale.pixel_area(points)
             uneven = float(np.max(np.abs(ratio / ratio[0] - 1)))
-            if uneven <= SCALE_TOLERANCE:
+            if uneven <= max(SCALE_TOLERANCE, CARRY_SHARE * weights.relative_scale_std):
                 return weights, float(ratio[0]), uneven
         self._weights = self._build_weights(frame, located)
         return self._weights, 1.0, 0.0
@@ -386,7 +391,7 @@ class AreaMeasurer:
                 applied, edge, area, threshold_std = False, counting, counted, counting_threshold_std
         sweep = [(float(level), measured(level)[0 if applied else 1])
                  for level in threshold + delta * np.arange(-3, 4) if 0 <= level <= 255]
-        scale_std = area * weights.relative_scale_std
+        scale_std = area * float(np.hypot(weights.relative_scale_std, carried))  # carrying errs like the scale
         offset_std = area * weights.relative_offset_std
         result = AreaResult(
             area_m2=area, area_std_m2=float(np.sqrt(scale_std**2 + threshold_std**2 + edge.discretisation**2

@@ -22,6 +22,7 @@ def _pyplot():
     return plt
 
 
+
 def write_calibration_report(result: CalibrationResult, folder: str | Path) -> list[Path]:
     """Write residuals.png, per_view.png, coverage.png, radial.png, uncertainty.png and calibration.json into
     `folder`."""

@@ -116,6 +116,9 @@ class VideoSource:
         self._capture.release()
 
 
+LOOP_CACHE_FRAMES = 16  # a looped folder of at most this many images is decoded once (test patterns at any rate)
+
+
 class FolderSource:
     def __init__(self, files: list[Path], loop: bool = False):
         if not files:
@@ -123,22 +126,23 @@ class FolderSource:
         self.files = files
         self.loop = loop
         self.index = 0
-        self._still: np.ndarray | None = None  # one looped image is decoded once (a test pattern at any rate)
+        self._cache: dict[int, np.ndarray] | None = {} if loop and len(files) <= LOOP_CACHE_FRAMES else None
 
     def read(self) -> np.ndarray | None:
         if self.index >= len(self.files):
             if not self.loop:
                 return None
             self.index = 0
-        if self._still is not None:
-            return self._still
-        path = self.files[self.index]
+        index = self.index
         self.index += 1
+        if self._cache is not None and index in self._cache:
+            return self._cache[index]
+        path = self.files[index]
         image, problem = read_image(path)
         if image is None:
             raise SourceError(f"{path.name} {problem}")
-        if self.loop and len(self.files) == 1:
-            self._still = image
+        if self._cache is not None:
+            self._cache[index] = image
         return image
 
     def release(self) -> None:

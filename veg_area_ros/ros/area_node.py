@@ -267,7 +267,7 @@ class AreaNode(Node):
         summary = result.summary()
         summary.update(stamp={"sec": header.sec, "nanosec": header.nanosec}, frame_id=header.frame_id,
                        frames_received=self.frames.received, frames_dropped=self.frames.skipped,
-                       frames_lost=self.frames.lost,
+                       frames_lost=self.frames.lost, weights_rebuilt=self.measurer.rebuilds,
                        frames_measured=self.frames_measured)
         publish_safely(self, self.info_pub, String(data=json.dumps(summary)))
         # the images cost a remap each: made only for topics somebody listens to (rosbag2 counts)
