@@ -21,6 +21,7 @@ import numpy as np
 import yaml
 
 from .camera_model import BrownCamera
+from .strict_yaml import StrictYamlError, load_text, read_text
 
 METADATA_KEY = "veg_area_ros"
 
@@ -140,13 +141,17 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
     """Read a camera_info YAML; any problem raises CalibrationFileError naming the file and the problem."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_text(path)
     except FileNotFoundError as exc:
         raise CalibrationFileError(f"{path}: no such calibration file") from exc
+    except StrictYamlError as exc:
+        raise CalibrationFileError(f"{path}: {exc}") from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibrationFileError(f"{path}: cannot be read ({exc})") from exc
     try:
-        content = yaml.safe_load(text)
+        content = load_text(text)
+    except StrictYamlError as exc:
+        raise CalibrationFileError(f"{path}: {exc}") from exc
     except yaml.YAMLError as exc:
         where = getattr(exc, "problem_mark", None)
         line = f" at line {where.line + 1}" if where else ""

@@ -29,26 +29,11 @@ import cv2
 import numpy as np
 import yaml
 
+from .strict_yaml import StrictYamlError, load_text, read_text
+
 
 class TargetsError(ValueError):
     """A targets file or a frame's targets that cannot give a scale; the message says why."""
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """PyYAML keeps the last of duplicate keys silently; a duplicate marker id must be an error."""
-
-
-def _construct_unique_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode, deep: bool = False) -> dict:
-    keys = set()
-    for key_node, _ in node.value:
-        key = loader.construct_object(key_node, deep=deep)
-        if key in keys:
-            raise TargetsError(f"duplicate key {key!r} at line {key_node.start_mark.line + 1}")
-        keys.add(key)
-    return yaml.SafeLoader.construct_mapping(loader, node, deep)
-
-
-_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_unique_mapping)
 
 
 def _pair(value, what: str) -> np.ndarray:
@@ -75,8 +60,8 @@ class TargetsSpec:
     def load(cls, path: str | Path) -> TargetsSpec:
         path = Path(path)
         try:
-            content = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
-        except TargetsError as exc:
+            content = load_text(read_text(path))
+        except StrictYamlError as exc:
             raise TargetsError(f"{path}: {exc}") from exc
         except FileNotFoundError as exc:
             raise TargetsError(f"{path}: no such targets file") from exc
