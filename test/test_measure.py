@@ -304,3 +304,17 @@ def test_area_modes_levels_and_the_uncertainty_terms_from_the_command_line(works
     row = next(csv.DictReader(csv_path.open()))
     assert float(row["plane_offset_std_m2"]) > 0.004 * float(row["area_m2"])  # 2 mm at 0.72 m: about 0.55 %
     assert row["area_mode"] == "subpixel" and float(row["levels_std_m2"]) > 0
+
+
+@pytest.mark.parametrize("option, value, problem", [
+    ("--overlay", "/proc/overlay.png", "cannot be written"),
+    ("--csv", "{workspace}/targets.yaml/rows.csv", "is a file, not a folder"),
+    ("--overlay", "{workspace}", None),  # a folder for a single frame's overlay is fine
+    ("--close", "100000", "at most 100 px"),
+])
+def test_bad_output_paths_and_radii_are_refused_before_any_work(workspace, option, value, problem):
+    done = measure(workspace, option, value.format(workspace=workspace))
+    if problem is None:
+        assert done.returncode == 0, done.stderr
+        return
+    assert done.returncode == 2 and problem in done.stderr and "Traceback" not in done.stderr, done.stderr

@@ -23,6 +23,7 @@ import numpy as np
 
 OBJECTS = ("dark", "bright", "green")
 AREA_MODES = ("subpixel", "count")  # object fraction of each pixel, or the paper's whole-pixel count
+MAX_MORPHOLOGY_PX = 100  # an opening or closing radius; specks and pin-holes are a few pixels
 PURE_ZONE_SPREADS = 4.0  # band values within this many spreads of a level are taken as pure, not mixed
 MIN_SPREAD_DN = 0.5  # the spread of a level is at least the band's quantisation
 BAND_VALUES = np.arange(256, dtype=float)
@@ -53,6 +54,9 @@ class Classifier:
             raise ClassifyError(f"threshold must be 0..255 or 'otsu', got {self.threshold!r}")
         if min(self.open_px, self.close_px) < 0:
             raise ClassifyError("morphology radii must be >= 0")
+        if max(self.open_px, self.close_px) > MAX_MORPHOLOGY_PX:  # a kernel larger than any frame: minutes of work
+            raise ClassifyError(f"morphology radii must be at most {MAX_MORPHOLOGY_PX} px, got "
+                                f"{max(self.open_px, self.close_px)}")
 
     def index_image(self, image: np.ndarray) -> np.ndarray:
         """The single-band image the threshold acts on, uint8, larger = more object-like for 'bright'."""

@@ -222,6 +222,28 @@ def _roi(text: str):
         raise argparse.ArgumentTypeError(f"the region {text!r} is empty: its corners enclose no area") from exc
 
 
+def _unwritable(path: Path, folder: bool) -> str | None:
+    """Why `path` (a file, or a folder to write into) cannot be written here, or None: checked before any work
+    by creating (and removing) a temporary file where it would go (permissions alone miss /proc as root)."""
+    import tempfile
+
+    if path.exists() and folder and not path.is_dir():
+        return "exists and is not a folder"
+    if path.exists() and not folder and path.is_dir():
+        return "is a folder, not a file"
+    where = path if folder and path.exists() else path.parent
+    while not where.exists():
+        where = where.parent
+    if not where.is_dir():
+        return f"{where} is a file, not a folder"
+    try:
+        with tempfile.TemporaryFile(dir=where):
+            pass
+    except OSError as exc:
+        return f"cannot be written in {where} ({exc.strerror or exc})"
+    return None
+
+
 def _frame_file_name(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(name).stem) + ".png"
 
@@ -298,6 +320,12 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
     series = videos + bags
     csv_path = Path(args.csv) if args.csv else (Path(f"{series[0].stem}_area.csv") if series else None)
     single_overlay = args.overlay and Path(args.overlay).suffix.lower() in IMAGE_SUFFIXES
+    for option, value, folder in (("--overlay", args.overlay, not single_overlay), ("--csv", args.csv, False),
+                                  ("--idealized", args.idealized, True)):
+        if value:
+            problem = _unwritable(Path(value), folder)
+            if problem:
+                raise CliError(f"{option} {value}: {problem}; nothing was measured", 2)
     if single_overlay and total > 1:
         raise CliError(f"--overlay {args.overlay} names one image but the input has {total} frames; "
                        "give a folder", 2)
@@ -357,7 +385,8 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
                 if args.overlay:
                     target = Path(args.overlay) if single_overlay else Path(args.overlay) / _frame_file_name(frame.name)
                     target.parent.mkdir(parents=True, exist_ok=True)
-                    cv2.imwrite(str(target), draw_overlay(result))
+                    if not cv2.imwrite(str(target), draw_overlay(result)):
+                        say(f"[{index}/{total}] {frame.name}: overlay {target} could not be written")
                 if args.idealized and camera is not None:
                     cv2.imwrite(str(Path(args.idealized) / _frame_file_name(frame.name)), result.image)
             if args.json:
