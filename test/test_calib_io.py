@@ -113,3 +113,40 @@ def test_failed_write_keeps_the_old_file_and_leaves_no_temporary(tmp_path, monke
         write_calibration(path, ENDOSCOPE.ideal())
     assert path.read_bytes() == before
     assert sorted(p.name for p in Path(tmp_path).iterdir()) == ["calib.yaml"]
+
+
+@pytest.mark.parametrize("url, expected", [
+    ("", None),
+    ("file:///data/calib.yaml", "/data/calib.yaml"),
+    ("/data/calib.yaml", "/data/calib.yaml"),
+])
+def test_camera_info_urls_as_camera_info_manager_reads_them(url, expected):
+    from veg_area_ros.calib_io import camera_info_url_to_path
+
+    path = camera_info_url_to_path(url)
+    assert (None if path is None else str(path)) == expected
+
+
+@pytest.mark.parametrize("url, reason", [
+    ("file://sub/calib.yaml", "needs an absolute path"),  # was taken as /calib.yaml
+    ("file://calib_here.yaml", "needs an absolute path"),  # was taken as the current folder
+    ("file:/abs/x.yaml", "only file:///absolute/path"),  # made a relative 'file:' folder tree
+    ("http://example.org/c.yaml", "only file:///absolute/path"),
+    ("calib.yaml", "give an absolute path"),
+    ("package://no_such_package_here/c.yaml", "not found"),
+])
+def test_camera_info_urls_that_cannot_be_meant_are_refused(url, reason):
+    from veg_area_ros.calib_io import camera_info_url_to_path
+
+    with pytest.raises(ValueError, match=reason):
+        camera_info_url_to_path(url)
+
+
+def test_a_package_url_points_into_the_installed_share_folder(monkeypatch):
+    from helpers import REPO
+
+    from veg_area_ros.calib_io import camera_info_url_to_path
+
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(REPO / ".venv"))
+    assert camera_info_url_to_path("package://veg_area_ros/config/x.yaml") == (
+        REPO / ".venv" / "share" / "veg_area_ros" / "config" / "x.yaml")

@@ -159,6 +159,39 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
     return from_camera_info_dict(content, path)
 
 
+def camera_info_url_to_path(url: str) -> Path | None:
+    """A camera_info URL as camera_info_manager reads it: `file:///absolute/path.yaml`, or
+    `package://<package>/<path>` (in that package's installed share folder); a plain absolute or ~ path is
+    taken too; '' = none. Anything else is a ValueError with the reason (`file://sub/x.yaml` names a host,
+    not a folder: it used to become /x.yaml)."""
+    if not url:
+        return None
+    if url.startswith("package://"):
+        package, _, relative = url[len("package://"):].partition("/")
+        if not package or not relative:
+            raise ValueError(f"camera_info URL {url!r}: write package://<package>/<path inside its share folder>")
+        try:
+            from ament_index_python.packages import get_package_share_directory
+
+            return Path(get_package_share_directory(package)) / relative
+        except Exception as exc:  # PackageNotFoundError, or no ament index at all
+            raise ValueError(f"camera_info URL {url!r}: package {package!r} not found ({exc})") from exc
+    if url.startswith("file://"):
+        path = url[len("file://"):]
+        if not path.startswith("/"):
+            raise ValueError(f"camera_info URL {url!r}: file:// needs an absolute path, e.g. file:///data/calib.yaml "
+                             f"(three slashes)")
+        return Path(path)
+    if ":" in url.split("/", 1)[0]:
+        raise ValueError(f"camera_info URL {url!r}: only file:///absolute/path and package://package/path are "
+                         "understood")
+    path = Path(url).expanduser()
+    if not path.is_absolute():
+        raise ValueError(f"camera_info URL {url!r}: give an absolute path (file:///...), not one relative to "
+                         "wherever the node happens to start")
+    return path
+
+
 def quality_rms(calibration: CalibrationFile) -> float:
     """The RMS residual recorded with a calibration, or infinity where none is recorded."""
     value = calibration.metadata.get("rms_px")

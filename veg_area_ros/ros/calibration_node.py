@@ -17,12 +17,11 @@ from std_srvs.srv import Trigger
 
 from .. import __version__
 from ..board import BoardSpec, BoardSpecError
-from ..calib_io import CalibrationFileError, quality_rms, read_calibration, write_calibration
+from ..calib_io import CalibrationFileError, camera_info_url_to_path, quality_rms, read_calibration, write_calibration
 from ..calibration import NEW_POSE_DISTANCE, CalibrationError, View, calibrate, coverage_grid, pose_signature
 from ..camera_model import BrownCamera
 from ..cdr import decode_image
 from ..sources import SYNTHETIC_BOARD
-from .camera_node import url_to_path
 from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, InputWatch, declare, publish_safely
 from .messages import ImageMessageError, camera_to_info, info_to_camera
 
@@ -45,7 +44,7 @@ class CalibrationNode(Node):
             self.board = BoardSpec.parse(board_text)
         except BoardSpecError as exc:
             raise ValueError(f"parameter board: {exc}") from exc
-        self.path = url_to_path(url)
+        self.path = camera_info_url_to_path(url)
         self.views: list[View] = []
         self.signatures: list[np.ndarray] = []
         self.covered = np.zeros((3, 3), bool)
@@ -142,15 +141,19 @@ class CalibrationNode(Node):
             self.get_logger().warning(warning)
         return True, text
 
-    def _serve(self, camera: BrownCamera, rms: float, persist: bool, metadata: dict | None = None) -> None:
+    def _serve(self, camera: BrownCamera, rms: float, persist: bool, metadata: dict | None = None) -> str | None:
+        """Publish (latched) and, with `persist`, write the calibration; the reason the write failed, or None."""
+        failed = None
         if persist and self.path is not None:
             try:
                 write_calibration(self.path, camera, self.camera_name, metadata)
             except OSError as exc:
-                self.get_logger().error(f"calibration served but not written to {self.path}: {exc}")
+                failed = f"not written to {self.path}: {exc.strerror or exc}"
+                self.get_logger().error(f"calibration served but {failed}")
         self.camera, self.rms = camera, rms
         info = camera_to_info(camera, self.frame_id, self.get_clock().now().to_msg())
         publish_safely(self, self.info_pub, info)
+        return failed
 
     def _on_calibrate(self, request, response):
         self.fitted = False  # a fit on request: also resumes collecting views afterwards
@@ -164,9 +167,12 @@ class CalibrationNode(Node):
             response.success, response.status_message = False, f"refused: {exc}"
             return response
         # an explicit replacement by the user: persisted and served whatever its RMS (unknown here)
-        self._serve(camera, math.inf, persist=True, metadata={"source": "set_camera_info",
-                                                              "date": dt.datetime.now(dt.UTC).isoformat()})
+        failed = self._serve(camera, math.inf, persist=True, metadata={"source": "set_camera_info",
+                                                                       "date": dt.datetime.now(dt.UTC).isoformat()})
         self.fitted = True
+        if failed:  # served, but a service must not say a failed write succeeded
+            response.success, response.status_message = False, f"camera_info set and served but {failed}"
+            return response
         response.success, response.status_message = True, f"camera_info set and written to {self.path}"
         self.get_logger().info(response.status_message)
         return response

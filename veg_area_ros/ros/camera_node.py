@@ -5,29 +5,16 @@ Frames go out pre-serialized (veg_area_ros.cdr): one copy from the camera's buff
 from __future__ import annotations
 
 import contextlib
-from pathlib import Path
-from urllib.parse import urlparse
 
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 
-from ..calib_io import CalibrationFileError, read_calibration
+from ..calib_io import CalibrationFileError, camera_info_url_to_path, read_calibration
 from ..cdr import restamp
 from ..sources import SYNTHETIC_SCENES, DeviceSource, SourceError, open_source
 from .common import IMAGE_QOS, LATCHED_QOS, declare, publish_safely
 from .messages import camera_to_info, image_bytes
-
-
-def url_to_path(url: str) -> Path | None:
-    """camera_info_manager style: file:///abs/path.yaml or a plain path; '' = none."""
-    if not url:
-        return None
-    if url.startswith("file://"):
-        return Path(urlparse(url).path)
-    if "://" in url:
-        raise ValueError(f"only file:// camera_info URLs are supported, got {url!r}")
-    return Path(url).expanduser()
 
 
 class CameraNode(Node):
@@ -52,7 +39,7 @@ class CameraNode(Node):
         self.image_pub = self.create_publisher(Image, "image_raw", IMAGE_QOS)
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
         self.camera_info = None
-        path = url_to_path(url)
+        path = camera_info_url_to_path(url)
         if path is not None:
             try:
                 calibration = read_calibration(path)
