@@ -101,7 +101,7 @@ def noisy_cores(camera, targets: TargetsSpec, repeats: int) -> None:
         stream = itertools.cycle(frames)
         core_ms = 1000 * median_seconds(lambda m=measurer, s=stream: m.measure(next(s)), repeats)
         base = base or core_ms
-        print(f"  noise {sigma:g} DN: area core {core_ms:8.3f} ms ({core_ms / base:.2f}x noise-free), weights "
+        print(f"  noise {sigma:g} DN: sub-pixel core {core_ms:8.3f} ms ({core_ms / base:.2f}x noise-free), weights "
               f"rebuilt {measurer.rebuilds - 1} of {repeats + 1} frames")
 
 

@@ -27,7 +27,7 @@ def numbers(line: str) -> list[float]:
 
 
 def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
-    out = run_bench("area_speed.py", "--repeats", "1")
+    out = run_bench("area_speed.py", "--repeats", "1", "--video-frames", "30")
     cores = [line for line in out.splitlines() if "area core" in line]
     assert len(cores) == 4, out  # count and sub-pixel mode at each size
     for line in cores:
@@ -35,6 +35,10 @@ def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
         assert math.isfinite(ratio) and milliseconds > 0 and ratio > 0, line
     for line in cores[1::2]:
         assert "sub-pixel" in line and numbers(line.split("copy,")[1])[0] > 0, line  # its cost against count's
+    noisy = [line for line in out.splitlines() if "DN: sub-pixel core" in line]
+    assert len(noisy) == 6 and all(re.search(r"rebuilt \d+ of \d+ frames", line) for line in noisy), out
+    video = next(line for line in out.splitlines() if "veg-area measure of a 30-frame" in line)
+    assert numbers(video.split("(")[-1])[0] > 0, video
 
 
 def test_calibration_speed_ours_fits_no_worse_than_opencv():
