@@ -4,6 +4,7 @@ import json
 import shutil
 
 import cv2
+import numpy as np
 import pytest
 import yaml
 from helpers import OPENCV_LEFT, run_cli, shared
@@ -171,3 +172,27 @@ def test_charuco_video_from_a_real_webcam(tmp_path):
     assert summary["views_used"] + len(summary["repeated_poses"]) >= 40
     assert 10 <= summary["views_used"] < 30, summary["views_used"]
     assert summary["rms_px"] < 1.0
+
+
+def test_an_image_declaring_an_absurd_size_is_skipped_before_decoding(tmp_path, board_folder):
+    """A 74-byte PNG that declares 100000x100000 among good photos aborted the whole calibration with an
+    OpenCV assertion; a 1x1 PNG gave a traceback. Both are skipped and named, in well under a second each."""
+    import struct
+    import time
+
+    folder = tmp_path / "photos"
+    shutil.copytree(board_folder, folder)
+    _, png = cv2.imencode(".png", np.zeros((48, 64, 3), np.uint8))
+    bomb = bytearray(png.tobytes())
+    bomb[16:24] = struct.pack(">II", 100000, 100000)
+    (folder / "zz_bomb.png").write_bytes(bytes(bomb))
+    cv2.imwrite(str(folder / "zz_tiny.png"), np.zeros((1, 1, 3), np.uint8))
+    started = time.perf_counter()
+    result = run_cli("calibrate", str(folder), "--board", BOARD, "-o", str(tmp_path / "c.yaml"), "--json")
+    assert result.returncode == 0 and "Traceback" not in result.stderr, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["views_used"] == 15 and sorted(summary["unreadable"]) == ["zz_bomb.png", "zz_tiny.png"]
+    assert "declares 100000x100000 pixels" in result.stderr and "too small" in result.stderr
+    alone = run_cli("calibrate", str(folder / "zz_bomb.png"), "--board", BOARD, "-o", str(tmp_path / "d.yaml"))
+    assert_clean_failure(alone, 1, "no readable image")
+    assert time.perf_counter() - started < 120

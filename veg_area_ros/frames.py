@@ -6,6 +6,7 @@ No ROS here.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,14 +39,50 @@ def is_bag(path: Path) -> bool:
     return path.suffix.lower() == ".mcap"
 
 
+MAX_IMAGE_PIXELS = 64_000_000  # six times the 3872x2592 DSLR; a 20000x20000 PNG took 9 GB and minutes to refuse
+MIN_IMAGE_SIDE = 16  # smaller holds no board and no targets
+
+
+def header_size(data: bytes) -> tuple[int, int] | None:
+    """(width, height) from a PNG, JPEG or BMP header, without decoding; None for other formats."""
+    if data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) >= 24:
+        return struct.unpack(">II", data[16:24])
+    if data[:2] == b"BM" and len(data) >= 26:
+        width, height = struct.unpack("<ii", data[18:26])
+        return abs(width), abs(height)
+    if data[:2] == b"\xff\xd8":
+        offset = 2
+        while offset + 9 <= len(data):
+            if data[offset] != 0xFF:
+                return None
+            marker = data[offset + 1]
+            if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:  # markers without a length
+                offset += 2
+                continue
+            (length,) = struct.unpack(">H", data[offset + 2:offset + 4])
+            if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):  # a start of frame
+                height, width = struct.unpack(">HH", data[offset + 5:offset + 9])
+                return width, height
+            offset += 2 + length
+    return None
+
+
 def read_image(path: Path) -> tuple[np.ndarray | None, str]:
-    """Decode an image file; a truncated JPEG is refused rather than measured half-grey."""
+    """Decode an image file; a truncated JPEG is refused rather than measured half-grey, and a header that
+    declares an absurd size is refused before decoding."""
     try:
         data = path.read_bytes()
     except OSError as exc:
         return None, f"cannot be read ({exc.strerror or exc})"
     if not data:
         return None, "is empty"
+    size = header_size(data)
+    if size is not None:
+        width, height = size
+        if width * height > MAX_IMAGE_PIXELS:
+            return None, f"declares {width}x{height} pixels, more than any camera here ({MAX_IMAGE_PIXELS} at most)"
+        if min(width, height) < MIN_IMAGE_SIDE:
+            return None, f"is {width}x{height} pixels, too small to hold a board or targets"
     if path.suffix.lower() in {".jpg", ".jpeg"} and not data.rstrip(b"\0\r\n ").endswith(b"\xff\xd9"):
         return None, "is a truncated JPEG (no end-of-image marker)"
     image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
