@@ -10,10 +10,10 @@ from veg_area_ros.sources import FolderSource, SourceError, SyntheticSource, Vid
 
 
 def test_folder_ends_loops_and_reports_unreadable_frames(tmp_path):
-    cv2.imwrite(str(tmp_path / "a.png"), np.zeros((4, 6, 3), np.uint8))
+    cv2.imwrite(str(tmp_path / "a.png"), np.zeros((16, 24, 3), np.uint8))
     (tmp_path / "b.png").write_bytes(b"not an image")
     source = open_source(str(tmp_path))
-    assert isinstance(source, FolderSource) and source.read().shape == (4, 6, 3)
+    assert isinstance(source, FolderSource) and source.read().shape == (16, 24, 3)
     with pytest.raises(SourceError, match=r"b\.png"):
         source.read()
     assert source.read() is None  # the end, cleanly
@@ -26,7 +26,7 @@ def test_folder_ends_loops_and_reports_unreadable_frames(tmp_path):
 
 def test_a_looped_still_is_decoded_once(tmp_path):
     still = tmp_path / "still.png"
-    cv2.imwrite(str(still), np.full((4, 6, 3), 7, np.uint8))
+    cv2.imwrite(str(still), np.full((16, 24, 3), 7, np.uint8))
     source = open_source(str(still), loop=True)
     first = source.read()
     still.write_bytes(b"replaced by something unreadable")  # not read again: the decoded frame is replayed
