@@ -751,6 +751,7 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
     from rclpy.node import Node
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
+    from std_msgs.msg import String
 
     from veg_area_ros.ros.common import RESULT_QOS
     from veg_area_ros.ros.messages import camera_to_info, image_to_msg
@@ -764,14 +765,9 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
     image_pub = probe.create_publisher(Image, "image_raw", qos_profile_sensor_data)
     info_pub = probe.create_publisher(CameraInfo, "camera_info", info_qos)
     areas: list[float] = []
-    published_before_first_area: list[int] = []
-
-    def on_area(msg: Vector3Stamped) -> None:
-        if not areas:
-            published_before_first_area.append(published)
-        areas.append(msg.vector.x)
-
-    probe.create_subscription(Vector3Stamped, "projected_area", on_area, RESULT_QOS)
+    infos: list[str] = []
+    probe.create_subscription(Vector3Stamped, "projected_area", lambda m: areas.append(m.vector.x), RESULT_QOS)
+    probe.create_subscription(String, "projected_area/info", lambda m: infos.append(m.data), RESULT_QOS)
     frame = render_scene(ENDOSCOPE, cube_scene(), 0.7, roll_deg=0.0)
     published = 0
 
@@ -796,8 +792,9 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
+    last = json.loads(infos[-1]) if infos else {}
     return {"areas": areas, "published": published, "truth_m2": cube_scene().true_area_m2,
-            "published_since_first_area": published - (published_before_first_area or [published])[0] + 1}
+            "frames_received": last.get("frames_received", 0), "frames_measured": last.get("frames_measured", 0)}
 
 
 if __name__ == "__main__":

@@ -148,8 +148,10 @@ def test_camera_info_from_every_kind_of_driver_is_used(tmp_path, qos):
     latched (ours): the area node, started after the driver, measures the cube from it at 10 Hz."""
     result = run_scenario("driver_qos", tmp_path, qos=qos, seconds=8.0)
     areas = np.array(result["areas"])
-    # from its first Af on (its start-up takes seconds), the node measures the frames as they come
-    assert len(areas) >= 10 and len(areas) >= 0.9 * result["published_since_first_area"], result
+    # every frame that reached the node was measured with the driver's calibration (a frame or two may come
+    # before the node's first camera_info); what the transport delivered is not what is judged here
+    received, measured = result["frames_received"], result["frames_measured"]
+    assert len(areas) >= 10 and measured >= 10 and measured >= received - 2, result
     assert np.all(np.abs(areas / result["truth_m2"] - 1) <= 0.005), areas
     assert result["off_machine"] == []
 

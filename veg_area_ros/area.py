@@ -29,6 +29,7 @@ import numpy as np
 from .camera_model import BrownCamera
 from .classify import (
     AREA_MODES,
+    MIN_SPREAD_DN,
     Classifier,
     ClassifyError,
     LevelEstimator,
@@ -313,7 +314,8 @@ class AreaMeasurer:
         if self.given_levels is None:
             return estimated if estimated is not None and estimated.resolvable() else None
         object_level, background_level = self.given_levels
-        spreads = (estimated.object_spread, estimated.background_spread) if estimated is not None else (0.5, 0.5)
+        spreads = ((estimated.object_spread, estimated.background_spread) if estimated is not None
+                   else (MIN_SPREAD_DN, MIN_SPREAD_DN))
         given = Levels(object_level, background_level, *spreads, estimated=False)
         return given if given.resolvable() else None
 

@@ -107,13 +107,6 @@ def _set_ros_distro(metadata: Path, distro: str) -> None:
     temporary.replace(metadata)
 
 
-def offered_qos(bag: str | Path) -> dict[str, list[dict]]:
-    """Each topic's offered QoS profiles as metadata.yaml records them."""
-    content = yaml.safe_load((Path(bag) / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
-    return {entry["topic_metadata"]["name"]: entry["topic_metadata"].get("offered_qos_profiles") or []
-            for entry in content["topics_with_message_count"]}
-
-
 def _read_record(data: memoryview, offset: int) -> tuple[int, memoryview, int] | None:
     """(opcode, content, next offset) of the MCAP record at `offset`, None if it is cut off."""
     if offset + 9 > len(data):

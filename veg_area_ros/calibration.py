@@ -21,7 +21,7 @@ from scipy import sparse
 from scipy.optimize import least_squares
 
 from .board import Detection
-from .camera_model import PARAM_NAMES, BrownCamera
+from .camera_model import PARAM_NAMES, BrownCamera, distort
 
 N_INTRINSIC = len(PARAM_NAMES)
 MIN_VIEWS = 3  # below this the nine camera parameters cannot be separated from the poses at all
@@ -308,11 +308,6 @@ def _camera_block(object_points: list[np.ndarray], x: np.ndarray, problem: _Prob
     return camera_inverse, np.array(gradients) @ camera_inverse.T
 
 
-def _refit(object_points: list[np.ndarray], image_points: list[np.ndarray], start: np.ndarray) -> np.ndarray:
-    """The joint least squares from a start near the solution (a subset of the views): camera and poses."""
-    return _bundle_lm(object_points, image_points, start)[0]
-
-
 LM_MAX_ITERATIONS = 200
 LM_TOLERANCE = 1e-12  # relative decrease of the cost, and relative step, below which the fit has converged
 
@@ -334,27 +329,23 @@ def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], 
         poses = x[N_INTRINSIC:].reshape(views, 6)
         rotations = np.array([cv2.Rodrigues(pose[:3])[0] for pose in poses])
         camera = np.einsum("nij,nj->ni", rotations[owner], every_point) + poses[owner, 3:]
-        fx, fy, cx, cy, k1, k2, p1, p2, k3 = x[:N_INTRINSIC]
-        u, v = camera[:, 0] / camera[:, 2], camera[:, 1] / camera[:, 2]
-        r2 = u * u + v * v
-        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        ud = u * radial + 2 * p1 * u * v + p2 * (r2 + 2 * u * u)
-        vd = v * radial + p1 * (r2 + 2 * v * v) + 2 * p2 * u * v
-        projected = np.column_stack([fx * ud + cx, fy * vd + cy]).ravel()
+        fx, fy, cx, cy = x[:4]
+        distorted = distort(camera[:, :2] / camera[:, 2:3], *x[4:N_INTRINSIC])  # plumb_bob order, as x holds it
+        projected = (distorted * (fx, fy) + (cx, cy)).ravel()
         difference = projected - every_observed
         return float(difference @ difference)
 
-    def evaluate(x: np.ndarray, jacobians: bool):
+    def evaluate(x: np.ndarray) -> tuple[list[np.ndarray], list[tuple[np.ndarray, np.ndarray]]]:
+        """Each view's residuals and Jacobian blocks (camera A, pose B)."""
         residuals, blocks = [], []
         for v in range(views):
             uv, jac = _project_with_jacobian(x[:N_INTRINSIC], x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6],
                                              object_points[v])
             residuals.append(uv - observed[v])
-            if jacobians:
-                blocks.append((jac[:, 6:6 + N_INTRINSIC], jac[:, :6]))
+            blocks.append((jac[:, 6:6 + N_INTRINSIC], jac[:, :6]))
         return residuals, blocks
 
-    residuals, blocks = evaluate(x, True)
+    residuals, blocks = evaluate(x)
     cost = sum(float(r @ r) for r in residuals)
     damping = 1e-3
     for iteration in range(1, LM_MAX_ITERATIONS + 1):
@@ -388,7 +379,7 @@ def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], 
                 damping = max(damping / 3, 1e-15)
                 if small_step or small_gain:
                     return x, True, iteration
-                residuals, blocks = evaluate(x, True)
+                residuals, blocks = evaluate(x)
                 break
             damping *= 4
             if damping > 1e12:  # no step lowers the cost: at the minimum to machine precision
@@ -405,7 +396,7 @@ def _halves(object_points: list[np.ndarray], image_points: list[np.ndarray], x: 
     for half in (0, 1):
         chosen = list(range(half, len(object_points), 2))
         start = np.concatenate([x[:N_INTRINSIC]] + [x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6] for v in chosen])
-        fitted.append(_refit([object_points[v] for v in chosen], [image_points[v] for v in chosen], start))
+        fitted.append(_bundle_lm([object_points[v] for v in chosen], [image_points[v] for v in chosen], start)[0])
     difference = fitted[0][:N_INTRINSIC] - fitted[1][:N_INTRINSIC]
     combined = np.array([std[name] for name in PARAM_NAMES]) * 2  # sqrt(2 std_half^2), std_half = sqrt(2) std
     z = np.abs(difference) / np.maximum(combined, 1e-300)

@@ -30,6 +30,17 @@ DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")  # plumb_bob order
 PARAM_NAMES = ("fx", "fy", "cx", "cy", *DIST_NAMES)  # OpenCV's names, the order calibration fits them
 
 
+def distort(xy: np.ndarray, k1: float, k2: float, p1: float, p2: float, k3: float) -> np.ndarray:
+    """The Brown model: ideal normalized coordinates (N, 2) -> distorted normalized coordinates (N, 2)."""
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    x, y = xy[:, 0], xy[:, 1]
+    r2 = x * x + y * y
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return np.column_stack([xd, yd])
+
+
 @dataclass(frozen=True)
 class BrownCamera:
     """A calibrated camera. Pixel units for c, xp, yp; K and P act on ideal normalized coordinates."""
@@ -114,13 +125,7 @@ class BrownCamera:
     # --- projection ---------------------------------------------------------------------------------
     def distort_normalized(self, xy: np.ndarray) -> np.ndarray:
         """Ideal normalized coordinates (N, 2) -> distorted normalized coordinates (N, 2)."""
-        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-        x, y = xy[:, 0], xy[:, 1]
-        r2 = x * x + y * y
-        radial = 1 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
-        xd = x * radial + 2 * self.p1 * x * y + self.p2 * (r2 + 2 * x * x)
-        yd = y * radial + self.p1 * (r2 + 2 * y * y) + 2 * self.p2 * x * y
-        return np.column_stack([xd, yd])
+        return distort(xy, self.k1, self.k2, self.p1, self.p2, self.k3)
 
     def normalized_to_pixels(self, xy: np.ndarray) -> np.ndarray:
         """Ideal normalized coordinates -> distorted pixels."""

@@ -124,9 +124,9 @@ class Levels:
         fraction[fraction >= 1 - eps_object] = 1.0
         return fraction
 
-    def mixed(self, values: np.ndarray | None = None) -> np.ndarray:
-        """Which band values are mixed (strictly between the pure zones): the pixels of an edge."""
-        fraction = self.fractions(values)
+    def mixed(self) -> np.ndarray:
+        """Which of the 256 band values are mixed (strictly between the pure zones): the pixels of an edge."""
+        fraction = self.fractions()
         return (fraction > 0) & (fraction < 1)
 
     def to_dict(self) -> dict:
@@ -189,11 +189,6 @@ class LevelEstimator:
             return None
         (obj, obj_spread), (bg, bg_spread) = (high, low) if self.object_is_high else (low, high)
         return Levels(obj, bg, obj_spread, bg_spread)
-
-
-def estimate_levels(counts: np.ndarray, threshold: float, object_is_high: bool) -> Levels | None:
-    """Object and background levels of a 256-bin band histogram, split at the threshold (`LevelEstimator`)."""
-    return LevelEstimator(counts, object_is_high).at(threshold)
 
 
 def check_levels(levels) -> tuple[float, float] | None:
