@@ -39,7 +39,15 @@ from .classify import (
     polygon_roi,
 )
 from .idealize import Idealizer
-from .scale import DetectedMarker, PlaneScale, TargetsError, TargetsSpec, marker_centre, track_markers
+from .scale import (
+    DetectedMarker,
+    PlaneScale,
+    TargetsError,
+    TargetsSpec,
+    marker_centre,
+    marker_layout_problem,
+    track_markers,
+)
 
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
 WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per frame
@@ -257,10 +265,20 @@ class AreaMeasurer:
             self._geometry = ideal_u, ideal_v, area
         return self._geometry
 
+    def _check_layout(self, located: _Located, roi_polygon: np.ndarray) -> None:
+        """TargetsError when the targets file cannot describe the detected markers (`marker_layout_problem`)."""
+        corners = {int(label.split()[1]): pixel + offset
+                   for label, pixel, offset in zip(located.labels, located.pixels, located.offsets, strict=False)
+                   if label.startswith("marker ")}
+        problem = marker_layout_problem(located.scale, corners, self.targets.marker_side_m, roi_polygon)
+        if problem:
+            raise TargetsError(problem)
+
     def _build_weights(self, frame: np.ndarray, located: _Located) -> _Weights:
         height, width = frame.shape[:2]
         ideal_u, ideal_v, ideal_area = self._pixel_geometry(height, width)
         roi_ideal, polygon = self._roi_ideal(frame.shape, located)
+        self._check_layout(located, polygon)
         roi_raw = cv2.remap(roi_ideal, ideal_u, ideal_v, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT)
         x, y, w, h = cv2.boundingRect(roi_raw)
         if w == 0 or h == 0:
@@ -431,7 +449,8 @@ class AreaMeasurer:
         self._check_size(frame)
         located = self._locate(frame)
         image = self.idealizer(frame) if self.idealizer is not None else frame
-        roi, _ = self._roi_ideal(image.shape, located)
+        roi, polygon = self._roi_ideal(image.shape, located)
+        self._check_layout(located, polygon)
         band = self.classifier.index_image(image)
         threshold = self.classifier.resolve_threshold(band, roi)
 

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from .camera_model import BrownCamera
+from .camera_model import BrownCamera, check_plausible
 from .strict_yaml import StrictYamlError, load_text, read_text
 
 METADATA_KEY = "veg_area_ros"
@@ -128,7 +128,8 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
         raise CalibrationFileError(f"{path}: {dist.size} distortion coefficients do not fit plumb_bob's five")
     dist = np.pad(dist[:5], (0, 5 - min(5, dist.size)))
     try:
-        camera = BrownCamera.from_opencv(K, dist, (content["image_width"], content["image_height"]))
+        camera = check_plausible(
+            BrownCamera.from_opencv(K, dist, (content["image_width"], content["image_height"])))
     except ValueError as exc:
         raise CalibrationFileError(f"{path}: {exc}") from exc
     metadata = content.get(METADATA_KEY) or {}

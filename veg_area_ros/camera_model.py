@@ -179,6 +179,52 @@ class BrownCamera:
         return uv.reshape(-1, 2)
 
 
+MAX_FIELD_SCALE = 3.0  # ideal vs distorted radius over the image: beyond a factor 3 no lens here, a corrupt model
+MIN_FOCAL_SCALE, MAX_FOCAL_SCALE = 0.05, 50.0  # principal distance in image widths: fisheye to long telephoto
+
+
+def implausibility(camera: BrownCamera, samples: int = 25) -> str | None:
+    """Why this camera model cannot be a real lens-and-port calibration, or None. A model is refused when its
+    principal distance or point is absurd for its image, or when its distortion is not one-to-one over the
+    image (the Jacobian folds, or a pixel has no ideal ray) or stretches the field by more than
+    MAX_FIELD_SCALE: such a model (k1 = 1e6, say) would idealize frames into nonsense without an error."""
+    width, height = camera.image_size
+    if not MIN_FOCAL_SCALE * width <= camera.fx <= MAX_FOCAL_SCALE * width:
+        return f"principal distance {camera.fx:.6g} px is absurd for an image {width} px wide"
+    if not 0.25 <= camera.aspect <= 4.0:
+        return f"pixel aspect fy/fx = {camera.aspect:.6g} is absurd"
+    if not (-0.5 * width <= camera.xp <= 1.5 * width and -0.5 * height <= camera.yp <= 1.5 * height):
+        return f"principal point ({camera.xp:.6g}, {camera.yp:.6g}) px is far outside the {width}x{height} image"
+    u, v = np.meshgrid(np.linspace(0, width - 1, samples), np.linspace(0, height - 1, samples))
+    raw = np.column_stack([u.ravel(), v.ravel()])
+    with np.errstate(all="ignore"):
+        ideal = camera.pixels_to_normalized(raw)
+        back = camera.normalized_to_pixels(ideal)
+        if not np.all(np.isfinite(back)) or np.max(np.abs(back - raw)) > 1e-3:
+            return "its distortion has no inverse over the image (some pixels have no ray): not monotonic"
+        # along every ray from the centre to an image pixel the mapping must not fold
+        steps = np.linspace(0.0, 1.0, 33)[1:, None, None]
+        a, b, c, d = camera._distortion_jacobian((steps * ideal[None]).reshape(-1, 2))
+        if np.any(a * d - b * c <= 0):
+            return "its distortion folds over inside the image (not monotonic)"
+        distorted = np.hypot(*camera.distort_normalized(ideal).T)
+        radius = np.hypot(*ideal.T)
+        far = radius > 1e-6
+        ratio = radius[far] / distorted[far]
+    if far.any() and not 1 / MAX_FIELD_SCALE <= ratio.min() <= ratio.max() <= MAX_FIELD_SCALE:
+        return (f"its distortion scales the field by {ratio.min():.3g}–{ratio.max():.3g}x over the image "
+                f"(at most {MAX_FIELD_SCALE:g}x for any lens and port): the coefficients are absurd")
+    return None
+
+
+def check_plausible(camera: BrownCamera) -> BrownCamera:
+    """The camera, or ValueError with `implausibility`'s reason."""
+    problem = implausibility(camera)
+    if problem:
+        raise ValueError(f"implausible camera model: {problem}")
+    return camera
+
+
 @dataclass(frozen=True)
 class ImportResult:
     """A camera converted from another convention, with how well the conversion fits."""

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera_model import BrownCamera
+from .camera_model import BrownCamera, check_plausible
+from .frames import MAX_IMAGE_PIXELS
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, no options
 CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1}
@@ -286,4 +287,7 @@ def info_to_camera(msg) -> BrownCamera:
     if max(msg.width, msg.height) > MAX_IMAGE_SIDE:
         raise ValueError(f"camera_info image size {msg.width}x{msg.height} is beyond any camera "
                          f"(at most {MAX_IMAGE_SIDE} px a side)")
-    return BrownCamera.from_opencv(k, dist, (msg.width, msg.height))
+    if msg.width * msg.height > MAX_IMAGE_PIXELS:
+        raise ValueError(f"camera_info image size {msg.width}x{msg.height} is more than any camera here "
+                         f"({MAX_IMAGE_PIXELS} pixels at most)")
+    return check_plausible(BrownCamera.from_opencv(k, dist, (msg.width, msg.height)))

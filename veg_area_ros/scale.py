@@ -55,6 +55,7 @@ class TargetsSpec:
     pixel_std: float = 0.1
     object_plane_offset_m: float | None = None  # None: the object lies in the targets' plane (the paper's set-up)
     object_plane_offset_std_m: float = 0.002
+    marker_side_m: float | None = None  # the black square's side: checks the layout's scale against each marker
 
     @classmethod
     def load(cls, path: str | Path) -> TargetsSpec:
@@ -90,6 +91,11 @@ class TargetsSpec:
             if not isinstance(entry, dict) or "pixel" not in entry or "plane" not in entry:
                 raise TargetsError(f"point {k} needs 'pixel' and 'plane'")
             spec.points.append((_pair(entry["pixel"], f"point {k} pixel"), _pair(entry["plane"], f"point {k} plane")))
+        if "marker_side_m" in content:
+            side = content["marker_side_m"]
+            if not _is_number(side) or not 0 < side <= 10:
+                raise TargetsError(f"'marker_side_m' must be a side in metres, got {side!r}")
+            spec.marker_side_m = float(side)
         for key in ("distance_std_m", "pixel_std", "object_plane_offset_std_m"):
             if key in content:
                 value = content[key]
@@ -387,6 +393,52 @@ class PlaneScale:
         areas = [PlaneScale.fit(self.pixels, self.planes, plane_offset_m=self.plane_offset_m + sign * step,
                                 camera_matrix=self.camera_matrix).pixel_area(uv)[0] for sign in (1, -1)]
         return float(abs(np.log(areas[0] / areas[1])) / (2 * step))
+
+
+SQUARE_TOLERANCE = 0.08  # a marker's sides and diagonals on the plane may differ this much (relative) from a square
+SIDE_TOLERANCE = 0.05  # each marker's side on the plane against `marker_side_m`
+CORNER_STD_PX = 0.25  # ArUco corners on real frames: what the tolerances must allow on a small marker
+
+
+def marker_layout_problem(scale: PlaneScale, corners: dict[int, np.ndarray], marker_side_m: float | None,
+                          roi_pixels: np.ndarray | None = None) -> str | None:
+    """Why the targets file cannot describe what was detected, or None. The scale's map must send every
+    marker's own four corners (idealized px) to a square of one handedness (the side `marker_side_m` when it
+    is given) and keep the targets and the ROI on one side of its line at infinity. Permuted marker ids or a
+    mistyped coordinate fold or stretch the map (Af off by orders of magnitude) and fail this."""
+    if scale.kind == "distance" or not corners:
+        return None
+    H = scale.matrix
+    pixels = np.vstack([scale.pixels, *corners.values(), *([] if roi_pixels is None else [roi_pixels])])
+    w = H[2, 0] * pixels[:, 0] + H[2, 1] * pixels[:, 1] + H[2, 2]
+    if not (np.all(w > 0) or np.all(w < 0)):
+        return ("the targets' positions fold the plane (its horizon crosses the targets): marker ids or "
+                "coordinates in the targets file do not match the board (permuted or mistyped?)")
+    handedness = []
+    for marker_id, marker in corners.items():
+        marker = np.asarray(marker, float).reshape(4, 2)
+        plane = cv2.perspectiveTransform(marker.reshape(-1, 1, 2), H).reshape(4, 2)
+        edges = plane[[1, 2, 3, 0]] - plane
+        lengths = np.hypot(*edges.T)
+        diagonals = np.hypot(*(plane[2:] - plane[:2]).T) / np.sqrt(2)
+        mean = lengths.mean()
+        side_px = float(np.hypot(*(marker[[1, 2, 3, 0]] - marker).T).mean())
+        allowed = max(SQUARE_TOLERANCE, 6 * CORNER_STD_PX / max(side_px, 1.0))
+        spread = float(np.max(np.abs(np.concatenate([lengths, diagonals]) / mean - 1)))
+        if spread > allowed:
+            return (f"marker {marker_id} maps to a {lengths.min() * 1000:.3g}–{lengths.max() * 1000:.3g} mm "
+                    f"quadrilateral, not a square (off by {spread:.0%}): marker ids or coordinates in the "
+                    f"targets file do not match the board (permuted or mistyped?)")
+        handedness.append(np.sign(edges[0, 0] * edges[1, 1] - edges[0, 1] * edges[1, 0]))
+        allowed = max(SIDE_TOLERANCE, 4 * CORNER_STD_PX / max(side_px, 1.0))
+        if marker_side_m is not None and abs(mean / marker_side_m - 1) > allowed:
+            return (f"marker {marker_id} measures {mean * 1000:.4g} mm a side on the targets' plane where the "
+                    f"targets file gives marker_side_m = {marker_side_m * 1000:.4g} mm: a coordinate or the "
+                    f"side is mistyped")
+    if len(set(handedness)) > 1:
+        return ("the markers map mirrored against each other: marker ids or coordinates in the targets file do "
+                "not match the board (permuted?)")
+    return None
 
 
 def _offset_plane_matrix(matrix: np.ndarray, kind: str, camera_matrix: np.ndarray | None,
