@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import struct
 import time
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,7 @@ from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 
+from .calib_io import write_atomic
 from .cdr import CameraInfoFields, ImageFields, decode_camera_info, decode_image
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -102,9 +104,7 @@ def _set_ros_distro(metadata: Path, distro: str) -> None:
     """metadata.yaml with the distribution the messages come from, replaced atomically (temp file + rename)."""
     content = yaml.safe_load(metadata.read_text())
     content["rosbag2_bagfile_information"]["ros_distro"] = distro
-    temporary = metadata.with_name(metadata.name + ".tmp")
-    temporary.write_text(yaml.safe_dump(content, sort_keys=False))
-    temporary.replace(metadata)
+    write_atomic(metadata, yaml.safe_dump(content, sort_keys=False))
 
 
 def _read_record(data: memoryview, offset: int) -> tuple[int, memoryview, int] | None:
@@ -124,59 +124,97 @@ def _string(content: memoryview, offset: int) -> tuple[str, int]:
     return bytes(content[offset + 4:offset + 4 + length]).decode(), offset + 4 + length
 
 
-def recover_bag(broken: str | Path, output: str | Path) -> dict[str, int]:
-    """A readable copy of an MCAP bag whose recorder died: every message of every complete chunk (and of
-    uncompressed complete records) written through rosbags into `output`. Returns messages per topic."""
+@dataclass
+class Recovery:
+    counts: dict[str, int]  # messages recovered per topic
+    dropped: list[str]  # why each damaged chunk or record was left out
+    unchecked_chunks: int = 0  # chunks without a CRC (rosbags writes none): damage inside them cannot be seen
+
+
+def recover_bag(broken: str | Path, output: str | Path) -> Recovery:
+    """A readable copy of an MCAP bag whose recorder died: every message of every complete chunk whose CRC
+    matches (and of uncompressed complete records) written through rosbags into `output`. A chunk that is
+    damaged (its CRC, its compression or its records) is left out and named in `dropped`."""
     broken = Path(broken)
+    if not broken.exists():
+        raise BagError(f"{broken}: no such bag")
     files = sorted(broken.glob("*.mcap")) if broken.is_dir() else [broken]
     if not files:
         raise BagError(f"{broken}: no .mcap file to recover")
-    data = memoryview(files[0].read_bytes())
+    try:
+        data = memoryview(files[0].read_bytes())
+    except OSError as exc:
+        raise BagError(f"{files[0]}: cannot be read ({exc.strerror or exc})") from exc
     if bytes(data[:8]) != MCAP_MAGIC:
-        raise BagError(f"{files[0]}: not an MCAP file")
+        raise BagError(f"{files[0]}: not an MCAP file (no MCAP magic at its start)")
     schemas: dict[int, tuple[str, str]] = {}
     channels: dict[int, tuple[str, int]] = {}
     messages: list[tuple[int, int, bytes]] = []
+    dropped: list[str] = []
+    unchecked = [0]
 
-    def scan(records: memoryview, offset: int) -> int:
-        while (record := _read_record(records, offset)) is not None:
-            opcode, content, offset = record
-            if opcode == 0x03:  # schema: id, name, encoding, data
-                (schema_id,) = struct.unpack_from("<H", content, 0)
-                name, at = _string(content, 2)
-                _, at = _string(content, at)
-                (length,) = struct.unpack_from("<I", content, at)
-                schemas[schema_id] = (name, bytes(content[at + 4:at + 4 + length]).decode())
-            elif opcode == 0x04:  # channel: id, schema id, topic, ...
-                channel_id, schema_id = struct.unpack_from("<HH", content, 0)
-                topic, _ = _string(content, 4)
-                channels[channel_id] = (topic, schema_id)
-            elif opcode == 0x05:  # message: channel, sequence, log time, publish time, data
-                channel_id, _, log_time = struct.unpack_from("<HIQ", content, 0)
-                messages.append((channel_id, log_time, bytes(content[22:])))
-            elif opcode == 0x06:  # chunk: times, sizes, crc, compression, records
-                compression, at = _string(content, 28)
-                (length,) = struct.unpack_from("<Q", content, at)
-                inner = content[at + 8:at + 8 + length]
-                if compression == "zstd":
-                    from backports import zstd
+    def record(opcode: int, content: memoryview) -> None:
+        if opcode == 0x03:  # schema: id, name, encoding, data
+            (schema_id,) = struct.unpack_from("<H", content, 0)
+            name, at = _string(content, 2)
+            _, at = _string(content, at)
+            (length,) = struct.unpack_from("<I", content, at)
+            schemas[schema_id] = (name, bytes(content[at + 4:at + 4 + length]).decode())
+        elif opcode == 0x04:  # channel: id, schema id, topic, ...
+            channel_id, schema_id = struct.unpack_from("<HH", content, 0)
+            topic, _ = _string(content, 4)
+            channels[channel_id] = (topic, schema_id)
+        elif opcode == 0x05:  # message: channel, sequence, log time, publish time, data
+            channel_id, _, log_time = struct.unpack_from("<HIQ", content, 0)
+            messages.append((channel_id, log_time, bytes(content[22:])))
 
-                    inner = memoryview(zstd.decompress(bytes(inner)))
-                elif compression:
-                    raise BagError(f"chunk compression {compression!r} cannot be recovered")
-                scan(inner, 0)
-        return offset
+    def chunk(content: memoryview) -> None:
+        """A chunk's records, all or none: checked against the chunk's CRC before any is kept."""
+        _, _, size, crc = struct.unpack_from("<QQQI", content, 0)
+        compression, at = _string(content, 28)
+        (length,) = struct.unpack_from("<Q", content, at)
+        inner = content[at + 8:at + 8 + length]
+        if compression == "zstd":
+            from backports import zstd
 
-    scan(data, 8)
+            inner = memoryview(zstd.decompress(bytes(inner)))
+        elif compression:
+            raise ValueError(f"compression {compression!r} cannot be recovered")
+        if len(inner) != size or (crc and zlib.crc32(inner) != crc):
+            raise ValueError("its CRC does not match its records")
+        unchecked[0] += not crc
+        records, offset = [], 0
+        while (found := _read_record(inner, offset)) is not None:
+            opcode, record_content, offset = found
+            records.append((opcode, record_content))
+        if offset != len(inner):
+            raise ValueError("a record runs past the chunk's end")
+        for opcode, record_content in records:
+            record(opcode, record_content)
+
+    offset = 8
+    while (found := _read_record(data, offset)) is not None:
+        opcode, content, next_offset = found
+        try:
+            chunk(content) if opcode == 0x06 else record(opcode, content)
+        except Exception as exc:
+            kind = "chunk" if opcode == 0x06 else f"record 0x{opcode:02x}"
+            dropped.append(f"{kind} at byte {offset} dropped: {exc}")
+        offset = next_offset
     if not channels:
-        raise BagError(f"{files[0]}: no complete chunk: nothing to recover")
+        raise BagError(f"{files[0]}: no complete chunk: nothing to recover"
+                       + (f" ({'; '.join(dropped[:3])})" if dropped else ""))
     recorder = BagRecorder(output, "mcap")
-    for topic, schema_id in channels.values():
+    known = {channel_id: channel for channel_id, channel in channels.items() if channel[1] in schemas}
+    for topic, schema_id in known.values():
         recorder.add_topic(topic, schemas[schema_id][0])  # types the recorder could write: Kilted's
     for channel_id, log_time, payload in messages:
-        recorder.write(channels[channel_id][0], log_time, payload)
+        if channel_id in known:
+            recorder.write(known[channel_id][0], log_time, payload)
+        else:
+            dropped.append(f"a message of channel {channel_id} dropped: its channel or schema was damaged")
     recorder.close()
-    return dict(recorder.counts)
+    return Recovery(dict(recorder.counts), dropped, unchecked[0])
 
 
 @dataclass

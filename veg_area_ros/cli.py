@@ -399,7 +399,10 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
     except KeyboardInterrupt:  # Ctrl-C on a long video or bag: what was measured is kept (CSV, plot)
         interrupted = True
 
-    if csv_path is not None:
+    if csv_path is not None and measured == 0 and rows:  # an error-only table must not replace a real one
+        kept = " (the existing file is kept)" if csv_path.exists() else ""
+        say(f"time series not written: no frame was measured{kept}")
+    elif csv_path is not None and rows:
         _write_area_csv(csv_path, rows)
         say(f"time series: {csv_path}")
         if len(rows) > 1:
@@ -413,7 +416,6 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
                                     time_label="time [s]" if timed else "frame")
             say(f"plot: {plot}")
     if interrupted:  # the frame in hand when Ctrl-C came is not in the rows
-        measured = sum(not r["error"] for r in rows)
         say(f"interrupted after {len(rows)} of {total} frames ({measured} measured)"
             + (f"; the series so far: {csv_path}" if csv_path is not None and rows else ""))
         return 130, rows
@@ -584,12 +586,18 @@ def cmd_bag_recover(args: argparse.Namespace) -> int:
     from .bags import BagError, recover_bag
 
     try:
-        counts = recover_bag(args.bag, args.output)
+        recovery = recover_bag(args.bag, args.output)
     except BagError as exc:
         raise CliError(str(exc)) from exc
-    for topic, count in counts.items():
+    for topic, count in recovery.counts.items():
         print(f"{topic}: {count} messages recovered")
-    print(f"readable bag: {args.output}")
+    for reason in recovery.dropped:
+        print(f"damaged: {reason}", file=sys.stderr)
+    if recovery.unchecked_chunks:
+        print(f"{recovery.unchecked_chunks} chunk(s) carry no CRC (the writer computed none): damage inside them "
+              "cannot be detected", file=sys.stderr)
+    print(f"readable bag: {args.output}" + (f" ({len(recovery.dropped)} damaged part(s) left out)"
+                                           if recovery.dropped else ""))
     return 0
 
 
