@@ -238,6 +238,12 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
     probe.create_subscription(Image, "image_raw", lambda m: image_stamps.append(time.monotonic()), IMAGE_QOS)
     probe.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)), RESULT_QOS)
     probe.create_subscription(CameraInfo, "camera_info", camera_infos.append, LATCHED_QOS)
+    from rcl_interfaces.msg import Log
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    area_log: list[str] = []
+    probe.create_subscription(Log, "/rosout", lambda m: m.name == "area_node" and area_log.append(m.msg),
+                              QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
     inject = probe.create_publisher(Image, "image_raw", IMAGE_QOS)
     masks: list[dict] = []
 
@@ -315,6 +321,11 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         out["bad_threshold"] = None if bad is None else [bad.results[0].successful, bad.results[0].reason]
         bad_roi = set_parameter("roi", [1.0, 2.0])
         out["bad_roi"] = None if bad_roi is None else [bad_roi.results[0].successful, bad_roi.results[0].reason]
+        far_roi = set_parameter("roi", [2000.0, 2000.0, 2100.0, 2000.0, 2100.0, 2100.0])
+        out["far_roi"] = None if far_roi is None else [far_roi.results[0].successful, far_roi.results[0].reason]
+        median = set_parameter("threshold_mode", "median")
+        out["bad_threshold_mode"] = None if median is None else [median.results[0].successful,
+                                                                 median.results[0].reason]
         good = set_parameter("threshold", 60.0)
         out["good_threshold"] = None if good is None else good.results[0].successful
         mark = len(infos)
@@ -346,6 +357,13 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
             rclpy.spin_once(probe, timeout_sec=0.05)
         mark = len(infos)
         out["measures_after_bad_frames"] = spin_until(lambda: len(calibrated(mark)) >= 3, 30)
+        # one more bad frame after the throttle period: its line says how many the throttle hid
+        spin_until(lambda: False, 5.5)
+        msg = Image(encoding="16UC1", width=640, height=480, step=1280, data=bytes(640 * 480 * 2))
+        msg.header.stamp = probe.get_clock().now().to_msg()
+        inject.publish(msg)
+        spin_until(lambda: sum("frame refused" in line for line in area_log) >= 2, 10)
+        out["refused_lines"] = [line for line in area_log if "frame refused" in line]
 
         # bad calibrations: a camera_info beyond any camera (refused: the served one stays), then the targets file
         # spoiled on disk before a new calibration comes (the file was read when set: the calibration applies)
@@ -364,9 +382,16 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         bogus = camera_to_info(served)
         bogus.width = bogus.height = 100_000
         probe.create_publisher(CameraInfo, "camera_info", LATCHED_QOS).publish(bogus)
+        absurd = camera_to_info(dataclasses.replace(served, k1=1e6))  # a lens no camera has: Af +570 % before
+        probe.create_publisher(CameraInfo, "camera_info", LATCHED_QOS).publish(absurd)
         mark = len(infos)
         spin_until(lambda: len(calibrated(mark)) >= 4, 30)
         out["areas_after_bogus_camera_info"] = [i["area_m2"] for i in calibrated(mark)[2:]]
+        request = SetCameraInfo.Request()
+        request.camera_info = absurd
+        response = call(probe.create_client(SetCameraInfo, "set_camera_info"), request)
+        out["set_absurd_camera_info"] = None if response is None else [response.success, response.status_message]
+        out["ignored_lines"] = [line for line in area_log if "camera_info ignored" in line]
         request = SetCameraInfo.Request()
         request.camera_info = camera_to_info(served)  # the fitted calibration back: Af of the cube again
         response = call(probe.create_client(SetCameraInfo, "set_camera_info"), request)

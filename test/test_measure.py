@@ -154,7 +154,8 @@ def test_usage_errors(workspace, args, message):
 
 def test_roi_outside_the_image_and_corrupt_calibration(workspace, tmp_path):
     done = measure(workspace, "--roi", "2000,2000,2100,2000,2100,2100")
-    assert done.returncode == 1 and "region of interest is empty" in done.stderr
+    # refused before any frame, as a bad argument: the calibration gives the image size
+    assert done.returncode == 2 and "lies outside the 640x480 image" in done.stderr
     corrupt = tmp_path / "corrupt.yaml"
     corrupt.write_text("image_width: 640\ncamera_matrix: [oops\n")
     done = measure(workspace, calibration=str(corrupt))

@@ -64,6 +64,10 @@ def test_parameters_are_validated_and_change_at_run_time(graph):
     assert not ok and "out of range" in reason
     ok, reason = graph["bad_roi"]
     assert not ok and "at least 3 x,y pairs" in reason
+    ok, reason = graph["far_roi"]  # accepted before, and then no frame was measured
+    assert not ok and "lies outside the 640x480 image" in reason
+    ok, reason = graph["bad_threshold_mode"]  # reported success before, and behaved as fixed
+    assert not ok and "fixed or otsu" in reason
     assert graph["good_threshold"] is True and graph["thresholds_after_change"] == [60.0]
     ok, reason = graph["bad_area_mode"]
     assert not ok and "subpixel, count" in reason
@@ -77,6 +81,24 @@ def test_bad_frames_do_not_stop_the_nodes(graph):
     assert graph["measures_after_bad_frames"]
     assert all(graph["alive_at_end"].values()), graph["alive_at_end"]
     assert graph["exit_codes"] == {"camera_node": 0, "calibration_node": 0, "area_node": 0}  # clean on SIGINT
+
+
+def test_throttled_warnings_say_how_many_they_hid(graph):
+    """Bad frames in a burst and one more after the throttle period: every refusal is accounted for, as a line
+    of its own or counted as hidden in a later line (before, 18 of 22 went unsaid)."""
+    lines = graph["refused_lines"]
+    assert len(lines) >= 2 and "(1 so far)" in lines[0], lines
+    totals = [int(line.split("(")[-1].split(" so far")[0]) for line in lines]
+    hidden = [int(line.split(", ")[-1].split(" like it")[0]) if "like it not shown" in line else 0 for line in lines]
+    assert totals == sorted(totals) and totals[-1] == len(lines) + sum(hidden), lines
+
+
+def test_a_camera_model_no_lens_has_is_refused_by_both_nodes(graph):
+    """k1 = 1e6 on camera_info (Af +570 % before) is ignored by the area node, and set_camera_info answers
+    failure with the reason; the calibration in use stays."""
+    assert any("implausible camera model" in line for line in graph["ignored_lines"]), graph["ignored_lines"]
+    ok, reason = graph["set_absurd_camera_info"]
+    assert not ok and "implausible camera model" in reason
 
 
 def test_bad_calibrations_are_refused_and_the_node_goes_on(graph):

@@ -36,6 +36,7 @@ from .classify import (
     Levels,
     check_levels,
     check_polygon,
+    check_roi_in_image,
     polygon_roi,
 )
 from .idealize import Idealizer
@@ -152,7 +153,9 @@ class AreaMeasurer:
         self.idealizer = Idealizer(camera) if camera is not None else None
         self.targets = targets
         self.classifier = classifier
-        self.roi_polygon = None if roi is None else check_polygon(roi)  # refused now, not at every frame
+        # refused now, not at every frame: without a calibration the image size is known only from frames
+        self.roi_polygon = (None if roi is None else check_polygon(roi) if camera is None
+                            else check_roi_in_image(roi, *camera.image_size))
         self.threshold_delta = threshold_delta
         self._hand_pixels = self._idealize_points(np.array([p for p, _ in targets.points]).reshape(-1, 2))
         self._markers: dict[int, DetectedMarker] = {}  # raw-frame markers of the previous frame

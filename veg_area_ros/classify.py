@@ -237,6 +237,43 @@ def check_polygon(polygon) -> np.ndarray:
     return polygon
 
 
+def _clip(polygon: np.ndarray, axis: int, limit: float, keep_below: bool) -> np.ndarray:
+    """One Sutherland–Hodgman step: the part of the polygon on one side of the line x[axis] = limit."""
+    if len(polygon) == 0:
+        return polygon
+    kept = []
+    for start, end in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
+        start_in = start[axis] <= limit if keep_below else start[axis] >= limit
+        end_in = end[axis] <= limit if keep_below else end[axis] >= limit
+        if start_in:
+            kept.append(start)
+        if start_in != end_in:
+            t = (limit - start[axis]) / (end[axis] - start[axis])
+            kept.append(start + t * (end - start))
+    return np.array(kept).reshape(-1, 2)
+
+
+def roi_area_inside(polygon, width: int, height: int) -> float:
+    """Area (px²) of the part of the polygon inside a width x height image; exact for convex polygons and a
+    bound from above for others (enough to refuse a ROI that misses the image)."""
+    clipped = check_polygon(polygon)
+    for axis, limit, below in ((0, -0.5, False), (0, width - 0.5, True), (1, -0.5, False), (1, height - 0.5, True)):
+        clipped = _clip(clipped, axis, limit, below)
+    if len(clipped) < 3:
+        return 0.0
+    x, y = clipped[:, 0], clipped[:, 1]
+    return float(abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2)
+
+
+def check_roi_in_image(polygon, width: int, height: int) -> np.ndarray:
+    """The polygon, or ClassifyError when it encloses less than a pixel of the width x height image."""
+    if roi_area_inside(polygon, width, height) < 1.0:
+        corners = np.asarray(polygon, float).reshape(-1, 2)
+        raise ClassifyError(f"the region of interest ({corners.min(axis=0).round(1).tolist()} to "
+                            f"{corners.max(axis=0).round(1).tolist()} px) lies outside the {width}x{height} image")
+    return check_polygon(polygon)
+
+
 def polygon_roi(shape: tuple[int, int], polygon: np.ndarray, holes: list[np.ndarray] = ()) -> np.ndarray:
     """uint8 ROI mask: inside `polygon` (N, 2 px) and outside every hole polygon."""
     roi = np.zeros(shape[:2], np.uint8)

@@ -32,7 +32,16 @@ from ..idealize import FrameSizeError
 from ..latest import FrameTally
 from ..scale import TargetsError, TargetsSpec
 from ..synthetic import SCENE_DICTIONARY, SCENE_MARKERS
-from .common import ANY_INFO_QOS, IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS, InputWatch, declare, publish_safely
+from .common import (
+    ANY_INFO_QOS,
+    IMAGE_QOS,
+    PER_FRAME_INFO_QOS,
+    RESULT_QOS,
+    CountedWarnings,
+    InputWatch,
+    declare,
+    publish_safely,
+)
 from .messages import ImageMessageError, image_bytes
 
 BUSY_GAP_NS = 1_000_000  # callbacks closer than 1 ms: the node never waited for messages in between
@@ -102,6 +111,7 @@ class AreaNode(Node):
                                      raw=True)]
         self.create_subscription(Image, "image_raw", self._on_frame, IMAGE_QOS, raw=True)
         self.input_watch = InputWatch(self, "image_raw")
+        self.warn = CountedWarnings(self.get_logger())
 
     @staticmethod
     def _load_targets(path: str) -> TargetsSpec:
@@ -181,7 +191,7 @@ class AreaNode(Node):
         try:
             camera = info_to_camera(decode_camera_info(data))
         except ValueError as exc:
-            self.get_logger().warning(f"camera_info ignored: {exc}", throttle_duration_sec=10.0)
+            self.warn("camera_info ignored", str(exc))
             return
         if camera == self.camera:
             return
@@ -220,7 +230,7 @@ class AreaNode(Node):
         try:
             self._on_image(data)
         except Exception as exc:  # one bad frame must not end the node's measuring
-            self.get_logger().error(f"frame not measured: {exc.__class__.__name__}: {exc}", throttle_duration_sec=5.0)
+            self.warn("frame not measured", f"{exc.__class__.__name__}: {exc}", "error")
         finally:
             self._note_busy(self._measuring_since, time.time_ns())
             self._measuring_since = None
@@ -236,27 +246,26 @@ class AreaNode(Node):
             self._lost_logged = lost
 
     def _on_image(self, data: bytes) -> None:
-        log = self.get_logger()
         try:
             fields = decode_image(data)
             frame = fields.pixels()
         except ImageMessageError as exc:
-            log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
+            self.warn("frame refused", str(exc))
             return
         header = fields.header
         self.frames.took(header.nanoseconds, time.time_ns(), self._busy_between)
         if self.camera is None and self.uncalibrated == "drop":
-            log.warning("no calibration yet (camera_info or calibration_file): frames dropped; set "
-                        "uncalibrated_frames:=measure to measure them uncalibrated", throttle_duration_sec=10.0)
+            self.warn("frame dropped", "no calibration yet (camera_info or calibration_file); set "
+                      "uncalibrated_frames:=measure to measure them uncalibrated")
             return
         wanted = [pub.get_subscription_count() > 0 for pub in (self.mask_pub, self.rect_pub, self.overlay_pub)]
         try:
             result = self.measurer.measure(frame, keep_images=any(wanted))
         except FrameSizeError as exc:
-            log.warning(f"frame refused: {exc}", throttle_duration_sec=5.0)
+            self.warn("frame refused", str(exc))
             return
         except (TargetsError, ClassifyError) as exc:
-            log.warning(f"frame not measured: {exc}", throttle_duration_sec=5.0)
+            self.warn("frame not measured", str(exc))
             return
         self.frames_measured += 1
         stamp = Time(sec=header.sec, nanosec=header.nanosec)

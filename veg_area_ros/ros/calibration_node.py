@@ -22,7 +22,7 @@ from ..calibration import NEW_POSE_DISTANCE, CalibrationError, View, calibrate, 
 from ..camera_model import BrownCamera
 from ..cdr import decode_image
 from ..sources import SYNTHETIC_BOARD
-from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, InputWatch, declare, publish_safely
+from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, CountedWarnings, InputWatch, declare, publish_safely
 from .messages import ImageMessageError, camera_to_info, info_to_camera
 
 
@@ -57,6 +57,7 @@ class CalibrationNode(Node):
         self.progress_pub = self.create_publisher(String, "~/progress", RESULT_QOS)
         self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS, raw=True)  # a view, no copy
         self.input_watch = InputWatch(self, "image_raw")
+        self.warn = CountedWarnings(self.get_logger())
         self.create_service(Trigger, "~/calibrate", self._on_calibrate)
         self.create_service(SetCameraInfo, "set_camera_info", self._on_set_camera_info)
         if self.path is not None and self.path.exists():
@@ -77,14 +78,14 @@ class CalibrationNode(Node):
         try:
             image = decode_image(data).pixels()
         except ImageMessageError as exc:
-            self.get_logger().warning(f"frame ignored: {exc}", throttle_duration_sec=5.0)
+            self.warn("frame ignored", str(exc))
             return
         size = (image.shape[1], image.shape[0])
         if self.image_size is None:
             self.image_size = size
         elif size != self.image_size:
-            self.get_logger().warning(f"frame ignored: {size[0]}x{size[1]}, the views so far are "
-                                      f"{self.image_size[0]}x{self.image_size[1]}", throttle_duration_sec=5.0)
+            self.warn("frame ignored", f"{size[0]}x{size[1]}, the views so far are "
+                                       f"{self.image_size[0]}x{self.image_size[1]}")
             return
         if self.fitted:
             return  # a served fit: views are collected again only after ~/calibrate is called

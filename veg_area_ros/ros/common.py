@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import time
 import traceback
 from collections.abc import Callable
 
@@ -49,6 +50,34 @@ def declare(node: Node, name: str, default, description: str, *, low: float | No
             descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high),
                                                                   step=0.0)]
     return node.declare_parameter(name, default, descriptor).value
+
+
+class CountedWarnings:
+    """Throttled log lines that say what the throttle hid. Throttled per kind and detail (a new problem is
+    always shown); each line carries how many of its kind came so far and how many like it were not shown
+    since its last line (rclpy's throttle drops them unsaid)."""
+
+    def __init__(self, logger, period_s: float = 5.0, clock: Callable[[], float] = time.monotonic):
+        self._logger, self._period, self._clock = logger, period_s, clock
+        self._total: dict[str, int] = {}
+        self._hidden: dict[tuple[str, str], int] = {}
+        self._last: dict[tuple[str, str], float] = {}
+
+    def __call__(self, kind: str, detail: str, level: str = "warning") -> None:
+        self._total[kind] = self._total.get(kind, 0) + 1
+        key, now = (kind, detail), self._clock()
+        if key in self._last and now - self._last[key] < self._period:
+            self._hidden[key] = self._hidden.get(key, 0) + 1
+            return
+        if len(self._last) > 1000:  # details with ever-new text must not grow this without bound
+            self._last.clear()
+        hidden = self._hidden.pop(key, 0)
+        since = f", {hidden} like it not shown since its last line" if hidden else ""
+        getattr(self._logger, level)(f"{kind}: {detail} ({self._total[kind]} so far{since})")
+        self._last[key] = now
+
+    def total(self, kind: str) -> int:
+        return self._total.get(kind, 0)
 
 
 def publish_safely(node: Node, publisher, msg) -> bool:
