@@ -400,6 +400,16 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         spin_until(lambda: len(calibrated(mark)) >= 6, 30)
         out["areas_after_spoiled_targets_file"] = [i["area_m2"] for i in calibrated(mark)[3:]]
         out["scales_after_spoiled_targets_file"] = [i["scale_m_per_px"] for i in calibrated(mark)[3:]]
+        # a write that fails (the file's place taken by a folder, which stops root too): served, answered failure
+        calibration_file.rename(calibration_file.with_suffix(".kept"))
+        calibration_file.mkdir()
+        request = SetCameraInfo.Request()
+        request.camera_info = camera_to_info(served)
+        response = call(probe.create_client(SetCameraInfo, "set_camera_info"), request)
+        out["set_camera_info_unwritable"] = None if response is None else [response.success,
+                                                                            response.status_message]
+        calibration_file.rmdir()
+        calibration_file.with_suffix(".kept").rename(calibration_file)
         out["sockets"] = sockets_of([os.getpid()] + [p.pid for _, p in nodes.processes])
     finally:
         probe.destroy_node()

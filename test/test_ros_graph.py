@@ -101,6 +101,11 @@ def test_a_camera_model_no_lens_has_is_refused_by_both_nodes(graph):
     assert not ok and "implausible camera model" in reason
 
 
+def test_set_camera_info_answers_failure_when_the_write_fails(graph):
+    ok, reason = graph["set_camera_info_unwritable"]
+    assert not ok and "not written to" in reason and "served.yaml" in reason
+
+
 def test_bad_calibrations_are_refused_and_the_node_goes_on(graph):
     """A camera_info of 100000x100000 px is refused (frames are still measured, Af as before it); a calibration
     arriving after the targets file was spoiled on disk still applies (the file was read when set): the fitted
