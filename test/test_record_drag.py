@@ -4,6 +4,7 @@ node's (issue #5), and the drag node on synthetic instrument streams."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -121,6 +122,12 @@ def test_record_command_duration_all_and_a_mistyped_topic(tmp_path):
     info = yaml.safe_load((Path(everything["bag"]) / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     topics = {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
     assert topics.get("/image_raw", 0) >= 5 and "/rosout" not in topics, (topics, everything["stderr"])
+    # discovery takes seconds: the recorder says what it missed of the 5 Hz camera before its first frame
+    said = re.search(r"/image_raw: not recorded in the first ([\d.]+) s after the command, about (\d+) messages",
+                     everything["stderr"])
+    assert said, everything["stderr"]
+    gap, missed = float(said.group(1)), int(said.group(2))
+    assert 0 < gap < 30 and abs(missed - 5 * gap) <= 0.25 * 5 * gap + 1, (gap, missed)
 
 
 def test_killed_recording_is_recovered_but_for_the_last_chunk(recorded, tmp_path):
@@ -143,7 +150,7 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
     targets.write_text(yaml.safe_dump({"dictionary": SCENE_DICTIONARY,
                                        "markers": {k: list(v) for k, v in SCENE_MARKERS.items()}}))
     store = get_typestore(Stores.ROS2_KILTED)
-    live, live_std, first_frames = {}, {}, []
+    live, live_std, live_info, first_frames = {}, {}, {}, []
     with Reader(folder / "closed_bag") as reader:
         wanted = [c for c in reader.connections if c.topic in ("/projected_area", "/projected_area/info")]
         for connection, _, data in reader.messages(connections=wanted):
@@ -152,6 +159,7 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
                 info = json.loads(message.data)
                 if info["frames_received"] == 1:
                     first_frames.append((info["stamp"]["sec"], info["stamp"]["nanosec"]))
+                live_info[(info["stamp"]["sec"], info["stamp"]["nanosec"])] = info
                 continue
             live[(message.header.stamp.sec, message.header.stamp.nanosec)] = message.vector.x
             live_std[(message.header.stamp.sec, message.header.stamp.nanosec)] = message.vector.y
@@ -169,10 +177,20 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
     # identical where both started from the same frame; if the recorder found the area node's topics after its
     # first results, the offline run starts later and re-tracks the markers over another sequence: the README's
     # bound
+    # The weights are carried over the frames each run measured: a frame the live node skipped or lost (a loaded
+    # machine) changes its sequence, and from then on the two agree within their weight error bounds (each run's
+    # Af is within its bound of a fresh build), no longer to 1e-9.
     same_start = first_frames == [first]
     for stamp in common:
-        bound = 1e-9 if same_start else live_std[stamp]
-        assert abs(offline[stamp]["area_m2"] - live[stamp]) <= bound, (stamp, same_start)
+        info = live_info.get(stamp, {})
+        same_sequence = same_start and not (info.get("frames_dropped") or info.get("frames_lost"))
+        if same_sequence:
+            bound = 1e-9
+        elif same_start:
+            bound = (info["weight_error_bound"] + offline[stamp]["weight_error_bound"]) * live[stamp] + 1e-12
+        else:
+            bound = live_std[stamp]
+        assert abs(offline[stamp]["area_m2"] - live[stamp]) <= bound, (stamp, same_start, same_sequence)
     assert (tmp_path / "bag.png").exists()
 
 

@@ -10,14 +10,32 @@ from __future__ import annotations
 
 import datetime as dt
 import importlib
+import os
+import time
+from pathlib import Path
 
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..bags import STORAGES, BagError, BagRecorder, OfferedQos
+from ..cdr import ImageMessageError, stamp_ns
 from .common import declare
 
 DEFAULT_TOPICS = ["image_raw", "camera_info", "projected_area", "projected_area/info"]
+
+
+STAMPED_TYPES = {"sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo", "sensor_msgs/msg/CompressedImage"}
+
+
+def process_start_ns() -> int:
+    """When this process started (the user's command), wall clock ns; now where /proc cannot say."""
+    try:
+        fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+        boot = next(int(line.split()[1]) for line in Path("/proc/stat").read_text().splitlines()
+                    if line.startswith("btime"))
+        return int((boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")) * 1e9)
+    except (OSError, ValueError, IndexError, StopIteration):
+        return time.time_ns()
 
 
 def message_class(msgtype: str):
@@ -38,6 +56,8 @@ class RecordNode(Node):
                            high=1e9, read_only=True)
         self.stop_requested = False
         self.exit_code = 0
+        self.started_ns = process_start_ns()
+        self.first_stamp: dict[str, tuple[int, int]] = {}  # stamped topic -> (first stamp, messages by 1 s later)
         if duration > 0:
             self.create_timer(duration, self._stop)
         self.output = output or dt.datetime.now().strftime("veg_area_%Y%m%d_%H%M%S")
@@ -91,11 +111,46 @@ class RecordNode(Node):
 
     def _write(self, topic: str, data: bytes) -> None:
         self.recorder.write(topic, self.get_clock().now().nanoseconds, data)
+        if self.recording[topic] in STAMPED_TYPES or self.recording[topic].endswith("Stamped"):
+            self._note_start(topic, data)
+
+    def _note_start(self, topic: str, data: bytes) -> None:
+        """What the bag misses before its first message of a stamped topic: the time from the command to that
+        message's stamp (discovery takes 1-4 s), said at once and, with the rate of the first second, in frames
+        at the end."""
+        try:
+            stamp = stamp_ns(data)
+        except ImageMessageError:
+            return
+        if topic not in self.first_stamp:
+            self.first_stamp[topic] = (stamp, 1)
+            gap = (stamp - self.started_ns) / 1e9
+            if gap > 0:
+                self.get_logger().warning(f"{topic}: the first message recorded was stamped {gap:.2f} s after the "
+                                          "command started; what was published before it is not in the bag")
+            return
+        first, count = self.first_stamp[topic]
+        if stamp - first <= 1_000_000_000:
+            self.first_stamp[topic] = (first, count + 1)
+
+    def missed_before_start(self) -> dict[str, tuple[float, float | None]]:
+        """Stamped topic -> (seconds from the command to its first recorded message, estimated messages missed
+        in that time at the rate of its first recorded second; None when one message cannot give a rate)."""
+        missed = {}
+        for topic, (first, count) in self.first_stamp.items():
+            gap = max(0.0, (first - self.started_ns) / 1e9)
+            missed[topic] = (gap, gap * (count - 1) if count > 1 else None)
+        return missed
 
     def destroy_node(self) -> None:
         self.recorder.close()
         counts = ", ".join(f"{t} {n}" for t, n in self.recorder.counts.items())
         self.get_logger().info(f"bag {self.output} closed: {counts or 'no messages'}")
+        for topic, (gap, frames) in self.missed_before_start().items():
+            if gap > 0:
+                estimate = f", about {frames:.0f} messages" if frames is not None else ""
+                self.get_logger().warning(f"{topic}: not recorded in the first {gap:.2f} s after the command"
+                                          f"{estimate} (subscribing waits for discovery)")
         never = [t for t in (self.resolve_topic_name(w) for w in self.wanted) if t not in self.recording]
         if never or (self.everything and not self.recording):
             self.get_logger().warning(f"never seen on the graph, not recorded: {', '.join(never) or 'any topic'} "
