@@ -60,6 +60,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     except BoardSpecError as exc:
         raise CliError(str(exc), 2) from exc
     output = Path(args.output)
+    problem = _unwritable(output, folder=False)
+    if problem:
+        raise CliError(f"-o {output}: {problem}; nothing was calibrated", 2)
     try:
         files = expand_inputs(args.inputs)
     except InputError as exc:

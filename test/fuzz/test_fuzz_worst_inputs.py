@@ -1,0 +1,198 @@
+"""The issue's classes of bad input replayed through `veg-area` as a user runs it, each in its own process under
+a time and memory watch: no traceback, no result that is wrong with exit 0, every refusal in under 2 s (beyond
+the interpreter's start-up, measured in the same run) and 500 MB, and no existing file lost."""
+
+from __future__ import annotations
+
+import os
+import resource
+import struct
+import subprocess
+import sys
+import time
+import zlib
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+
+from veg_area_ros.calib_io import to_camera_info_dict, write_calibration
+from veg_area_ros.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, cube_scene, render_scene
+
+REPO = Path(__file__).resolve().parents[2]
+MEMORY_LIMIT = 500 * 2**20  # the issue's cap on a refusal
+TIME_LIMIT_S = 2.0
+ADDRESS_SPACE_CAP = 4 * 2**30  # a runaway input fails fast here instead of taking the machine's 24 GB
+
+
+@dataclass
+class Run:
+    code: int
+    stdout: str
+    stderr: str
+    seconds: float
+    peak_rss: int  # bytes
+
+
+# the child writes its own peak resident memory at exit (RUSAGE_CHILDREN would give the largest child so far)
+CHILD = ("import atexit, os, resource, sys\n"
+         "atexit.register(lambda: open(os.environ['PEAK_FILE'], 'w').write(\n"
+         "    str(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)))\n"
+         "from veg_area_ros.cli import main\n"
+         "sys.exit(main(sys.argv[1:]))\n")
+
+
+def run_capped(args: list[str], cwd: Path) -> Run:
+    """`veg-area ARGS` (the CLI's main, as `python -m veg_area_ros.cli` runs it) with its peak memory and wall
+    time, under an address-space cap."""
+    def cap() -> None:
+        resource.setrlimit(resource.RLIMIT_AS, (ADDRESS_SPACE_CAP, ADDRESS_SPACE_CAP))
+
+    peak_file = cwd / f"peak_{time.monotonic_ns()}.txt"
+    env = dict(os.environ, PYTHONPATH=str(REPO), PEAK_FILE=str(peak_file))
+    started = time.perf_counter()
+    process = subprocess.Popen([sys.executable, "-c", CHILD, *args], cwd=cwd, env=env,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, preexec_fn=cap)
+    try:
+        stdout, stderr = process.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        stdout, stderr = process.communicate()
+    seconds = time.perf_counter() - started
+    peak = int(peak_file.read_text()) * 1024 if peak_file.exists() else MEMORY_LIMIT * 100
+    peak_file.unlink(missing_ok=True)
+    return Run(process.returncode, stdout.decode(errors="replace"), stderr.decode(errors="replace"), seconds, peak)
+
+
+def png_declaring(width: int, height: int) -> bytes:
+    _, png = cv2.imencode(".png", np.zeros((48, 64, 3), np.uint8))
+    bomb = bytearray(png.tobytes())
+    bomb[16:24] = struct.pack(">II", width, height)
+    return bytes(bomb)
+
+
+def valid_huge_png(side: int) -> bytes:
+    """A real, decodable side x side grey PNG, streamed (a few hundred kB: all zeros)."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    compressor, row, body = zlib.compressobj(9), bytes(side + 1), []
+    for _ in range(side):
+        body.append(compressor.compress(row))
+    body.append(compressor.flush())
+    header = struct.pack(">IIBBBBB", side, side, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", b"".join(body)) + chunk(b"IEND", b"")
+
+
+ALIAS_BOMB = "a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
+    f"{chr(98 + k)}: &{chr(98 + k)} [" + ", ".join([f"*{chr(97 + k)}"] * 9) + "]\n" for k in range(8))
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("worst")
+    write_calibration(folder / "camera.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
+    markers = {k: list(map(float, v)) for k, v in SCENE_MARKERS.items()}
+    (folder / "targets.yaml").write_text(yaml.safe_dump({"dictionary": SCENE_DICTIONARY, "markers": markers}))
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
+    cv2.imwrite(str(folder / "cube.png"), frame)
+    (folder / "bomb.png").write_bytes(png_declaring(100000, 100000))
+    (folder / "huge.png").write_bytes(valid_huge_png(20000))
+    cv2.imwrite(str(folder / "tiny.png"), np.zeros((1, 1, 3), np.uint8))
+    _, jpeg = cv2.imencode(".jpg", frame)
+    scrambled = bytearray(jpeg.tobytes())
+    scrambled[len(scrambled) // 3:len(scrambled) // 3 + 2000] = np.random.default_rng(0).integers(
+        0, 256, 2000, dtype=np.uint8).tobytes()
+    (folder / "scrambled.jpg").write_bytes(bytes(scrambled))
+    (folder / "alias_targets.yaml").write_text(ALIAS_BOMB)
+    (folder / "alias_camera.yaml").write_text(ALIAS_BOMB)
+    info = to_camera_info_dict(ENDOSCOPE, "endoscope")
+    text = yaml.safe_dump(info, sort_keys=False)
+    (folder / "alias_name.yaml").write_text(text.replace("camera_name: endoscope",
+                                                         "camera_name: &n [x, x, x]\nbomb: [*n, *n, *n]"))
+    longer = [v * 1.06 for v in info["camera_matrix"]["data"]]  # a second camera_matrix: the last one won before
+    (folder / "duplicate_key.yaml").write_text(f"{text}camera_matrix:\n  rows: 3\n  cols: 3\n  data: {longer}\n")
+    write_calibration(folder / "k1.yaml", replace(ENDOSCOPE, k1=1e6), "endoscope")
+    ids = sorted(markers)
+    permuted = {a: markers[b] for a, b in zip(ids, ids[1:] + ids[:1], strict=True)}
+    (folder / "permuted.yaml").write_text(yaml.safe_dump({"dictionary": SCENE_DICTIONARY, "markers": permuted}))
+    mistyped = dict(markers)
+    mistyped[ids[2]] = [markers[ids[2]][0] * 10, markers[ids[2]][1]]
+    (folder / "mistyped.yaml").write_text(yaml.safe_dump({"dictionary": SCENE_DICTIONARY, "markers": mistyped}))
+    (folder / "a_file").write_text("not a folder")
+    return folder
+
+
+def measure(*extra: str, image: str = "cube.png", calibration: str = "camera.yaml",
+            targets: str = "targets.yaml") -> list[str]:
+    return ["measure", image, "--calibration", calibration, "--targets", targets, "--threshold", "120", *extra]
+
+
+# name -> (arguments, the words the refusal must hold)
+CASES = {
+    "png declaring 100000x100000": (measure(image="bomb.png"), "declares 100000x100000"),
+    "valid 20000x20000 png": (measure(image="huge.png"), "declares 20000x20000"),
+    "1x1 png": (measure(image="tiny.png"), "too small"),
+    "corrupt jpeg": (measure(image="scrambled.jpg"), "corrupt JPEG"),
+    "close radius 100000": (measure("--close", "100000"), "morphology radii must be at most"),
+    "csv under a file": (measure("--csv", "a_file/areas.csv"), "a_file"),
+    "csv under /proc": (measure("--csv", "/proc/areas.csv"), "/proc"),
+    "overlay under a file": (measure("--overlay", "a_file/o.png"), "a_file"),
+    "calibration output under a file": (["calibrate", "cube.png", "--board", "chessboard:9x6:0.03", "-o",
+                                         "a_file/c.yaml"], "a_file"),
+    "targets alias bomb": (measure(targets="alias_targets.yaml"), "alias"),
+    "calibration alias bomb": (measure(calibration="alias_camera.yaml"), "alias"),
+    "alias in camera_name": (measure(calibration="alias_name.yaml"), "alias"),
+    "duplicate camera_matrix": (measure(calibration="duplicate_key.yaml"), "camera_matrix"),
+    "k1 = 1e6": (measure(calibration="k1.yaml"), "implausible camera model"),
+    "permuted marker ids": (measure(targets="permuted.yaml"), "do not match the board"),
+    "mistyped coordinate": (measure(targets="mistyped.yaml"), "do not match the board"),
+    "bag-recover of a missing path": (["bag-recover", "nowhere.mcap", "out_bag"], "no such bag"),
+    "bag-recover of a mangled file": (["bag-recover", "cube.png", "out_bag2"], "not an MCAP file"),
+    "roi off the image": (measure("--roi", "2000,2000,2100,2000,2100,2100"), "lies outside"),
+}
+
+
+@pytest.fixture(scope="module")
+def startup_s(workspace) -> float:
+    """The interpreter and the imports a measurement needs, best of three: the part of each run's time that is
+    not the refusal's."""
+    def imports() -> float:
+        env = dict(os.environ, PYTHONPATH=str(REPO))
+        started = time.perf_counter()
+        subprocess.run([sys.executable, "-c", "import veg_area_ros.cli, veg_area_ros.area, veg_area_ros.calibration"],
+                       env=env, check=True, timeout=120)
+        return time.perf_counter() - started
+
+    return min(imports() for _ in range(3))
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_bad_input_is_refused_quickly_and_clearly(workspace, startup_s, name):
+    args, words = CASES[name]
+    existing = workspace / "areas_existing.csv"
+    existing.write_text("frame,area_m2\nyesterday,0.0105\n")
+    run = run_capped([*args, "--csv", str(existing)] if args[0] == "measure" and "--csv" not in args else args,
+                     workspace)
+    assert run.code != 0 and "Traceback" not in run.stderr, run.stderr[-3000:]
+    assert words in run.stderr, run.stderr[-3000:]
+    last = run.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"veg-area {args[0]}: "), last  # one line that names the command and the reason
+    assert run.seconds - startup_s < TIME_LIMIT_S, (run.seconds, startup_s)
+    assert run.peak_rss < MEMORY_LIMIT, run.peak_rss / 2**20
+    assert existing.read_text() == "frame,area_m2\nyesterday,0.0105\n"  # a user's series is never replaced
+
+
+def test_good_input_still_measures_under_the_same_watch(workspace, startup_s):
+    """The control: the same command on a good frame succeeds with the true area (so the caps above are not
+    met by refusing everything)."""
+    run = run_capped([*measure("--json")], workspace)
+    assert run.code == 0, run.stderr
+    import json
+
+    result = json.loads(run.stdout)
+    assert abs(result["area_m2"] / cube_scene().true_area_m2 - 1) < 0.005
+    assert run.peak_rss < MEMORY_LIMIT
