@@ -24,6 +24,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from .calib_io import write_atomic
 from .cdr import CameraInfoFields, ImageFields, decode_camera_info, decode_image
+from .strict_yaml import load_text, read_text
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
@@ -102,7 +103,7 @@ class BagRecorder:
 
 def _set_ros_distro(metadata: Path, distro: str) -> None:
     """metadata.yaml with the distribution the messages come from, replaced atomically (temp file + rename)."""
-    content = yaml.safe_load(metadata.read_text())
+    content = load_text(read_text(metadata))
     content["rosbag2_bagfile_information"]["ros_distro"] = distro
     write_atomic(metadata, yaml.safe_dump(content, sort_keys=False))
 
