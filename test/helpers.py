@@ -54,11 +54,16 @@ def calibrated_endoscope(medium: str):
     return calibrated_camera("endoscope", medium)
 
 
-@functools.cache
 def calibrated_camera(setup: str, medium: str):
     """A synthetic camera ('endoscope' or 'dslr') calibrated in `medium` ('air' or 'water') at 0.7 m from the
     rendered chessboard views of reproduction.SETUPS (seed 3); computed once per test session."""
+    return calibration_result(setup, medium).camera
+
+
+@functools.cache
+def calibration_result(setup: str, medium: str):
+    """The whole CalibrationResult behind `calibrated_camera` (std, correlation, ...)."""
     from veg_area_ros.reproduction import CONDITIONS, SETUPS, calibrate_synthetic
 
     condition = next(c for c in CONDITIONS if c.name == {"air": "air", "water": "water tank"}[medium])
-    return calibrate_synthetic(SETUPS[setup], condition, np.random.default_rng(3)).camera
+    return calibrate_synthetic(SETUPS[setup], condition, np.random.default_rng(3))

@@ -39,12 +39,14 @@ from .classify import (
     check_roi_in_image,
     polygon_roi,
 )
+from .flat_port import FlatPortCamera, PortError, absorbed_camera, estimate_pose
 from .idealize import Idealizer
 from .scale import (
     DetectedMarker,
     PlaneScale,
     TargetsError,
     TargetsSpec,
+    detect_markers,
     marker_centre,
     marker_layout_problem,
     track_markers,
@@ -548,3 +550,65 @@ def draw_overlay(result: AreaResult) -> np.ndarray:
     cv2.putText(canvas, text, (size, text_h + size), cv2.FONT_HERSHEY_SIMPLEX, font_scale, (255, 255, 255),
                 thickness, cv2.LINE_AA)
     return canvas
+
+
+class PortAreaMeasurer:
+    """Af through a lens calibrated in air behind a flat port (`flat_port.FlatPortCamera`). The targets' plane
+    pose comes from the markers through the exact refraction model; the object's plane (the targets' one, or
+    `object_plane_offset_m` farther along the optical axis) then gets the plumb_bob camera that images it as
+    the lens and port do (`flat_port.absorbed_camera`, fitted over the whole image), and the measurement is the
+    calibrated one of `AreaMeasurer` with that camera. The plane is found again when the targets move."""
+
+    def __init__(self, camera: FlatPortCamera, targets: TargetsSpec, classifier: Classifier, **options):
+        if sum(1 for _ in targets.markers) + len(targets.points) < 4:
+            raise TargetsError("a flat-port measurement needs 4 or more targets (the plane's pose through the port)")
+        self.camera, self.targets, self.classifier, self.options = camera, targets, classifier, options
+        self._inner: AreaMeasurer | None = None
+        self._rebuilds_seen = 0
+        self.absorbed_residual_px = float("nan")  # the plumb_bob stand-in's largest misfit over the image
+        self.plane_pose: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def rebuilds(self) -> int:
+        return 0 if self._inner is None else self._inner.rebuilds
+
+    def _plane_pose(self, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        markers = detect_markers(frame, self.targets.dictionary) if self.targets.markers else {}
+        found = [i for i in self.targets.markers if i in markers]
+        pixels = [markers[i].centre for i in found] + [pixel for pixel, _ in self.targets.points]
+        planes = [self.targets.markers[i] for i in found] + [plane for _, plane in self.targets.points]
+        if len(pixels) < 4:
+            raise TargetsError(f"only {len(pixels)} target(s) found; the plane's pose through the port needs 4")
+        try:
+            return estimate_pose(self.camera, np.array(planes), np.array(pixels))
+        except PortError as exc:
+            raise TargetsError(str(exc)) from exc
+
+    def _targets_box(self, rvec: np.ndarray, tvec: np.ndarray) -> tuple[float, float, float, float]:
+        """The raw-image box of every listed target (seen or not), widened by 15 % of the image a side: where
+        the default ROI and the targets are."""
+        planes = self.targets.all_planes()
+        pixels = self.camera.project_pose(np.column_stack([planes, np.zeros(len(planes))]), rvec, tvec)
+        width, height = self.camera.image_size
+        (u0, v0), (u1, v1) = pixels.min(axis=0), pixels.max(axis=0)
+        return (max(0.0, u0 - 0.15 * width), max(0.0, v0 - 0.15 * height),
+                min(width - 1.0, u1 + 0.15 * width), min(height - 1.0, v1 + 0.15 * height))
+
+    def _build(self, frame: np.ndarray) -> None:
+        rvec, tvec = self._plane_pose(frame)
+        self.plane_pose = (rvec, tvec)
+        offset = self.targets.object_plane_offset_m or 0.0
+        object_tvec = np.asarray(tvec, float) + np.array([0.0, 0.0, offset])
+        absorbed, self.absorbed_residual_px = absorbed_camera(self.camera, rvec, object_tvec,
+                                                              box=self._targets_box(rvec, tvec))
+        self._inner = AreaMeasurer(absorbed, self.targets, self.classifier, **self.options)
+
+    def measure(self, frame: np.ndarray, keep_images: bool = False) -> AreaResult:
+        if self._inner is None:
+            self._build(frame)
+        result = self._inner.measure(frame, keep_images)
+        if self._inner.rebuilds > max(self._rebuilds_seen, 1):  # the targets moved: find their plane again
+            self._build(frame)
+            result = self._inner.measure(frame, keep_images)
+        self._rebuilds_seen = self._inner.rebuilds
+        return result

@@ -22,6 +22,7 @@ import numpy as np
 import yaml
 
 from .camera_model import BrownCamera, check_plausible
+from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
 from .strict_yaml import StrictYamlError, load_text, read_text
 
 METADATA_KEY = "veg_area_ros"
@@ -33,9 +34,14 @@ class CalibrationFileError(ValueError):
 
 @dataclass
 class CalibrationFile:
-    camera: BrownCamera
+    camera: BrownCamera  # plumb_bob: the calibration, or a flat port's absorbed equivalent at one distance
     camera_name: str = "camera"
     metadata: dict[str, Any] = field(default_factory=dict)
+
+    def port_camera(self) -> FlatPortCamera | None:
+        """The air lens behind its flat port, when the file carries one (`veg-area calibrate --port`)."""
+        block = self.metadata.get(PORT_KEY)
+        return None if block is None else port_from_dict(block, self.camera.image_size)
 
 
 def _matrix(rows: int, cols: int, values: np.ndarray) -> dict[str, Any]:
@@ -172,7 +178,14 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
     metadata = content.get(METADATA_KEY) or {}
     if not isinstance(metadata, dict):
         raise CalibrationFileError(f"{path}: '{METADATA_KEY}' must be a mapping")
-    return CalibrationFile(camera, str(content.get("camera_name", "camera")), metadata)
+    calibration = CalibrationFile(camera, str(content.get("camera_name", "camera")), metadata)
+    try:
+        port_camera = calibration.port_camera()
+        if port_camera is not None:
+            check_plausible(port_camera.lens)
+    except ValueError as exc:  # PortError too
+        raise CalibrationFileError(f"{path}: {exc}") from exc
+    return calibration
 
 
 def read_calibration(path: str | os.PathLike) -> CalibrationFile:

@@ -55,14 +55,18 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from .frames import VIDEO_SUFFIXES, InputError, expand_inputs, iter_frames, video_frame_count
 
     say = _progress(args.quiet)
-    try:
-        board = BoardSpec.parse(args.board)
-    except BoardSpecError as exc:
-        raise CliError(str(exc), 2) from exc
     output = Path(args.output)
     problem = _unwritable(output, folder=False)
     if problem:
         raise CliError(f"-o {output}: {problem}; nothing was calibrated", 2)
+    if args.port or args.lens:
+        return _calibrate_port(args, say)
+    if not args.inputs or not args.board:
+        raise CliError("give the board (--board) and its images", 2)
+    try:
+        board = BoardSpec.parse(args.board)
+    except BoardSpecError as exc:
+        raise CliError(str(exc), 2) from exc
     try:
         files = expand_inputs(args.inputs)
     except InputError as exc:
@@ -172,6 +176,80 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _calibrate_port(args: argparse.Namespace, say) -> int:
+    """`calibrate --port ... --lens air.yaml [underwater views]`: the port fitted from the views (or as measured)
+    in front of the air calibration; written as the absorbed plumb_bob equivalent at --absorbed-distance with
+    the lens and port in the file's veg_area_ros block."""
+    from .board import BoardSpec, BoardSpecError
+    from .calib_io import CalibrationFileError, _plain, read_calibration, write_calibration
+    from .flat_port import PORT_KEY, FlatPort, FlatPortCamera, PortError, absorbed_at_distance, fit_port, port_to_dict
+    from .frames import InputError, expand_inputs, iter_frames
+
+    if not (args.port and args.lens):
+        raise CliError("--port and --lens go together: the port's numbers and the lens's air calibration", 2)
+    try:
+        start = FlatPort.parse(args.port, args.water_index)
+        lens_file = read_calibration(args.lens)
+    except (PortError, CalibrationFileError) as exc:
+        raise CliError(str(exc), 2) from exc
+    if lens_file.metadata.get("medium") not in ("air", None):
+        say(f"warning: {args.lens} says medium {lens_file.metadata.get('medium')!r}; --lens wants the air calibration")
+    lens = lens_file.camera
+    std: dict[str, float] = {}
+    summary: dict = {"port": "as measured"}
+    port = start
+    if args.inputs:
+        if not args.board:
+            raise CliError("give the board (--board) of the underwater views", 2)
+        try:
+            board = BoardSpec.parse(args.board)
+            files = expand_inputs(args.inputs)
+        except (BoardSpecError, InputError) as exc:
+            raise CliError(str(exc), 2) from exc
+        views = []
+        for index, frame in enumerate(iter_frames(files), 1):
+            if frame.image is None:
+                say(f"[{index}] {frame.name}: skipped, {frame.problem}")
+                continue
+            if (frame.image.shape[1], frame.image.shape[0]) != lens.image_size:
+                say(f"[{index}] {frame.name}: skipped, not {lens.width}x{lens.height} like the lens calibration")
+                continue
+            detection = board.detect(frame.image)
+            if detection is None:
+                say(f"[{index}] {frame.name}: no {args.board} board found")
+                continue
+            views.append((detection.object_points, detection.image_points))
+            say(f"[{index}] {frame.name}: {len(detection)} points")
+        if len(views) < 2:
+            raise CliError(f"{len(views)} underwater view(s) with the board: a port fit needs 2 or more")
+        try:
+            fit = fit_port(lens, views, start, fit_water_index=args.fit_water_index)
+        except PortError as exc:
+            raise CliError(str(exc)) from exc
+        port, std = fit.port, fit.std
+        summary = {"port": "fitted", "views": len(views), "rms_px": fit.rms_px, "view_rms_px": fit.view_rms_px,
+                   "std": std}
+        say(f"port fitted from {len(views)} views: distance {port.distance * 1000:.2f} ± "
+            f"{std['distance'] * 1000:.2f} mm, tilt {math.degrees(port.tilt_x_rad):.3f}° / "
+            f"{math.degrees(port.tilt_y_rad):.3f}° (± {math.degrees(std['tilt_x_rad']):.3f}° / "
+            f"{math.degrees(std['tilt_y_rad']):.3f}°), RMS {fit.rms_px:.3f} px")
+    camera = FlatPortCamera(lens, port)
+    absorbed, residual = absorbed_at_distance(camera, args.absorbed_distance)
+    metadata = {"medium": "water", "date": dt.datetime.now(dt.UTC).isoformat(), "lens_file": str(args.lens),
+                PORT_KEY: port_to_dict(camera, std, args.absorbed_distance),
+                "absorbed_residual_px": residual, **{k: v for k, v in summary.items() if k != "std"}}
+    write_calibration(args.output, absorbed, args.camera_name, metadata)
+    summary.update(output=str(args.output), distance_m=port.distance, tilt_x_deg=float(math.degrees(port.tilt_x_rad)),
+                   tilt_y_deg=float(math.degrees(port.tilt_y_rad)), water_index=port.water_index,
+                   absorbed_residual_px=residual)
+    if args.json:
+        print(json.dumps(_plain(summary)))
+    else:
+        print(f"flat port written to {args.output} (plumb_bob equivalent at {args.absorbed_distance:g} m: "
+              f"largest misfit {residual:.2f} px)")
+    return 0
+
+
 def _format_calibration(result, output: Path) -> str:
     cam, std = result.camera, result.std
     lines = [f"calibration written to {output}",
@@ -271,7 +349,7 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
     (the batch was interrupted) ends the series as Ctrl-C does."""
     import cv2
 
-    from .area import NO_CALIBRATION_FOR_OFFSET, AreaMeasurer, draw_overlay
+    from .area import NO_CALIBRATION_FOR_OFFSET, AreaMeasurer, PortAreaMeasurer, draw_overlay
     from .bags import BagError, bag_image_count
     from .calib_io import CalibrationFileError, read_calibration, write_calibration
     from .cdr import info_to_camera
@@ -291,13 +369,14 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
     say = _progress(args.quiet)
     if args.video_step < 1:
         raise CliError("--video-step must be 1 or more", 2)
-    camera = None
+    camera = port_camera = None
     from_bag = args.calibration.lower() == "bag"  # each frame with the camera_info recorded before it
     if args.calibration.lower() not in ("none", "bag"):
         try:
-            camera = read_calibration(args.calibration).camera
+            calibration = read_calibration(args.calibration)
         except CalibrationFileError as exc:
             raise CliError(str(exc)) from exc
+        camera, port_camera = calibration.camera, calibration.port_camera()
     try:
         targets = TargetsSpec.load(args.targets)
         classifier = Classifier(threshold=args.threshold, object=args.object, channel=args.channel,
@@ -336,10 +415,12 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
     if targets.object_plane_offset_m is not None and camera is None and not from_bag:
         raise CliError(NO_CALIBRATION_FOR_OFFSET)
 
-    def new_measurer(camera) -> AreaMeasurer:
+    def new_measurer(camera) -> AreaMeasurer | PortAreaMeasurer:
+        options = dict(roi=args.roi, threshold_delta=args.sweep_step, area_mode=args.area_mode, levels=args.levels)
         try:
-            return AreaMeasurer(camera, targets, classifier, roi=args.roi, threshold_delta=args.sweep_step,
-                                area_mode=args.area_mode, levels=args.levels)
+            if port_camera is not None and camera is calibration.camera:  # the exact port model, not the stand-in
+                return PortAreaMeasurer(port_camera, targets, classifier, **options)
+            return AreaMeasurer(camera, targets, classifier, **options)
         except ClassifyError as exc:
             raise CliError(str(exc), 2) from exc
         except TargetsError as exc:
@@ -402,10 +483,9 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
     except KeyboardInterrupt:  # Ctrl-C on a long video or bag: what was measured is kept (CSV, plot)
         interrupted = True
 
-    if csv_path is not None and measured == 0 and rows:  # an error-only table must not replace a real one
-        kept = " (the existing file is kept)" if csv_path.exists() else ""
-        say(f"time series not written: no frame was measured{kept}")
-    elif csv_path is not None and rows:
+    if csv_path is not None and measured == 0 and csv_path.exists():  # an error-only table must not replace one
+        say(f"time series not written: no frame was measured (the existing {csv_path} is kept)")
+    elif csv_path is not None and rows:  # a new file lists every frame, with its error where there is one
         _write_area_csv(csv_path, rows)
         say(f"time series: {csv_path}")
         if len(rows) > 1:
@@ -681,8 +761,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     cal = sub.add_parser("calibrate", help="self-calibrating bundle adjustment from board images or videos")
-    cal.add_argument("inputs", nargs="+", help="images, folders of images, videos")
-    cal.add_argument("--board", required=True,
+    cal.add_argument("inputs", nargs="*", help="images, folders of images, videos (underwater views with --port)")
+    cal.add_argument("--board",
                      help="chessboard:COLSxROWS:SQUARE_M | charuco:SXxSY:SQUARE_M:MARKER_M:DICT | "
                           "circles:COLSxROWS:SPACING_M (asymmetric grid) | circles:COLSxROWS:SPACING_M:symmetric")
     cal.add_argument("-o", "--output", required=True, help="camera_info YAML to write")
@@ -701,6 +781,14 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("--video-step", type=int, default=0, help="use every Nth video frame (0: about 60 per video)")
     cal.add_argument("--force", action="store_true", help="replace the output even if it holds a better fit")
     cal.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    cal.add_argument("--port", metavar="flat:DISTANCE_M:THICKNESS_M:N_GLASS",
+                     help="an explicit flat port in front of the --lens air calibration: fitted (normal, distance) "
+                          "from the underwater views given, or taken as measured when none are given")
+    cal.add_argument("--lens", metavar="AIR_YAML", help="the lens's calibration in air (with --port)")
+    cal.add_argument("--water-index", type=_positive_float, default=1.333, help="refractive index of the water")
+    cal.add_argument("--fit-water-index", action="store_true", help="fit the water's index too (with --port)")
+    cal.add_argument("--absorbed-distance", type=_positive_float, default=0.7, metavar="M",
+                     help="distance of the plane for the absorbed plumb_bob equivalent written for ROS tools")
     cal.set_defaults(func=cmd_calibrate)
 
     mea = sub.add_parser("measure", help="projected area Af of an object in images, folders or videos")

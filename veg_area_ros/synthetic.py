@@ -15,19 +15,7 @@ import numpy as np
 
 from .board import BoardSpec
 from .camera_model import BrownCamera
-
-WATER_INDEX = 1.333
-
-
-@dataclass(frozen=True)
-class FlatPort:
-    """A flat window perpendicular to the optical axis, `distance` metres in front of the lens, with water
-    (refractive index `water_index`) behind it. Glass of parallel faces only shifts rays by a fraction of a
-    millimetre and is left out."""
-
-    distance: float = 0.02
-    water_index: float = WATER_INDEX
-
+from .flat_port import FlatPort, FlatPortCamera
 
 # a typical cheap 640x480 underwater endoscope: short focal length and strong barrel distortion
 ENDOSCOPE = BrownCamera(640, 480, c=520.0, xp=326.0, yp=236.5, aspect=1.004,
@@ -51,34 +39,20 @@ def _pixel_rays(camera: BrownCamera, supersample: int) -> np.ndarray:
 
 
 def refract_at_port(rays: np.ndarray, port: FlatPort) -> tuple[np.ndarray, np.ndarray]:
-    """Rays from the lens centre -> (origins on the port, directions in water), both (..., 3)."""
-    origins = rays * (port.distance / rays[..., 2:3])
-    eta = 1.0 / port.water_index
-    sin2 = eta**2 * (1.0 - rays[..., 2] ** 2)
-    directions = np.empty_like(rays)
-    directions[..., :2] = eta * rays[..., :2]
-    directions[..., 2] = np.sqrt(1.0 - sin2)
-    return origins, directions
+    """Unit rays from the lens centre -> (origins on the port's outer surface, directions in water), both
+    (..., 3): the exact flat-port model (`flat_port.FlatPortCamera`), whose lens plays no part here."""
+    return FlatPortCamera(ENDOSCOPE, port).rays_in_water(rays)
 
 
 def ideal_rays_to(points: np.ndarray, port: FlatPort | None = None) -> np.ndarray:
     """Camera-frame 3-D points (N, 3) -> ideal normalized (x, y) of the air ray that reaches each point,
-    refraction at the port included (solved per point by bisection on the air-ray angle)."""
+    refraction at the port included."""
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     if port is None:
         return points[:, :2] / points[:, 2:3]
-    rho = np.hypot(points[:, 0], points[:, 1])
-    depth = points[:, 2]
-    lo, hi = np.zeros_like(rho), np.full_like(rho, np.pi / 2 - 1e-9)
-    for _ in range(60):  # lateral offset grows monotonically with the air angle
-        mid = (lo + hi) / 2
-        sin_w = np.sin(mid) / port.water_index
-        reach = port.distance * np.tan(mid) + (depth - port.distance) * sin_w / np.sqrt(1 - sin_w**2)
-        lo, hi = np.where(reach < rho, mid, lo), np.where(reach < rho, hi, mid)
-    tan_air = np.tan((lo + hi) / 2)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        direction = np.where(rho[:, None] > 0, points[:, :2] / rho[:, None], 0.0)
-    return direction * tan_air[:, None]
+    sine, normal, radial = FlatPortCamera(ENDOSCOPE, port).air_sine(points)
+    air = np.sqrt(1.0 - sine**2)[:, None] * normal + sine[:, None] * radial
+    return air[:, :2] / air[:, 2:3]
 
 
 def plane_coordinates(

@@ -97,7 +97,7 @@ def test_an_existing_csv_is_kept_when_nothing_is_measured(workspace, tmp_path, c
     cv2.imwrite(str(blank), np.full((480, 640, 3), 200, np.uint8))  # no targets in it
     assert measure(workspace, str(blank), extra=("--csv", str(csv_path))) == 1
     assert csv_path.read_text() == "frame,area_m2\nyesterday,0.0105\n"
-    assert "existing file is kept" in capsys.readouterr().err
+    assert f"the existing {csv_path} is kept" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("umask", [0o022, 0o002, 0o077])

@@ -1,0 +1,198 @@
+"""The explicit flat-port model (issue #19): exact projection both ways, the port fitted from a few underwater
+views and an air calibration, and Af under water without an underwater board, on renders whose port is tilted
+and has glass."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from helpers import calibrated_camera, calibration_result, run_cli
+
+from veg_area_ros.area import AreaMeasurer, PortAreaMeasurer
+from veg_area_ros.board import BoardSpec
+from veg_area_ros.calib_io import read_calibration, write_calibration
+from veg_area_ros.camera_model import PARAM_NAMES
+from veg_area_ros.classify import Classifier
+from veg_area_ros.flat_port import FlatPort, FlatPortCamera, PortError, fit_port
+from veg_area_ros.scale import TargetsSpec
+from veg_area_ros.synthetic import (
+    CUBE_SIDE_M,
+    DSLR,
+    ENDOSCOPE,
+    SCENE_DICTIONARY,
+    SCENE_MARKERS,
+    board_views,
+    cube_scene,
+    render_board_views,
+    render_scene,
+)
+
+PORTS = {  # 5-30 mm, acrylic or glass, tilted up to 3 degrees
+    "5 mm, 3 mm glass, 3° / -1.5°": FlatPort(0.005, thickness=0.003, glass_index=1.52,
+                                             tilt_x_rad=np.radians(3.0), tilt_y_rad=np.radians(-1.5)),
+    "30 mm, 8 mm acrylic, -2° / 2.5°": FlatPort(0.030, thickness=0.008, glass_index=1.49,
+                                                tilt_x_rad=np.radians(-2.0), tilt_y_rad=np.radians(2.5)),
+}
+BOARD = "chessboard:9x6:0.03"
+
+
+@pytest.mark.parametrize("lens", [ENDOSCOPE, DSLR], ids=["endoscope", "dslr"])
+@pytest.mark.parametrize("name", list(PORTS))
+def test_projection_and_back_projection_are_inverses(lens, name):
+    camera = FlatPortCamera(lens, PORTS[name])
+    rng = np.random.default_rng(0)
+    pixels = rng.uniform((0, 0), lens.image_size, (5000, 2))
+    origins, directions = camera.back_project(pixels)
+    points = origins + directions * rng.uniform(0.2, 2.0, len(pixels))[:, None]
+    assert np.max(np.abs(camera.project(points) - pixels)) < 1e-6
+
+
+def test_with_every_index_one_it_is_the_air_camera():
+    camera = FlatPortCamera(ENDOSCOPE, FlatPort(0.02, water_index=1.0, thickness=0.01, glass_index=1.0,
+                                                tilt_x_rad=0.05))
+    points = np.random.default_rng(1).uniform((-0.3, -0.2, 0.4), (0.3, 0.2, 1.2), (1000, 3))
+    expected = ENDOSCOPE.normalized_to_pixels(points[:, :2] / points[:, 2:])
+    assert np.max(np.abs(camera.project(points) - expected)) < 1e-9
+
+
+def test_a_perpendicular_thin_port_bends_rays_as_snells_law_says():
+    """Independent of the vector form: a ray at angle a in air leaves at asin(sin a / n) in water, from the
+    point where it meets the port."""
+    port = FlatPort(0.02, water_index=1.333)
+    camera = FlatPortCamera(ENDOSCOPE, port)
+    pixels = np.random.default_rng(2).uniform((0, 0), ENDOSCOPE.image_size, (500, 2))
+    air = camera.air_rays(pixels)
+    origins, directions = camera.back_project(pixels)
+    angle_air = np.arccos(air[:, 2])
+    assert np.allclose(np.arccos(directions[:, 2]), np.arcsin(np.sin(angle_air) / 1.333), atol=1e-12)
+    assert np.allclose(origins, air * (0.02 / air[:, 2:3]), atol=1e-15)
+    radial_air = air[:, :2] / np.linalg.norm(air[:, :2], axis=1, keepdims=True)
+    radial_water = directions[:, :2] / np.linalg.norm(directions[:, :2], axis=1, keepdims=True)
+    assert np.allclose(radial_air, radial_water, atol=1e-12)  # in the plane of refraction
+
+
+def test_bad_ports_are_refused():
+    for text in ("flat:0.02:0.005", "dome:0.02:0.005:1.49", "flat:x:0.005:1.49", "flat:-0.02:0.005:1.49",
+                 "flat:0.02:0.005:0.9"):
+        with pytest.raises(PortError):
+            FlatPort.parse(text)
+
+
+def lens_covariance(result) -> np.ndarray:
+    std = np.array([result.std[name] for name in PARAM_NAMES])
+    return result.correlation * np.outer(std, std)
+
+
+def underwater_views(lens, port: FlatPort, count: int, seed: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    board = BoardSpec.parse(BOARD)
+    rng = np.random.default_rng(seed)
+    poses = board_views(lens, board, count, 0.6, rng, port=port)
+    images = render_board_views(lens, board, poses, port=port, rng=rng, supersample=3 if lens is ENDOSCOPE else 1)
+    detections = [board.detect(image) for image in images]
+    assert all(d is not None for d in detections)
+    return [(d.object_points, d.image_points) for d in detections]
+
+
+@pytest.mark.parametrize("setup", ["endoscope", "dslr"])
+@pytest.mark.parametrize("name", list(PORTS))
+def test_the_port_is_fitted_from_six_underwater_views(setup, name):
+    """Distance within 2 mm, normal within 0.2°, truth within 3 σ (the air calibration's own uncertainty
+    carried into it), with the lens at its own air calibration (not the true lens) and the port started 15 mm
+    off and untilted."""
+    truth = PORTS[name]
+    lens = ENDOSCOPE if setup == "endoscope" else DSLR
+    views = underwater_views(lens, truth, 6, seed=5)
+    start = FlatPort(0.015, water_index=truth.water_index, thickness=truth.thickness, glass_index=truth.glass_index)
+    air = calibration_result(setup, "air")
+    fit = fit_port(air.camera, views, start, lens_covariance=lens_covariance(air))
+    error_mm = (fit.port.distance - truth.distance) * 1000
+    normal_deg = np.degrees(np.arccos(np.clip(fit.port.normal @ truth.normal, -1, 1)))
+    assert abs(error_mm) <= 2.0 and normal_deg <= 0.2, (error_mm, normal_deg)
+    for key in ("distance", "tilt_x_rad", "tilt_y_rad"):
+        assert abs(getattr(fit.port, key) - getattr(truth, key)) <= 3 * fit.std[key], (key, fit.std)
+    assert fit.rms_px < 0.3
+
+
+def _scene(distance: float):
+    """The cube between four markers, the layout shrunk below 0.7 m so that it stays in view, the cube grown
+    beyond 0.7 m so that it spans as many pixels as there: the paper's 10 cm cube is 32 px wide at 1.2 m,
+    where sub-pixel edges alone err +0.3 % with the true lens and port (a limit of counting a small object,
+    not of the port model, which this test is about)."""
+    k = min(1.0, distance / 0.7)
+    markers = {i: (x * k, y * k) for i, (x, y) in SCENE_MARKERS.items()}
+    scene = cube_scene(side=CUBE_SIDE_M * max(1.0, distance / 0.7), marker_size=0.05 * max(k, 0.8), markers=markers)
+    targets = TargetsSpec.from_dict({"dictionary": SCENE_DICTIONARY,
+                                     "markers": {i: list(v) for i, v in markers.items()}})
+    return scene, targets
+
+
+UNDERWATER = FlatPort(0.02, thickness=0.006, glass_index=1.49, tilt_x_rad=np.radians(2.0),
+                      tilt_y_rad=np.radians(-1.0))
+DISTANCES = (0.4, 0.55, 0.7, 1.0, 1.2)
+
+
+@pytest.fixture(scope="module")
+def fitted_underwater_port():
+    views = underwater_views(ENDOSCOPE, UNDERWATER, 6, seed=9)
+    start = FlatPort(0.015, thickness=UNDERWATER.thickness, glass_index=UNDERWATER.glass_index)
+    return fit_port(calibrated_camera("endoscope", "air"), views, start).port
+
+
+@pytest.mark.parametrize("distance", DISTANCES)
+def test_af_under_water_from_the_air_calibration_and_the_port(distance, fitted_underwater_port):
+    """No underwater board at all: the air calibration and the port as measured give Af within 0.5 % at
+    0.4-1.2 m, the fitted port within 0.3 %; the air calibration alone (no port model) errs by several %."""
+    scene, targets = _scene(distance)
+    frame = render_scene(ENDOSCOPE, scene, distance, UNDERWATER)
+    lens = calibrated_camera("endoscope", "air")
+    errors = {}
+    for name, measurer in (("measured port", PortAreaMeasurer(FlatPortCamera(lens, UNDERWATER), targets,
+                                                              Classifier(threshold=120))),
+                           ("fitted port", PortAreaMeasurer(FlatPortCamera(lens, fitted_underwater_port), targets,
+                                                            Classifier(threshold=120))),
+                           ("air only", AreaMeasurer(lens, targets, Classifier(threshold=120)))):
+        errors[name] = measurer.measure(frame).area_m2 / scene.true_area_m2 - 1
+    assert abs(errors["measured port"]) <= 0.005 and abs(errors["fitted port"]) <= 0.003, errors
+    assert abs(errors["air only"]) > 0.03, errors
+
+
+def test_the_command_line_fits_writes_and_measures_with_a_port(tmp_path):
+    """`calibrate --port --lens` with underwater views, and with none (the port as measured); the file carries
+    the absorbed plumb_bob equivalent for ROS tools and the port in its own block; `measure` uses the port."""
+    write_calibration(tmp_path / "air.yaml", calibrated_camera("endoscope", "air"), "endoscope", {"medium": "air"})
+    board = BoardSpec.parse(BOARD)
+    rng = np.random.default_rng(4)
+    poses = board_views(ENDOSCOPE, board, 5, 0.6, rng, port=UNDERWATER)
+    for k, image in enumerate(render_board_views(ENDOSCOPE, board, poses, port=UNDERWATER, rng=rng)):
+        cv2.imwrite(str(tmp_path / f"view{k}.png"), image)
+    port_text = f"flat:0.015:{UNDERWATER.thickness}:{UNDERWATER.glass_index}"
+    fitted = run_cli("calibrate", *(str(tmp_path / f"view{k}.png") for k in range(5)), "--board", BOARD,
+                     "--port", port_text, "--lens", str(tmp_path / "air.yaml"), "-o", str(tmp_path / "fitted.yaml"),
+                     "--json")
+    assert fitted.returncode == 0, fitted.stderr
+    summary = json.loads(fitted.stdout)
+    assert summary["port"] == "fitted" and abs(summary["distance_m"] - UNDERWATER.distance) < 0.002
+    as_measured = run_cli("calibrate", "--port", f"flat:{UNDERWATER.distance}:{UNDERWATER.thickness}:"
+                          f"{UNDERWATER.glass_index}", "--lens", str(tmp_path / "air.yaml"), "-o",
+                          str(tmp_path / "measured.yaml"))
+    assert as_measured.returncode == 0, as_measured.stderr
+    calibration = read_calibration(tmp_path / "fitted.yaml")
+    assert calibration.port_camera() is not None and calibration.metadata["medium"] == "water"
+    plain = yaml.safe_load((tmp_path / "fitted.yaml").read_text())
+    assert plain["distortion_model"] == "plumb_bob" and plain["camera_matrix"]["data"][0] > 1.2 * 520
+
+    scene, targets = _scene(0.55)
+    cv2.imwrite(str(tmp_path / "cube.png"), render_scene(ENDOSCOPE, scene, 0.55, UNDERWATER))
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(
+        {"dictionary": SCENE_DICTIONARY, "markers": {k: [float(c) for c in v] for k, v in targets.markers.items()}}))
+    for calibration_name in ("fitted.yaml", "measured.yaml"):
+        done = run_cli("measure", str(tmp_path / "cube.png"), "--calibration", str(tmp_path / calibration_name),
+                       "--targets", str(tmp_path / "targets.yaml"), "--threshold", "120", "--json")
+        assert done.returncode == 0, done.stderr
+        assert abs(json.loads(done.stdout)["area_m2"] / scene.true_area_m2 - 1) <= 0.005, calibration_name
+    lonely = run_cli("calibrate", "--port", port_text, "-o", str(tmp_path / "x.yaml"))
+    assert lonely.returncode == 2 and "--port and --lens go together" in lonely.stderr
