@@ -18,15 +18,12 @@ from veg_area_ros.calib_io import read_calibration, write_calibration
 from veg_area_ros.camera_model import PARAM_NAMES
 from veg_area_ros.classify import Classifier
 from veg_area_ros.flat_port import FlatPort, FlatPortCamera, PortError, fit_port
-from veg_area_ros.scale import TargetsSpec
+from veg_area_ros.reproduction import distance_scene, port_rows
 from veg_area_ros.synthetic import (
-    CUBE_SIDE_M,
     DSLR,
     ENDOSCOPE,
     SCENE_DICTIONARY,
-    SCENE_MARKERS,
     board_views,
-    cube_scene,
     render_board_views,
     render_scene,
 )
@@ -118,16 +115,7 @@ def test_the_port_is_fitted_from_six_underwater_views(setup, name):
 
 
 def _scene(distance: float):
-    """The cube between four markers, the layout shrunk below 0.7 m so that it stays in view, the cube grown
-    beyond 0.7 m so that it spans as many pixels as there: the paper's 10 cm cube is 32 px wide at 1.2 m,
-    where sub-pixel edges alone err +0.3 % with the true lens and port (a limit of counting a small object,
-    not of the port model, which this test is about)."""
-    k = min(1.0, distance / 0.7)
-    markers = {i: (x * k, y * k) for i, (x, y) in SCENE_MARKERS.items()}
-    scene = cube_scene(side=CUBE_SIDE_M * max(1.0, distance / 0.7), marker_size=0.05 * max(k, 0.8), markers=markers)
-    targets = TargetsSpec.from_dict({"dictionary": SCENE_DICTIONARY,
-                                     "markers": {i: list(v) for i, v in markers.items()}})
-    return scene, targets
+    return distance_scene(distance)
 
 
 UNDERWATER = FlatPort(0.02, thickness=0.006, glass_index=1.49, tilt_x_rad=np.radians(2.0),
@@ -196,3 +184,17 @@ def test_the_command_line_fits_writes_and_measures_with_a_port(tmp_path):
         assert abs(json.loads(done.stdout)["area_m2"] / scene.true_area_m2 - 1) <= 0.005, calibration_name
     lonely = run_cli("calibrate", "--port", port_text, "-o", str(tmp_path / "x.yaml"))
     assert lonely.returncode == 2 and "--port and --lens go together" in lonely.stderr
+
+
+def test_the_explicit_model_holds_where_the_absorbed_one_drifts():
+    """The water calibration at 0.7 m (refraction absorbed into K1..P2) against the air calibration and the
+    port, at 0.4 and 1.2 m, with the targets in the object's plane and the object 5 cm off it either way
+    (the README's table): the explicit model within 0.3 % everywhere; the absorbed one exact at 0.7 m only."""
+    rows = port_rows(distances=(0.4, 0.7, 1.2), offsets=(0.0, -0.05, 0.05),
+                     absorbed=calibrated_camera("endoscope", "water"), air=calibrated_camera("endoscope", "air"))
+    assert len(rows) == 9
+    for row in rows:
+        assert abs(row.explicit_error_pct) <= 0.3, row
+        assert abs(row.air_only_error_pct) > 0.5, row  # the comparison: no port model at all
+    near = [r for r in rows if r.distance_m == 0.4]
+    assert all(abs(r.absorbed_error_pct) > abs(r.explicit_error_pct) for r in near), near

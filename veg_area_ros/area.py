@@ -599,8 +599,11 @@ class PortAreaMeasurer:
         self.plane_pose = (rvec, tvec)
         offset = self.targets.object_plane_offset_m or 0.0
         object_tvec = np.asarray(tvec, float) + np.array([0.0, 0.0, offset])
-        absorbed, self.absorbed_residual_px = absorbed_camera(self.camera, rvec, object_tvec,
-                                                              box=self._targets_box(rvec, tvec))
+        # one stand-in for both planes: the targets' (their centres make the scale) and the object's (its
+        # pixels' footprints); through a port they are not one pinhole's, so each alone would bias the other
+        absorbed, self.absorbed_residual_px = absorbed_camera(
+            self.camera, rvec, object_tvec, box=self._targets_box(rvec, tvec),
+            more_tvecs=(np.asarray(tvec, float),) if offset else ())
         self._inner = AreaMeasurer(absorbed, self.targets, self.classifier, **self.options)
 
     def measure(self, frame: np.ndarray, keep_images: bool = False) -> AreaResult:

@@ -197,28 +197,42 @@ def estimate_pose(camera: FlatPortCamera, plane_points: np.ndarray, pixels: np.n
 
 
 def absorbed_camera(camera: FlatPortCamera, rvec: np.ndarray, tvec: np.ndarray, samples: int = 25,
-                    box: tuple[float, float, float, float] | None = None) -> tuple[BrownCamera, float]:
+                    box: tuple[float, float, float, float] | None = None,
+                    more_tvecs: tuple[np.ndarray, ...] = ()) -> tuple[BrownCamera, float]:
     """The plumb_bob camera that images the plane z = 0 of this pose as the lens behind the port does: what
     an underwater calibration at this plane would absorb into K1..P2, for ROS tools that know only plumb_bob
     and for measuring with the existing pipeline. Fitted on a grid of pixels over the image, or over `box`
     (u0, v0, u1, v1 raw px: where the measurement is, since five coefficients cannot follow refraction at
-    the corners of a wide lens as well); returns the camera and its largest residual in pixels there."""
+    the corners of a wide lens as well), on this plane and on the parallel planes at `more_tvecs` (the
+    targets' and the object's, when they differ); returns the camera and its largest residual in pixels."""
     width, height = camera.image_size
     u0, v0, u1, v1 = box if box is not None else (0, 0, width - 1, height - 1)
     u, v = np.meshgrid(np.linspace(u0, u1, samples), np.linspace(v0, v1, samples))
     pixels = np.column_stack([u.ravel(), v.ravel()])
-    plane = camera.plane_hits(pixels, rvec, tvec)
-    points = np.column_stack([plane, np.zeros(len(plane))])
+    planes = []
+    for translation in (tvec, *more_tvecs):
+        hits = camera.plane_hits(pixels, rvec, translation)
+        planes.append((np.column_stack([hits, np.zeros(len(hits))]), np.asarray(translation, float)))
     lens, n_w = camera.lens, camera.port.water_index
     start = replace(lens, c=lens.c * n_w)
 
     def model(x: np.ndarray) -> BrownCamera:
         return BrownCamera(width, height, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8])
 
-    def residual(x: np.ndarray) -> np.ndarray:
-        return (model(x).project(points, rvec, tvec) - pixels).ravel()
+    # x[9]: the stand-in pinhole's place along the optical axis. Through a port the planes look as if seen
+    # from about distance * (n - 1) farther back; a pinhole held at the lens would scale a second plane's
+    # footprint wrongly (0.5 % for a 5 cm plane offset at 0.4 m behind a 2 cm port)
+    # (with one plane it trades off with c alone: held at its paraxial value)
+    paraxial_shift = camera.port.distance * (n_w - 1)
 
-    x0 = np.array([start.c, start.xp, start.yp, start.aspect, start.k1, start.k2, start.k3, start.p1, start.p2])
+    def residual(x: np.ndarray) -> np.ndarray:
+        candidate = model(x)
+        shift = np.array([0.0, 0.0, x[9] if len(x) > 9 else paraxial_shift])
+        return np.concatenate([(candidate.project(points, rvec, t + shift) - pixels).ravel()
+                               for points, t in planes])
+
+    x0 = np.array([start.c, start.xp, start.yp, start.aspect, start.k1, start.k2, start.k3, start.p1, start.p2,
+                   *([paraxial_shift] if more_tvecs else [])])
     fit = least_squares(residual, x0, method="lm", x_scale="jac")
     absorbed = model(fit.x)
     return absorbed, float(np.max(np.hypot(*residual(fit.x).reshape(-1, 2).T)))

@@ -19,15 +19,18 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .area import AreaMeasurer
+from .area import AreaMeasurer, PortAreaMeasurer
 from .board import BoardSpec
 from .calibration import View, calibrate
 from .camera_model import BrownCamera
 from .classify import Classifier
 from .scale import TargetsSpec
 from .synthetic import (
+    CUBE_SIDE_M,
     DSLR,
     ENDOSCOPE,
+    SCENE_DICTIONARY,
+    SCENE_MARKERS,
     FlatPort,
     Scene,
     board_views,
@@ -159,6 +162,61 @@ def format_table(rows: list[Row]) -> str:
                      f"| {r.count_error_pct:+.3f} % (± {r.count_std_pct:.2f} %) "
                      f"| {paper(r.paper_raw_pct)} | {paper(r.paper_calibrated_pct)} |")
     return "\n".join(lines)
+
+
+def distance_scene(distance: float, object_offset: float = 0.0) -> tuple[Scene, TargetsSpec]:
+    """The cube between four markers at `distance`: the marker layout shrunk below 0.7 m so that it stays in
+    the endoscope's view, the cube grown beyond 0.7 m so that it spans as many pixels as there (the paper's
+    10 cm cube is 32 px wide at 1.2 m, where sub-pixel edges alone err +0.3 %: a limit of a small object, not
+    of any camera model). `object_offset`: the cube that much farther than the targets' plane."""
+    k = min(1.0, distance / DISTANCE_M)
+    markers = {i: (x * k, y * k) for i, (x, y) in SCENE_MARKERS.items()}
+    scene = cube_scene(side=CUBE_SIDE_M * max(1.0, distance / DISTANCE_M), marker_size=0.05 * max(k, 0.8),
+                       markers=markers)
+    content = {"dictionary": SCENE_DICTIONARY, "markers": {i: list(v) for i, v in markers.items()}}
+    if object_offset:
+        content["object_plane_offset_m"] = object_offset
+    return scene, TargetsSpec.from_dict(content)
+
+
+@dataclass
+class PortRow:
+    distance_m: float
+    object_offset_m: float
+    absorbed_error_pct: float  # the water calibration at 0.7 m (refraction absorbed into K1..P2)
+    explicit_error_pct: float  # the air calibration and the port model
+    explicit_std_pct: float
+    air_only_error_pct: float  # the air calibration used in water without the port model
+
+
+def port_rows(distances: tuple[float, ...] = (0.4, 0.55, 0.7, 1.0, 1.2), offsets: tuple[float, ...] = (0.0,),
+              progress: Callable[[str], None] = lambda _: None, absorbed: BrownCamera | None = None,
+              air: BrownCamera | None = None) -> list[PortRow]:
+    """The absorbed-model calibration (underwater, at 0.7 m) against the explicit flat-port model (the air
+    calibration and the port) at other distances, the endoscope in the water tank's port. The two
+    calibrations are made here (seed 3) unless given."""
+    from .flat_port import FlatPortCamera
+
+    setup, tank = SETUPS["endoscope"], next(c for c in CONDITIONS if c.name == "water tank")
+    air_condition = next(c for c in CONDITIONS if c.name == "air")
+    absorbed = absorbed or calibrate_synthetic(setup, tank, np.random.default_rng(3)).camera
+    air = air or calibrate_synthetic(setup, air_condition, np.random.default_rng(3)).camera
+    rows = []
+    for distance in distances:
+        for offset in offsets:
+            scene, targets = distance_scene(distance, offset)
+            frame = render_scene(setup.camera, scene, distance, tank.port, supersample=setup.supersample,
+                                 object_offset=offset)
+            classifier = Classifier(threshold=THRESHOLD)
+            results = [measurer.measure(frame) for measurer in (
+                AreaMeasurer(absorbed, targets, classifier),
+                PortAreaMeasurer(FlatPortCamera(air, tank.port), targets, classifier),
+                AreaMeasurer(air, targets, classifier))]
+            errors = [100 * (r.area_m2 / scene.true_area_m2 - 1) for r in results]
+            rows.append(PortRow(distance, offset, errors[0], errors[1],
+                                100 * results[1].area_std_m2 / scene.true_area_m2, errors[2]))
+            progress(f"{distance} m, offset {offset:+g} m: absorbed {errors[0]:+.3f} %, explicit {errors[1]:+.3f} %")
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,7 +24,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 
-from ..area import AreaMeasurer, draw_overlay
+from ..area import AreaMeasurer, PortAreaMeasurer, draw_overlay
 from ..calib_io import CalibrationFileError, read_calibration
 from ..cdr import decode_camera_info, decode_image, info_to_camera, stamp_ns, unstamped
 from ..classify import AREA_MODES, CHANNELS, OBJECTS, Classifier, ClassifyError
@@ -89,10 +89,15 @@ class AreaNode(Node):
         self.mask_pub = self.create_publisher(Image, "mask", IMAGE_QOS)
         self.rect_pub = self.create_publisher(Image, "image_rect", IMAGE_QOS)
         self.overlay_pub = self.create_publisher(Image, "overlay", IMAGE_QOS)
+        self.file_camera = None
+        self.port_camera = None  # a flat port's exact model from calibration_file, for frames of its camera
         if calibration_file:
             try:
-                self.camera = read_calibration(calibration_file).camera
-                self.get_logger().info(f"calibration from {calibration_file}")
+                calibration = read_calibration(calibration_file)
+                self.camera, self.port_camera = calibration.camera, calibration.port_camera()
+                self.file_camera = calibration.camera
+                port = " (lens and flat port: the exact refraction model)" if self.port_camera else ""
+                self.get_logger().info(f"calibration from {calibration_file}{port}")
             except CalibrationFileError as exc:
                 self.get_logger().error(f"{exc}; waiting for camera_info instead")
         self.settings = {p: self.get_parameter(p).value for p in TUNABLE}
@@ -134,8 +139,10 @@ class AreaNode(Node):
         levels = list(settings["levels"])
         if settings["area_mode"] not in AREA_MODES:
             raise ClassifyError(f"area_mode must be one of {', '.join(AREA_MODES)}, got {settings['area_mode']!r}")
-        return AreaMeasurer(camera, targets, classifier, roi=polygon, area_mode=settings["area_mode"],
-                            levels=None if levels in ([0.0], []) else levels)
+        options = dict(roi=polygon, area_mode=settings["area_mode"], levels=None if levels in ([0.0], []) else levels)
+        if self.port_camera is not None and camera == self.file_camera:  # not a camera_info that replaced it
+            return PortAreaMeasurer(self.port_camera, targets, classifier, **options)
+        return AreaMeasurer(camera, targets, classifier, **options)
 
     def _on_parameters(self, parameters) -> SetParametersResult:
         proposed = dict(self.settings)
