@@ -555,17 +555,18 @@ def draw_overlay(result: AreaResult) -> np.ndarray:
 class PortAreaMeasurer:
     """Af through a lens calibrated in air behind a flat port (`flat_port.FlatPortCamera`). The targets' plane
     pose comes from the markers through the exact refraction model; the object's plane (the targets' one, or
-    `object_plane_offset_m` farther along the optical axis) then gets the plumb_bob camera that images it as
-    the lens and port do (`flat_port.absorbed_camera`, fitted over the whole image), and the measurement is the
-    calibrated one of `AreaMeasurer` with that camera. The plane is found again when the targets move."""
+    `object_plane_offset_m` farther along the optical axis) and the targets' then get the plumb_bob camera that
+    images them as the lens and port do (`flat_port.absorbed_camera`, fitted around the targets), and the
+    measurement is the calibrated one of `AreaMeasurer` with that camera. The plane is found again when the
+    targets move."""
 
     def __init__(self, camera: FlatPortCamera, targets: TargetsSpec, classifier: Classifier, **options):
-        if sum(1 for _ in targets.markers) + len(targets.points) < 4:
+        if len(targets.markers) + len(targets.points) < 4:
             raise TargetsError("a flat-port measurement needs 4 or more targets (the plane's pose through the port)")
         self.camera, self.targets, self.classifier, self.options = camera, targets, classifier, options
         self._inner: AreaMeasurer | None = None
         self._rebuilds_seen = 0
-        self.absorbed_residual_px = float("nan")  # the plumb_bob stand-in's largest misfit over the image
+        self.absorbed_residual_px = float("nan")  # the plumb_bob stand-in's largest misfit around the targets
         self.plane_pose: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
