@@ -131,7 +131,7 @@ GOOD_INFO = _camera_info_writer(CameraInfoFields(
        st.integers(0, 255)), max_size=6), tail=st.binary(max_size=20))
 def test_mangled_bytes_give_a_frame_or_a_reason_never_another_error(image, cut, edits, tail):
     """Whatever a foreign publisher or a damaged bag hands over: a frame (calibration), or ValueError saying why."""
-    from veg_area_ros.cdr import info_to_camera
+    from veg_area_ros.camera_info import info_to_camera
 
     data = bytearray(GOOD_IMAGE if image else GOOD_INFO)
     for position, value in edits:

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from .camera_info import camera_from_info, camera_info_fields
 from .camera_model import BrownCamera, check_plausible
 from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
 from .strict_yaml import StrictYamlError, load_text, read_text
@@ -50,17 +51,16 @@ def _matrix(rows: int, cols: int, values: np.ndarray) -> dict[str, Any]:
 
 def to_camera_info_dict(camera: BrownCamera, camera_name: str = "camera",
                         metadata: dict[str, Any] | None = None) -> dict[str, Any]:
-    ideal = camera.ideal()
-    projection = np.hstack([ideal.camera_matrix, np.zeros((3, 1))])
+    fields = camera_info_fields(camera)
     content: dict[str, Any] = {
-        "image_width": camera.width,
-        "image_height": camera.height,
+        "image_width": fields["width"],
+        "image_height": fields["height"],
         "camera_name": camera_name,
-        "camera_matrix": _matrix(3, 3, camera.camera_matrix),
-        "distortion_model": "plumb_bob",
-        "distortion_coefficients": _matrix(1, 5, camera.dist),
-        "rectification_matrix": _matrix(3, 3, np.eye(3)),
-        "projection_matrix": _matrix(3, 4, projection),
+        "camera_matrix": _matrix(3, 3, fields["k"]),
+        "distortion_model": fields["distortion_model"],
+        "distortion_coefficients": _matrix(1, 5, fields["d"]),
+        "rectification_matrix": _matrix(3, 3, fields["r"]),
+        "projection_matrix": _matrix(3, 4, fields["p"]),
     }
     if metadata:
         content[METADATA_KEY] = _plain(metadata)
@@ -163,16 +163,10 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
         if not isinstance(value, int) or isinstance(value, bool) or value <= 0:
             raise CalibrationFileError(f"{path}: '{key}' must be a positive integer, found {value!r}")
     model = content.get("distortion_model", "plumb_bob")
-    K = _numbers(path, content, "camera_matrix", 3, 3).reshape(3, 3)
+    K = _numbers(path, content, "camera_matrix", 3, 3)
     dist = _numbers(path, content, "distortion_coefficients", 1, None)
-    if model not in ("plumb_bob", "rational_polynomial"):
-        raise CalibrationFileError(f"{path}: distortion model {model!r} is not supported (use plumb_bob)")
-    if dist.size not in (0, 4, 5, 8) or (dist.size == 8 and np.any(dist[5:] != 0)):
-        raise CalibrationFileError(f"{path}: {dist.size} distortion coefficients do not fit plumb_bob's five")
-    dist = np.pad(dist[:5], (0, 5 - min(5, dist.size)))
     try:
-        camera = check_plausible(
-            BrownCamera.from_opencv(K, dist, (content["image_width"], content["image_height"])))
+        camera = camera_from_info(content["image_width"], content["image_height"], str(model), dist, K)
     except ValueError as exc:
         raise CalibrationFileError(f"{path}: {exc}") from exc
     metadata = content.get(METADATA_KEY) or {}

@@ -14,12 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .camera_model import BrownCamera, check_plausible
-from .frames import MAX_IMAGE_PIXELS
-
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, no options
 CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1}
-MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in a camera_info are corrupt
 
 
 class ImageMessageError(ValueError):
@@ -267,27 +263,3 @@ def decode_camera_info(buffer) -> CameraInfoFields:
     x, y, h, w = reader.unpack("IIII")
     (rectify,) = reader.unpack("B")
     return CameraInfoFields(header, height, width, model, d, k, r, p, binning, (x, y, h, w, bool(rectify)))
-
-
-def info_to_camera(msg) -> BrownCamera:
-    """The calibrated camera in a sensor_msgs/CameraInfo or CameraInfoFields (the same field names);
-    ValueError (with the reason) for an uncalibrated or bad one."""
-    if msg.distortion_model != "plumb_bob" and np.any(np.asarray(msg.d, float) != 0):
-        raise ValueError(f"distortion model {msg.distortion_model!r} is not supported (plumb_bob)")
-    k = np.asarray(msg.k, float).reshape(3, 3)
-    if not np.all(np.isfinite(k)) or k[0, 0] <= 0 or k[1, 1] <= 0:
-        raise ValueError("camera matrix is zero or not finite (an uncalibrated camera_info)")
-    dist = np.zeros(5)
-    d = np.asarray(msg.d, float)[:5]
-    if not np.all(np.isfinite(d)):
-        raise ValueError("distortion coefficients are not finite")
-    dist[: d.size] = d
-    if msg.width == 0 or msg.height == 0:
-        raise ValueError("camera_info has no image size")
-    if max(msg.width, msg.height) > MAX_IMAGE_SIDE:
-        raise ValueError(f"camera_info image size {msg.width}x{msg.height} is beyond any camera "
-                         f"(at most {MAX_IMAGE_SIDE} px a side)")
-    if msg.width * msg.height > MAX_IMAGE_PIXELS:
-        raise ValueError(f"camera_info image size {msg.width}x{msg.height} is more than any camera here "
-                         f"({MAX_IMAGE_PIXELS} pixels at most)")
-    return check_plausible(BrownCamera.from_opencv(k, dist, (msg.width, msg.height)))

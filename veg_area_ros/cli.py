@@ -352,7 +352,7 @@ def _measure(args: argparse.Namespace, on_frame=None, stop=None) -> tuple[int, l
     from .area import NO_CALIBRATION_FOR_OFFSET, AreaMeasurer, PortAreaMeasurer, draw_overlay
     from .bags import BagError, bag_image_count
     from .calib_io import CalibrationFileError, read_calibration, write_calibration
-    from .cdr import info_to_camera
+    from .camera_info import info_to_camera
     from .classify import Classifier, ClassifyError
     from .frames import (
         IMAGE_SUFFIXES,

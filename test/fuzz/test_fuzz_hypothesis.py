@@ -13,7 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from veg_area_ros.calib_io import CalibrationFileError, from_camera_info_dict, to_camera_info_dict
-from veg_area_ros.cdr import ImageMessageError, decode_camera_info, decode_image, encode_image, info_to_camera
+from veg_area_ros.camera_info import info_to_camera
+from veg_area_ros.cdr import ImageMessageError, decode_camera_info, decode_image, encode_image
 from veg_area_ros.frames import header_size, jpeg_structure_problem
 from veg_area_ros.scale import TargetsError, TargetsSpec
 from veg_area_ros.strict_yaml import StrictYamlError, load_text

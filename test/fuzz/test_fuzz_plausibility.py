@@ -14,8 +14,9 @@ from helpers import calibrated_camera
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.calib_io import CalibrationFileError, read_calibration, to_camera_info_dict, write_calibration
+from veg_area_ros.camera_info import info_to_camera
 from veg_area_ros.camera_model import implausibility
-from veg_area_ros.cdr import CameraInfoFields, Header, info_to_camera
+from veg_area_ros.cdr import CameraInfoFields, Header
 from veg_area_ros.classify import Classifier
 from veg_area_ros.scale import TargetsError, TargetsSpec
 from veg_area_ros.synthetic import DSLR, ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, FlatPort, cube_scene, render_scene

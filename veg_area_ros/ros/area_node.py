@@ -26,7 +26,8 @@ from std_msgs.msg import String
 
 from ..area import AreaMeasurer, PortAreaMeasurer, draw_overlay
 from ..calib_io import CalibrationFileError, read_calibration
-from ..cdr import decode_camera_info, decode_image, info_to_camera, stamp_ns, unstamped
+from ..camera_info import info_to_camera
+from ..cdr import decode_camera_info, decode_image, stamp_ns, unstamped
 from ..classify import AREA_MODES, CHANNELS, OBJECTS, Classifier, ClassifyError
 from ..idealize import FrameSizeError
 from ..latest import FrameTally

@@ -6,8 +6,9 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import CameraInfo, Image
 
+from ..camera_info import camera_info_fields, info_to_camera
 from ..camera_model import BrownCamera
-from ..cdr import ImageMessageError, encode_image, frame_pixels, image_layout, info_to_camera
+from ..cdr import ImageMessageError, encode_image, frame_pixels, image_layout
 
 __all__ = ["ImageMessageError", "camera_to_info", "image_bytes", "image_to_msg", "info_to_camera", "msg_to_image"]
 
@@ -41,11 +42,7 @@ def camera_to_info(camera: BrownCamera, frame_id: str = "camera", stamp: Time | 
     if stamp is not None:
         msg.header.stamp = stamp
     msg.header.frame_id = frame_id
-    msg.width, msg.height = camera.image_size
-    msg.distortion_model = "plumb_bob"
-    msg.d = [float(v) for v in camera.dist]
-    msg.k = camera.camera_matrix.ravel().astype(float)
-    msg.r = np.eye(3).ravel()
-    ideal = camera.ideal().camera_matrix
-    msg.p = np.hstack([ideal, np.zeros((3, 1))]).ravel()
+    fields = camera_info_fields(camera)
+    msg.width, msg.height, msg.distortion_model = fields["width"], fields["height"], fields["distortion_model"]
+    msg.d, msg.k, msg.r, msg.p = fields["d"], fields["k"], fields["r"], fields["p"]
     return msg

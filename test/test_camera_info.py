@@ -1,0 +1,58 @@
+"""One mapping between BrownCamera and camera_info (issue #20): a file, a message and CDR fields refuse the same
+things for the same reason (the message path used to cut eight coefficients to five without a word)."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+from rclpy.serialization import serialize_message
+
+from veg_area_ros.calib_io import CalibrationFileError, read_calibration, to_camera_info_dict
+from veg_area_ros.camera_info import camera_info_fields, info_to_camera
+from veg_area_ros.cdr import decode_camera_info
+from veg_area_ros.ros.messages import camera_to_info
+from veg_area_ros.synthetic import ENDOSCOPE
+
+CASES = {
+    "eight coefficients, the rational ones not zero": (dict(d=[*map(float, ENDOSCOPE.dist), 0.1, 0.0, 0.0]),
+                                                       "do not fit plumb_bob's five"),
+    "an unknown model": (dict(distortion_model="equidistant"), "not supported"),
+    "no focal length": (dict(k=[0.0] * 9), "uncalibrated"),
+    "k1 = 1e6": (dict(d=[1e6, 0, 0, 0, 0]), "implausible camera model"),
+    "a corrupt size": (dict(width=100_000), "beyond any camera"),
+}
+
+
+def _three_ways(tmp_path, change: dict):
+    """The same camera_info as a YAML file, a CameraInfo message and CDR fields."""
+    fields = {**camera_info_fields(ENDOSCOPE), **change}
+    content = to_camera_info_dict(ENDOSCOPE)
+    content.update(image_width=fields["width"], distortion_model=fields["distortion_model"])
+    content["distortion_coefficients"] = {"rows": 1, "cols": len(fields["d"]), "data": [float(v) for v in fields["d"]]}
+    content["camera_matrix"]["data"] = [float(v) for v in fields["k"]]
+    path = tmp_path / "camera.yaml"
+    path.write_text(yaml.safe_dump(content))
+    msg = camera_to_info(ENDOSCOPE)
+    msg.width, msg.distortion_model, msg.d, msg.k = (fields["width"], fields["distortion_model"], fields["d"],
+                                                     fields["k"])
+    return path, msg, decode_camera_info(serialize_message(msg))
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_a_file_a_message_and_cdr_fields_refuse_alike(tmp_path, name):
+    change, reason = CASES[name]
+    path, msg, fields = _three_ways(tmp_path, change)
+    with pytest.raises(CalibrationFileError, match=reason):
+        read_calibration(path)
+    for carrier in (msg, fields):
+        with pytest.raises(ValueError, match=reason):
+            info_to_camera(carrier)
+
+
+def test_a_file_a_message_and_cdr_fields_accept_alike(tmp_path):
+    """rational_polynomial with its extra terms zero is plumb_bob: taken by all three, the same camera."""
+    path, msg, fields = _three_ways(tmp_path, dict(distortion_model="rational_polynomial",
+                                                   d=[*map(float, ENDOSCOPE.dist), 0.0, 0.0, 0.0]))
+    cameras = [read_calibration(path).camera, info_to_camera(msg), info_to_camera(fields)]
+    assert all(camera == cameras[0] for camera in cameras)
+    assert cameras[0].parameters() == pytest.approx(ENDOSCOPE.parameters(), rel=1e-12)

@@ -1,0 +1,62 @@
+"""The one mapping between a calibrated camera (`BrownCamera`) and camera_info's fields, whichever carries them:
+a sensor_msgs/CameraInfo message, its CDR bytes (`cdr.CameraInfoFields`) or a camera_info YAML file. One
+validation for all three, with the reason in the error.
+
+No ROS here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .camera_model import BrownCamera, check_plausible
+from .frames import MAX_IMAGE_PIXELS
+
+MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in a camera_info are corrupt
+PLUMB_BOB_SIZES = (0, 4, 5, 8, 12, 14)  # OpenCV's lengths; beyond the fifth they must be zero (rational terms)
+
+
+def camera_info_fields(camera: BrownCamera) -> dict:
+    """camera_info's fields for a camera: plumb_bob, and the projection matrix of the ideal camera (what
+    `image_rect` and the idealized images are in)."""
+    ideal = camera.ideal().camera_matrix
+    return {"width": camera.width, "height": camera.height, "distortion_model": "plumb_bob",
+            "d": [float(v) for v in camera.dist], "k": [float(v) for v in camera.camera_matrix.ravel()],
+            "r": [float(v) for v in np.eye(3).ravel()],
+            "p": [float(v) for v in np.hstack([ideal, np.zeros((3, 1))]).ravel()]}
+
+
+def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence[float],
+                     k: Sequence[float]) -> BrownCamera:
+    """The calibrated camera that camera_info's fields describe; ValueError with the reason for an
+    uncalibrated, corrupt or implausible one."""
+    if width <= 0 or height <= 0:
+        raise ValueError("camera_info has no image size")
+    if max(width, height) > MAX_IMAGE_SIDE:
+        raise ValueError(f"camera_info image size {width}x{height} is beyond any camera "
+                         f"(at most {MAX_IMAGE_SIDE} px a side)")
+    if width * height > MAX_IMAGE_PIXELS:
+        raise ValueError(f"camera_info image size {width}x{height} is more than any camera here "
+                         f"({MAX_IMAGE_PIXELS} pixels at most)")
+    dist = np.asarray(d, float).ravel()
+    if distortion_model not in ("plumb_bob", "rational_polynomial") and np.any(dist != 0):
+        raise ValueError(f"distortion model {distortion_model!r} is not supported (plumb_bob)")
+    if not np.all(np.isfinite(dist)):
+        raise ValueError("distortion coefficients are not finite")
+    if dist.size not in PLUMB_BOB_SIZES or np.any(dist[5:] != 0):
+        raise ValueError(f"{dist.size} distortion coefficients do not fit plumb_bob's five")
+    matrix = np.asarray(k, float).ravel()
+    if matrix.size != 9:
+        raise ValueError(f"the camera matrix should hold 9 numbers, found {matrix.size}")
+    matrix = matrix.reshape(3, 3)
+    if not np.all(np.isfinite(matrix)) or matrix[0, 0] <= 0 or matrix[1, 1] <= 0:
+        raise ValueError("camera matrix fx, fy must be finite and positive (zero: an uncalibrated camera_info)")
+    return check_plausible(BrownCamera.from_opencv(matrix, np.pad(dist[:5], (0, 5 - min(5, dist.size))),
+                                                   (int(width), int(height))))
+
+
+def info_to_camera(msg) -> BrownCamera:
+    """The calibrated camera in a sensor_msgs/CameraInfo or CameraInfoFields (the same field names)."""
+    return camera_from_info(msg.width, msg.height, msg.distortion_model, msg.d, msg.k)
