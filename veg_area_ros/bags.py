@@ -198,7 +198,7 @@ def recover_bag(broken: str | Path, output: str | Path) -> Recovery:
         opcode, content, next_offset = found
         try:
             chunk(content) if opcode == 0x06 else record(opcode, content)
-        except Exception as exc:
+        except Exception as exc:  # any damage (struct, decode, zstd, CRC) loses this record only, said below
             kind = "chunk" if opcode == 0x06 else f"record 0x{opcode:02x}"
             dropped.append(f"{kind} at byte {offset} dropped: {exc}")
         offset = next_offset

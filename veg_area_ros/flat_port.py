@@ -84,6 +84,55 @@ def _refract(directions: np.ndarray, normal: np.ndarray, eta: float) -> np.ndarr
     return eta * directions + (cos_out - eta * cos_in)[..., None] * normal
 
 
+def rays_in_water(port: FlatPort, air: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit air rays from the projection centre (..., 3) -> (origins on the port's outer surface, unit
+    directions in water), both (..., 3): two ray-plane intersections and Snell's law at each surface."""
+    n = port.normal
+    inner = air * (port.distance / (air @ n))[..., None]
+    glass = _refract(air, n, 1.0 / port.glass_index)
+    outer = inner + glass * (port.thickness / (glass @ n))[..., None]
+    return outer, _refract(glass, n, port.glass_index / port.water_index)
+
+
+def air_rays_to(port: FlatPort, points: np.ndarray) -> np.ndarray:
+    """Camera-frame points in water (N, 3) -> the unit air ray from the projection centre that reaches each
+    through the port. The ray lies in the plane of refraction (the normal and the point); the sine of its
+    angle to the normal is solved for from the point's distance from the normal's axis."""
+    n = port.normal
+    points = np.asarray(points, float).reshape(-1, 3)
+    depth = points @ n
+    radial = points - depth[:, None] * n
+    reach = np.linalg.norm(radial, axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        unit = np.where(reach[:, None] > 0, radial / reach[:, None], 0.0)
+    water_path = depth - port.distance - port.thickness
+    if np.any(water_path <= 0):
+        raise PortError("a point lies inside the port, not in the water in front of it")
+    indices = np.array([1.0, port.glass_index, port.water_index])
+    lengths = np.column_stack([np.full_like(depth, port.distance), np.full_like(depth, port.thickness),
+                               water_path])
+
+    def lateral(sine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        q = sine[:, None] / indices
+        root = np.sqrt(1.0 - q * q)
+        return (lengths * q / root).sum(axis=1), (lengths / (indices * root**3)).sum(axis=1)
+
+    sine = np.clip(reach / (lengths / indices).sum(axis=1), 0.0, 0.999)  # the paraxial guess
+    low, high = np.zeros_like(sine), np.full_like(sine, 1.0 - 1e-12)
+    for _ in range(60):
+        value, slope = lateral(sine)
+        error = value - reach
+        low, high = np.where(error < 0, sine, low), np.where(error < 0, high, sine)
+        step = sine - error / slope
+        outside = ~((step > low) & (step < high))
+        step[outside] = 0.5 * (low + high)[outside]  # Newton left the bracket: bisect
+        done = np.abs(step - sine) < 1e-15
+        sine = step
+        if np.all(done):
+            break
+    return np.sqrt(1.0 - sine**2)[:, None] * n + sine[:, None] * unit
+
+
 @dataclass(frozen=True)
 class FlatPortCamera:
     """The air-calibrated lens behind a flat port."""
@@ -101,60 +150,13 @@ class FlatPortCamera:
         rays = np.column_stack([xy, np.ones(len(xy))])
         return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
-    def rays_in_water(self, air: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Unit air rays from the projection centre (..., 3) -> (origins on the outer surface, unit directions
-        in water), both (..., 3)."""
-        port, n = self.port, self.port.normal
-        inner = air * (port.distance / (air @ n))[..., None]
-        glass = _refract(air, n, 1.0 / port.glass_index)
-        outer = inner + glass * (port.thickness / (glass @ n))[..., None]
-        return outer, _refract(glass, n, port.glass_index / port.water_index)
-
     def back_project(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Raw pixels (N, 2) -> their rays in water: origins and unit directions (N, 3)."""
-        return self.rays_in_water(self.air_rays(uv))
-
-    def air_sine(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Camera-frame points in water (N, 3) -> the sine of the air ray's angle to the normal that reaches each,
-        and the plane of refraction's two axes there: the normal's component and the unit radial direction."""
-        port, n = self.port, self.port.normal
-        points = np.asarray(points, float).reshape(-1, 3)
-        depth = points @ n
-        radial = points - depth[:, None] * n
-        reach = np.linalg.norm(radial, axis=1)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            unit = np.where(reach[:, None] > 0, radial / reach[:, None], 0.0)
-        water_path = depth - port.distance - port.thickness
-        if np.any(water_path <= 0):
-            raise PortError("a point lies inside the port, not in the water in front of it")
-        indices = np.array([1.0, port.glass_index, port.water_index])
-        lengths = np.column_stack([np.full_like(depth, port.distance), np.full_like(depth, port.thickness),
-                                   water_path])
-
-        def lateral(sine: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            q = sine[:, None] / indices
-            root = np.sqrt(1.0 - q * q)
-            return (lengths * q / root).sum(axis=1), (lengths / (indices * root**3)).sum(axis=1)
-
-        sine = np.clip(reach / (lengths / indices).sum(axis=1), 0.0, 0.999)  # the paraxial guess
-        low, high = np.zeros_like(sine), np.full_like(sine, 1.0 - 1e-12)
-        for _ in range(60):
-            value, slope = lateral(sine)
-            error = value - reach
-            low, high = np.where(error < 0, sine, low), np.where(error < 0, high, sine)
-            step = sine - error / slope
-            outside = ~((step > low) & (step < high))
-            step[outside] = 0.5 * (low + high)[outside]  # Newton left the bracket: bisect
-            done = np.abs(step - sine) < 1e-15
-            sine = step
-            if np.all(done):
-                break
-        return sine, n, unit
+        return rays_in_water(self.port, self.air_rays(uv))
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Camera-frame points in water (N, 3) -> raw pixels (N, 2), exact."""
-        sine, n, unit = self.air_sine(points)
-        air = np.sqrt(1.0 - sine**2)[:, None] * n + sine[:, None] * unit
+        air = air_rays_to(self.port, points)
         return self.lens.normalized_to_pixels(air[:, :2] / air[:, 2:3])
 
     def project_pose(self, plane_points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:

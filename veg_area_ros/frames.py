@@ -43,6 +43,7 @@ def is_bag(path: Path) -> bool:
     return path.suffix.lower() == ".mcap"
 
 
+JPEG_STANDALONE_MARKERS = {0x01, *range(0xD0, 0xD9)}  # TEM, restarts, start of image: no length follows
 MAX_IMAGE_PIXELS = 64_000_000  # six times the 3872x2592 DSLR; a 20000x20000 PNG took 9 GB and minutes to refuse
 MIN_IMAGE_SIDE = 16  # smaller holds no board and no targets
 
@@ -60,7 +61,7 @@ def header_size(data: bytes) -> tuple[int, int] | None:
             if data[offset] != 0xFF:
                 return None
             marker = data[offset + 1]
-            if marker in (0xD8, 0x01) or 0xD0 <= marker <= 0xD7:  # markers without a length
+            if marker in JPEG_STANDALONE_MARKERS:
                 offset += 2
                 continue
             (length,) = struct.unpack(">H", data[offset + 2:offset + 4])
@@ -122,7 +123,7 @@ def jpeg_structure_problem(data: bytes) -> str | None:
             continue
         if marker == 0xD9:
             return None
-        if marker == 0x01 or 0xD0 <= marker <= 0xD8:  # markers without a length
+        if marker in JPEG_STANDALONE_MARKERS:
             offset += 2
             continue
         if offset + 4 > len(data):

@@ -15,7 +15,7 @@ import numpy as np
 
 from .board import BoardSpec
 from .camera_model import BrownCamera
-from .flat_port import FlatPort, FlatPortCamera
+from .flat_port import FlatPort, air_rays_to, rays_in_water
 
 # a typical cheap 640x480 underwater endoscope: short focal length and strong barrel distortion
 ENDOSCOPE = BrownCamera(640, 480, c=520.0, xp=326.0, yp=236.5, aspect=1.004,
@@ -40,8 +40,8 @@ def _pixel_rays(camera: BrownCamera, supersample: int) -> np.ndarray:
 
 def refract_at_port(rays: np.ndarray, port: FlatPort) -> tuple[np.ndarray, np.ndarray]:
     """Unit rays from the lens centre -> (origins on the port's outer surface, directions in water), both
-    (..., 3): the exact flat-port model (`flat_port.FlatPortCamera`), whose lens plays no part here."""
-    return FlatPortCamera(ENDOSCOPE, port).rays_in_water(rays)
+    (..., 3): the exact flat-port model (`flat_port.rays_in_water`)."""
+    return rays_in_water(port, rays)
 
 
 def ideal_rays_to(points: np.ndarray, port: FlatPort | None = None) -> np.ndarray:
@@ -50,8 +50,7 @@ def ideal_rays_to(points: np.ndarray, port: FlatPort | None = None) -> np.ndarra
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     if port is None:
         return points[:, :2] / points[:, 2:3]
-    sine, normal, radial = FlatPortCamera(ENDOSCOPE, port).air_sine(points)
-    air = np.sqrt(1.0 - sine**2)[:, None] * normal + sine[:, None] * radial
+    air = air_rays_to(port, points)
     return air[:, :2] / air[:, 2:3]
 
 
