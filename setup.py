@@ -3,8 +3,10 @@ from glob import glob
 from setuptools import find_packages, setup
 
 PACKAGE = "veg_area_ros"
-# graph_node: camera, calibration and area composed in one process
-NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node"]
+# executable -> module under veg_area_ros.ros with its main(); graph_node: camera, calibration and area composed
+# in one process. rclpy is imported only when a node starts, so `veg-area` and the core run without ROS.
+NODES = {"camera_node": "camera_node", "calibration_node": "calibration_node", "area_node": "area_node",
+         "graph_node": "graph", "record_node": "record_node", "drag_node": "drag_node", "play_node": "play_node"}
 
 setup(
     name=PACKAGE,
@@ -19,7 +21,7 @@ setup(
     install_requires=["setuptools"],
     zip_safe=True,
     entry_points={
-        "console_scripts": [f"{node}={PACKAGE}.nodes:{node.split('_')[0]}_main" for node in NODES]
+        "console_scripts": [f"{node}={PACKAGE}.ros.{module}:main" for node, module in NODES.items()]
         + [f"veg-area={PACKAGE}.cli:main"],
     },
 )

@@ -28,8 +28,16 @@ from timing import median_seconds  # bench/ is the script's folder, first on sys
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.classify import Classifier
-from veg_area_ros.scale import TargetsSpec
-from veg_area_ros.synthetic import DSLR, ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, FlatPort, cube_scene, render_scene
+from veg_area_ros.sim.synthetic import (
+    DSLR,
+    ENDOSCOPE,
+    SCENE_DICTIONARY,
+    SCENE_MARKERS,
+    FlatPort,
+    cube_scene,
+    render_scene,
+)
+from veg_area_ros.targets import TargetsSpec
 
 
 def main() -> int:

@@ -28,7 +28,7 @@ from veg_area_ros.board import BoardSpec
 from veg_area_ros.calibration import View, calibrate
 from veg_area_ros.camera_model import BrownCamera
 from veg_area_ros.cli import main as veg_area
-from veg_area_ros.synthetic import ENDOSCOPE, board_views, render_board_views
+from veg_area_ros.sim.synthetic import ENDOSCOPE, board_views, render_board_views
 
 # a 1440x1080 camera of the dome-port class, milder distortion than the endoscope
 LARGE = BrownCamera(1440, 1080, c=1150.0, xp=722.0, yp=538.0, aspect=1.0, k1=-0.2, k2=0.08, k3=-0.01,

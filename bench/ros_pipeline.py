@@ -47,8 +47,8 @@ def plain_camera(spec: dict):
     from sensor_msgs.msg import Image
 
     from veg_area_ros.frames import read_image
-    from veg_area_ros.ros.common import IMAGE_QOS
     from veg_area_ros.ros.messages import image_to_msg
+    from veg_area_ros.ros.qos import IMAGE_QOS
 
     class PlainCamera(Node):
         def __init__(self) -> None:
@@ -72,15 +72,15 @@ def plain_area(spec: dict):
     from veg_area_ros.area import AreaMeasurer
     from veg_area_ros.calib_io import read_calibration
     from veg_area_ros.classify import Classifier
-    from veg_area_ros.ros.area_node import default_targets
-    from veg_area_ros.ros.common import IMAGE_QOS, RESULT_QOS
     from veg_area_ros.ros.messages import msg_to_image
+    from veg_area_ros.ros.qos import IMAGE_QOS, RESULT_QOS
+    from veg_area_ros.sim.synthetic import scene_targets
 
     class PlainArea(Node):
         def __init__(self) -> None:
             super().__init__("plain_area")
             camera = read_calibration(Path(spec["calibration"])).camera
-            self.measurer = AreaMeasurer(camera, default_targets(), Classifier(threshold=120.0))
+            self.measurer = AreaMeasurer(camera, scene_targets(), Classifier(threshold=120.0))
             self.areas = self.create_publisher(Vector3Stamped, "projected_area", RESULT_QOS)
             self.create_subscription(Image, "image_raw", self.on_image, IMAGE_QOS)
 
@@ -102,7 +102,7 @@ def probe(spec: dict) -> dict:
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import String
 
-    from veg_area_ros.ros.common import RESULT_QOS
+    from veg_area_ros.ros.qos import RESULT_QOS
 
     node = Node("bench_probe")
     latencies: list[float] = []
@@ -146,7 +146,7 @@ def probe(spec: dict) -> dict:
 def role_main(role: str, spec: dict) -> int:
     import rclpy
 
-    from veg_area_ros.ros.common import ensure_ros_environment, run_nodes
+    from veg_area_ros.ros.run import ensure_ros_environment, run_nodes
 
     if role == "plain_camera":
         return run_nodes([lambda: plain_camera(spec)], [])
@@ -171,7 +171,7 @@ def prepare_inputs(folder: Path, noise: list[float]) -> dict[str, dict[str, str]
     import numpy as np
 
     from veg_area_ros.calib_io import write_calibration
-    from veg_area_ros.synthetic import DSLR, ENDOSCOPE, cube_scene, render_scene
+    from veg_area_ros.sim.synthetic import DSLR, ENDOSCOPE, cube_scene, render_scene
 
     inputs = {}
     rng = np.random.default_rng(0)

@@ -40,7 +40,7 @@ MATCH_TIMEOUT_S = 30.0
 def qos_profile(kind: str):
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    from veg_area_ros.ros.common import IMAGE_QOS
+    from veg_area_ros.ros.qos import IMAGE_QOS
 
     if kind == "best_effort":
         return IMAGE_QOS  # the nodes' image QoS: best effort, newest frame only
@@ -163,7 +163,7 @@ def spin(nodes: list, until, timeout_s: float) -> None:
 def role_main(role: str, spec: dict) -> int:
     import rclpy
 
-    from veg_area_ros.ros.common import ensure_ros_environment
+    from veg_area_ros.ros.run import ensure_ros_environment
 
     ensure_ros_environment()
     rclpy.init()

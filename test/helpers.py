@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from veg_area_ros.board import BoardSpec
-from veg_area_ros.synthetic import ENDOSCOPE, FlatPort, board_views, render_board_views
+from veg_area_ros.sim.synthetic import ENDOSCOPE, FlatPort, board_views, render_board_views
 
 REPO = Path(__file__).resolve().parents[1]
 TEST_DATA = REPO / "test" / "data"
@@ -63,7 +63,7 @@ def calibrated_camera(setup: str, medium: str):
 @functools.cache
 def calibration_result(setup: str, medium: str):
     """The whole CalibrationResult behind `calibrated_camera` (std, correlation, ...)."""
-    from veg_area_ros.reproduction import CONDITIONS, SETUPS, calibrate_synthetic
+    from veg_area_ros.sim.reproduction import CONDITIONS, SETUPS, calibrate_synthetic
 
     condition = next(c for c in CONDITIONS if c.name == {"air": "air", "water": "water tank"}[medium])
     return calibrate_synthetic(SETUPS[setup], condition, np.random.default_rng(3))

@@ -143,7 +143,7 @@ def scenario_delivery(options: dict, nodes: Nodes) -> dict:
     from rclpy.node import Node
     from sensor_msgs.msg import Image
 
-    from veg_area_ros.ros.common import IMAGE_QOS
+    from veg_area_ros.ros.qos import IMAGE_QOS
 
     results = {}
     rclpy.init()
@@ -197,7 +197,8 @@ def main() -> int:
                   "drag": scenario_drag, "interop": scenario_interop, "foreign": scenario_foreign,
                   "full_rate": scenario_full_rate, "driver_qos": scenario_driver_qos,
                   "replay": scenario_replay, "record_cli": scenario_record_cli,
-                  "two_machines": scenario_two_machines}[name](options, nodes)
+                  "two_machines": scenario_two_machines, "bad_start_files": scenario_bad_start_files}[name](
+                      options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
         result["alive_at_end"] = nodes.alive()
@@ -220,9 +221,9 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
     from std_msgs.msg import String
 
     from veg_area_ros.calib_io import read_calibration
-    from veg_area_ros.ros.common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
     from veg_area_ros.ros.messages import camera_to_info, info_to_camera
-    from veg_area_ros.synthetic import cube_scene
+    from veg_area_ros.ros.qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
+    from veg_area_ros.sim.synthetic import cube_scene
 
     out: dict = {"truth_m2": cube_scene().true_area_m2}
     calibration_file = Path("served.yaml").resolve()
@@ -326,6 +327,8 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         median = set_parameter("threshold_mode", "median")
         out["bad_threshold_mode"] = None if median is None else [median.results[0].successful,
                                                                  median.results[0].reason]
+        fixed = set_parameter("threshold_mode", "fixed")  # the default is otsu, as on the command line
+        out["fixed_threshold_mode"] = None if fixed is None else fixed.results[0].successful
         good = set_parameter("threshold", 60.0)
         out["good_threshold"] = None if good is None else good.results[0].successful
         mark = len(infos)
@@ -367,7 +370,7 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
 
         # bad calibrations: a camera_info beyond any camera (refused: the served one stays), then the targets file
         # spoiled on disk before a new calibration comes (the file was read when set: the calibration applies)
-        from veg_area_ros.synthetic import SCENE_DICTIONARY, SCENE_MARKERS
+        from veg_area_ros.sim.synthetic import SCENE_DICTIONARY, SCENE_MARKERS
 
         targets = Path("targets.yaml").resolve()
         targets.write_text(f"dictionary: {SCENE_DICTIONARY}\nmarkers:\n"
@@ -420,7 +423,7 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
 def air_endoscope_calibration() -> Path:
     """The synthetic endoscope's true calibration in air, as a camera_info YAML in the scenario's folder."""
     from veg_area_ros.calib_io import write_calibration
-    from veg_area_ros.synthetic import ENDOSCOPE
+    from veg_area_ros.sim.synthetic import ENDOSCOPE
 
     calibration = Path("endoscope.yaml").resolve()
     write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air"})
@@ -462,7 +465,7 @@ def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
     from sensor_msgs.msg import CameraInfo
     from std_msgs.msg import String
 
-    from veg_area_ros.synthetic import ENDOSCOPE, cube_scene, render_scene
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene
 
     calibration, still = air_endoscope_calibration(), Path("cube.png").resolve()
     cv2.imwrite(str(still), render_scene(ENDOSCOPE, cube_scene(), 0.7))
@@ -563,7 +566,7 @@ def scenario_interop(options: dict, nodes: Nodes) -> dict:
     from geometry_msgs.msg import WrenchStamped
     from rclpy.node import Node
 
-    from veg_area_ros.synthetic import cube_scene
+    from veg_area_ros.sim.synthetic import cube_scene
 
     calibration = air_endoscope_calibration()
     ours = [nodes.start("camera_node", rate_hz=10.0, synthetic_scene="cube", synthetic_medium="air",
@@ -597,7 +600,7 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
     from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
     from rclpy.node import Node
 
-    from veg_area_ros.ros.common import RESULT_QOS
+    from veg_area_ros.ros.qos import RESULT_QOS
 
     cd, density, area, velocity = options["cd"], 998.2, options["area_m2"], options["velocity_m_s"]
     force = 0.5 * density * velocity**2 * area * cd
@@ -680,7 +683,7 @@ def _two_pcs(shm_root: Path) -> dict[str, list[str]]:
 def scenario_two_machines(options: dict, nodes: Nodes) -> dict:
     """Camera PC: camera_node (640x480 bgr8, options["rate_hz"]) and an instrument node on Fast DDS's defaults;
     measuring PC: area_node and another such node. Our nodes on the shipped default transport."""
-    from veg_area_ros.synthetic import cube_scene
+    from veg_area_ros.sim.synthetic import cube_scene
 
     pcs = _two_pcs(Path("pcs").resolve())
     calibration = air_endoscope_calibration()
@@ -743,7 +746,7 @@ def scenario_replay(options: dict, nodes: Nodes) -> dict:
     from geometry_msgs.msg import Vector3Stamped
     from rclpy.node import Node
 
-    from veg_area_ros.ros.common import RESULT_QOS
+    from veg_area_ros.ros.qos import RESULT_QOS
 
     rclpy.init()
     probe = Node("replay_probe")
@@ -788,9 +791,9 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
     from sensor_msgs.msg import CameraInfo, Image
     from std_msgs.msg import String
 
-    from veg_area_ros.ros.common import RESULT_QOS
     from veg_area_ros.ros.messages import camera_to_info, image_to_msg
-    from veg_area_ros.synthetic import ENDOSCOPE, cube_scene, render_scene
+    from veg_area_ros.ros.qos import RESULT_QOS
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene
 
     offered = INFO_QOS_OF[options["qos"]]
     info_qos = QoSProfile(depth=offered["depth"], reliability=getattr(ReliabilityPolicy, offered["reliability"]),
@@ -830,6 +833,71 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
     last = json.loads(infos[-1]) if infos else {}
     return {"areas": areas, "published": published, "truth_m2": cube_scene().true_area_m2,
             "frames_received": last.get("frames_received", 0), "frames_measured": last.get("frames_measured", 0)}
+
+
+
+def scenario_bad_start_files(options: dict, nodes: Nodes) -> dict:
+    """Every node started with a file it cannot read (targets_file missing, calibration_file and both
+    camera_info_url files corrupt): each logs why and what it does instead, and runs on; the area node measures
+    once targets_file is set to a readable file."""
+    import rclpy
+    from rcl_interfaces.msg import Log
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import String
+
+    from veg_area_ros.ros.qos import RESULT_QOS
+    from veg_area_ros.sim.synthetic import SCENE_DICTIONARY, SCENE_MARKERS
+
+    corrupt = Path("corrupt.yaml").resolve()
+    corrupt.write_text("image_width: [640\n")
+    logs: dict[str, list[str]] = {}
+    rclpy.init()
+    probe = Node("probe")
+    # transient local, as rclpy publishes /rosout: the start-up lines come before the probe discovers the nodes
+    probe.create_subscription(Log, "/rosout", lambda m: logs.setdefault(m.name, []).append(m.msg),
+                              QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE,
+                                         durability=DurabilityPolicy.TRANSIENT_LOCAL))
+    infos: list[dict] = []
+    probe.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)), RESULT_QOS)
+    nodes.start("camera_node", camera_info_url=f"file://{corrupt}", synthetic_scene="cube", rate_hz=5.0)
+    nodes.start("calibration_node", camera_info_url=f"file://{corrupt}")
+    nodes.start("area_node", targets_file=str(Path("missing_targets.yaml").resolve()),
+                calibration_file=str(corrupt), uncalibrated_frames="measure")
+
+    def spin_until(condition, seconds: float) -> bool:
+        deadline = time.monotonic() + seconds
+        while not condition() and time.monotonic() < deadline:
+            rclpy.spin_once(probe, timeout_sec=0.05)
+        return condition()
+
+    def said(node: str, text: str) -> bool:
+        return any(text in line for line in logs.get(node, []))
+
+    out: dict = {}
+    try:
+        spin_until(lambda: said("area_node", "frame not measured") and said("camera_node", "parameter")
+                   and said("calibration_node", "parameter"), 60)
+        out["logs"] = logs
+        out["measured_without_targets"] = len(infos)
+        out["alive_before_fix"] = nodes.alive()
+        targets = Path("targets.yaml").resolve()
+        targets.write_text(f"dictionary: {SCENE_DICTIONARY}\nmarkers:\n"
+                           + "".join(f"  {k}: [{x}, {y}]\n" for k, (x, y) in SCENE_MARKERS.items()))
+        client = probe.create_client(SetParameters, "area_node/set_parameters")
+        client.wait_for_service(timeout_sec=20)
+        future = client.call_async(SetParameters.Request(
+            parameters=[Parameter("targets_file", value=str(targets)).to_parameter_msg()]))
+        spin_until(future.done, 20)
+        out["targets_file_set"] = future.done() and future.result().results[0].successful
+        out["measured_after_fix"] = spin_until(lambda: len(infos) >= 3, 60)
+        out["logs"] = logs
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return out
 
 
 if __name__ == "__main__":

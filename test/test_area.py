@@ -9,8 +9,9 @@ from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
 from veg_area_ros.classify import Classifier, ClassifyError, polygon_roi
 from veg_area_ros.idealize import FrameSizeError, Idealizer
-from veg_area_ros.scale import PlaneScale, TargetsError, TargetsSpec, detect_markers, marker_centre
-from veg_area_ros.synthetic import (
+from veg_area_ros.markers import detect_markers, marker_centre
+from veg_area_ros.scale import PlaneScale
+from veg_area_ros.sim.synthetic import (
     ENDOSCOPE,
     FlatPort,
     board_views,
@@ -19,6 +20,7 @@ from veg_area_ros.synthetic import (
     render_board_views,
     render_scene,
 )
+from veg_area_ros.targets import TargetsError, TargetsSpec
 
 SCENE = cube_scene()
 

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 from helpers import calibrated_endoscope, shared
 
-from veg_area_ros import scale
+from veg_area_ros import markers
 from veg_area_ros.area import SCALE_TOLERANCE, AreaMeasurer
 from veg_area_ros.classify import Classifier, otsu_level
-from veg_area_ros.scale import RETRACK_AGREEMENT_PX, TargetsSpec, detect_markers, retrack_marker, track_markers
-from veg_area_ros.synthetic import DSLR, ENDOSCOPE, FlatPort, bush_scene, cube_scene, render_scene
+from veg_area_ros.markers import RETRACK_AGREEMENT_PX, detect_markers, retrack_marker, track_markers
+from veg_area_ros.sim.synthetic import DSLR, ENDOSCOPE, FlatPort, bush_scene, cube_scene, render_scene
+from veg_area_ros.targets import TargetsSpec
 
 CUBE, BUSH = cube_scene(), bush_scene(seed=1)
 
@@ -128,12 +129,12 @@ class DetectionCounter:
 
     def __init__(self, monkeypatch):
         self.shapes = []
-        real = scale.detect_markers
+        real = markers.detect_markers
 
         def counted(image, *args, **kwargs):
             self.shapes.append(image.shape[:2])
             return real(image, *args, **kwargs)
-        monkeypatch.setattr(scale, "detect_markers", counted)
+        monkeypatch.setattr(markers, "detect_markers", counted)
 
     @property
     def calls(self) -> int:
@@ -190,7 +191,8 @@ def test_retracking_on_a_real_video_agrees_with_detection():
             break
         for marker_id, marker in detect_markers(255 - frame, "DICT_4X4_1000").items():
             start = marker.corners + rng.uniform(-0.7, 0.7, (4, 2))
-            again = retrack_marker(255 - frame, "DICT_4X4_1000", marker_id, scale.DetectedMarker(start.mean(0), start))
+            guess = markers.DetectedMarker(start.mean(0), start)
+            again = retrack_marker(255 - frame, "DICT_4X4_1000", marker_id, guess)
             if again is not None:
                 accepted += 1
                 centre_errors.append(np.max(np.abs(again.centre - marker.centre)))

@@ -3,7 +3,7 @@ import pytest
 from helpers import render_views
 
 from veg_area_ros.board import BoardSpec, BoardSpecError
-from veg_area_ros.synthetic import ENDOSCOPE, look_at_pose, render_board_views
+from veg_area_ros.sim.synthetic import ENDOSCOPE, look_at_pose, render_board_views
 
 
 def test_spec_round_trip_and_points():

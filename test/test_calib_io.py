@@ -7,7 +7,7 @@ import yaml
 
 from veg_area_ros import calib_io
 from veg_area_ros.calib_io import CalibrationFileError, read_calibration, write_calibration
-from veg_area_ros.synthetic import ENDOSCOPE
+from veg_area_ros.sim.synthetic import ENDOSCOPE
 
 STANDARD_KEYS = ["image_width", "image_height", "camera_name", "camera_matrix", "distortion_model",
                  "distortion_coefficients", "rectification_matrix", "projection_matrix"]

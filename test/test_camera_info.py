@@ -11,7 +11,7 @@ from veg_area_ros.calib_io import CalibrationFileError, read_calibration, to_cam
 from veg_area_ros.camera_info import camera_info_fields, info_to_camera
 from veg_area_ros.cdr import decode_camera_info
 from veg_area_ros.ros.messages import camera_to_info
-from veg_area_ros.synthetic import ENDOSCOPE
+from veg_area_ros.sim.synthetic import ENDOSCOPE
 
 CASES = {
     "eight coefficients, the rational ones not zero": (dict(d=[*map(float, ENDOSCOPE.dist), 0.1, 0.0, 0.0]),

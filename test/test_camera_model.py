@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from veg_area_ros.camera_model import BrownCamera, from_matlab, from_photomodeler
-from veg_area_ros.synthetic import ENDOSCOPE
+from veg_area_ros.sim.synthetic import ENDOSCOPE
 
 
 def grid(camera, n=25):

@@ -24,7 +24,7 @@ from veg_area_ros.cdr import (
     unstamped,
 )
 from veg_area_ros.ros.messages import camera_to_info, image_to_msg, msg_to_image
-from veg_area_ros.synthetic import DSLR, ENDOSCOPE
+from veg_area_ros.sim.synthetic import DSLR, ENDOSCOPE
 
 
 def same_except_padding(ours, writer, theirs: bytes) -> None:

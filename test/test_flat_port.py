@@ -18,8 +18,8 @@ from veg_area_ros.calib_io import read_calibration, write_calibration
 from veg_area_ros.camera_model import PARAM_NAMES
 from veg_area_ros.classify import Classifier
 from veg_area_ros.flat_port import FlatPort, FlatPortCamera, PortError, fit_port
-from veg_area_ros.reproduction import distance_scene, port_rows
-from veg_area_ros.synthetic import (
+from veg_area_ros.sim.reproduction import distance_scene, port_rows
+from veg_area_ros.sim.synthetic import (
     DSLR,
     ENDOSCOPE,
     SCENE_DICTIONARY,

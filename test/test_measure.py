@@ -13,8 +13,8 @@ import yaml
 from helpers import calibrated_endoscope, run_cli
 
 from veg_area_ros.calib_io import write_calibration
-from veg_area_ros.reproduction import run as reproduce
-from veg_area_ros.synthetic import ENDOSCOPE, SCENE_MARKERS, FlatPort, cube_scene, render_scene
+from veg_area_ros.sim.reproduction import run as reproduce
+from veg_area_ros.sim.synthetic import ENDOSCOPE, SCENE_MARKERS, FlatPort, cube_scene, render_scene
 
 SCENE = cube_scene()
 
@@ -143,7 +143,7 @@ def test_targets_file_with_a_duplicate_id(workspace, tmp_path):
 @pytest.mark.parametrize("args,message", [
     (["--threshold", "300"], "must be a number from 0 to 255 or 'otsu', got '300'"),
     (["--threshold", "dark"], "must be a number from 0 to 255"),
-    (["--roi", "10,10,20,20,30,30"], "is empty: its corners enclose no area"),
+    (["--roi", "10,10,20,20,30,30"], "is empty (its corners enclose no area)"),
     (["--roi", "10,10,20"], "needs at least 3 x,y corner pairs"),
     (["--video-step", "0"], "--video-step must be 1 or more"),
 ])

@@ -15,7 +15,7 @@ from veg_area_ros.ros.messages import (
     info_to_camera,
     msg_to_image,
 )
-from veg_area_ros.synthetic import ENDOSCOPE
+from veg_area_ros.sim.synthetic import ENDOSCOPE
 
 
 @pytest.mark.parametrize("shape", [(480, 640, 3), (481, 641, 3), (7, 5), (1, 1, 3)])

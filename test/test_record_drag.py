@@ -16,7 +16,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
 from veg_area_ros.cdr import decode_image
-from veg_area_ros.synthetic import SCENE_DICTIONARY, SCENE_MARKERS
+from veg_area_ros.sim.synthetic import SCENE_DICTIONARY, SCENE_MARKERS
 
 pytestmark = pytest.mark.timeout(400)
 

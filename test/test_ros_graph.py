@@ -68,7 +68,8 @@ def test_parameters_are_validated_and_change_at_run_time(graph):
     assert not ok and "lies outside the 640x480 image" in reason
     ok, reason = graph["bad_threshold_mode"]  # reported success before, and behaved as fixed
     assert not ok and "fixed or otsu" in reason
-    assert graph["good_threshold"] is True and graph["thresholds_after_change"] == [60.0]
+    assert graph["fixed_threshold_mode"] is True and graph["good_threshold"] is True
+    assert graph["thresholds_after_change"] == [60.0]
     ok, reason = graph["bad_area_mode"]
     assert not ok and "subpixel, count" in reason
     ok, reason = graph["bad_levels"]
@@ -237,11 +238,30 @@ def test_the_main_job_measures_the_cube_within_half_a_percent(tmp_path):
     assert camera.width == 640 and camera.fx == pytest.approx(520.0 * 1.333, rel=0.01)  # water: c grows
 
 
+
+def test_a_file_a_node_cannot_read_at_start_is_logged_and_the_node_runs_on(tmp_path):
+    """One rule for a start parameter naming an unreadable file: the node says which parameter, why, and what it
+    does without it, and keeps running; the area node measures once targets_file names a readable file."""
+    result = run_scenario("bad_start_files", tmp_path, timeout=240)
+    logs = result["logs"]
+    assert any(line.startswith("parameter camera_info_url:") and "without camera_info" in line
+               for line in logs.get("camera_node", [])), logs.get("camera_node")
+    assert any(line.startswith("parameter camera_info_url:") and "serving no calibration" in line
+               for line in logs.get("calibration_node", [])), logs.get("calibration_node")
+    area = logs.get("area_node", [])
+    assert any(line.startswith("parameter calibration_file:") and "waiting for camera_info" in line for line in area)
+    assert any(line.startswith("parameter targets_file:") and "missing_targets.yaml" in line for line in area), area
+    assert any("frame not measured: no targets" in line for line in area), area
+    assert result["measured_without_targets"] == 0
+    assert all(result["alive_before_fix"].values()), result["alive_before_fix"]
+    assert result["targets_file_set"] is True and result["measured_after_fix"] is True
+    assert all(result["alive_at_end"].values()), result["alive_at_end"]
+
 BUSY_NODE = """
 import os, signal, sys, time
 from pathlib import Path
 from rclpy.node import Node
-from veg_area_ros.ros.common import run_nodes
+from veg_area_ros.ros.run import run_nodes
 
 class Busy(Node):
     def __init__(self):

@@ -8,9 +8,9 @@ import time
 import pytest
 
 from veg_area_ros.calib_io import CalibrationFileError, read_calibration, write_calibration
-from veg_area_ros.scale import TargetsError, TargetsSpec
+from veg_area_ros.sim.synthetic import ENDOSCOPE
 from veg_area_ros.strict_yaml import MAX_BYTES
-from veg_area_ros.synthetic import ENDOSCOPE
+from veg_area_ros.targets import TargetsError, TargetsSpec
 
 # "billion laughs": 416 bytes that plain PyYAML expands to 10^9 list items (9 GB, minutes, MemoryError)
 BOMB = "".join(f"l{k}: &l{k} [" + ",".join([f"*l{k - 1}"] * 10 if k else ["x"] * 10) + "]\n" for k in range(10))

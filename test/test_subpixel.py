@@ -9,9 +9,9 @@ from helpers import calibrated_camera
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.classify import PURE_ZONE_SPREADS, Classifier, ClassifyError, LevelEstimator, Levels
-from veg_area_ros.reproduction import CONDITIONS
-from veg_area_ros.scale import TargetsError, TargetsSpec
-from veg_area_ros.synthetic import DSLR, ENDOSCOPE, FlatPort, bush_scene, cube_scene, render_scene, twig_scene
+from veg_area_ros.sim.reproduction import CONDITIONS
+from veg_area_ros.sim.synthetic import DSLR, ENDOSCOPE, FlatPort, bush_scene, cube_scene, render_scene, twig_scene
+from veg_area_ros.targets import TargetsError, TargetsSpec
 
 # a square target frame: it stays in view of the endoscope under water when the scene is rolled by 90°
 SQUARE_MARKERS = {0: (-0.15, -0.15), 1: (0.15, -0.15), 2: (0.15, 0.15), 3: (-0.15, 0.15)}

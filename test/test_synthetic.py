@@ -2,7 +2,7 @@ import cv2
 import numpy as np
 import pytest
 
-from veg_area_ros.synthetic import (
+from veg_area_ros.sim.synthetic import (
     ENDOSCOPE,
     FlatPort,
     _pixel_rays,

@@ -41,16 +41,9 @@ from .classify import (
 )
 from .flat_port import FlatPortCamera, PortError, absorbed_camera, estimate_pose
 from .idealize import Idealizer
-from .scale import (
-    DetectedMarker,
-    PlaneScale,
-    TargetsError,
-    TargetsSpec,
-    detect_markers,
-    marker_centre,
-    marker_layout_problem,
-    track_markers,
-)
+from .markers import DetectedMarker, detect_markers, marker_centre, track_markers
+from .scale import PlaneScale, marker_layout_problem
+from .targets import TargetsError, TargetsSpec
 
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
 WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per frame

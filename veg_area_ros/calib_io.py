@@ -10,6 +10,7 @@ the idealized image this package measures.
 
 from __future__ import annotations
 
+import datetime as dt
 import glob
 import math
 import os
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from . import __version__
 from .camera_info import camera_from_info, camera_info_fields
 from .camera_model import BrownCamera, check_plausible
 from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
@@ -63,18 +65,18 @@ def to_camera_info_dict(camera: BrownCamera, camera_name: str = "camera",
         "projection_matrix": _matrix(3, 4, fields["p"]),
     }
     if metadata:
-        content[METADATA_KEY] = _plain(metadata)
+        content[METADATA_KEY] = plain(metadata)
     return content
 
 
-def _plain(value: Any) -> Any:
+def plain(value: Any) -> Any:
     """numpy scalars and arrays -> plain Python, so the YAML stays readable by any parser."""
     if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
+        return {str(k): plain(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
+        return [plain(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
+        return plain(value.tolist())
     if isinstance(value, np.generic):
         return value.item()
     return value
@@ -235,6 +237,27 @@ def camera_info_url_to_path(url: str) -> Path | None:
         raise ValueError(f"camera_info URL {url!r}: give an absolute path (file:///...), not one relative to "
                          "wherever the node happens to start")
     return path
+
+
+FIT_KEYS = ("rms_px", "mean_px", "max_residual_px", "sigma0_px", "views_used", "views_rejected", "std",
+            "std_covariance", "std_views", "coverage", "warnings")
+
+
+def provenance(producer: str) -> dict[str, str]:
+    """When and by what a calibration file was written: the keys every file this package writes carries."""
+    return {"date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
+            "software": f"veg_area_ros {__version__} {producer}"}
+
+
+def fit_metadata(summary: dict, medium: str, distance_m: float | None, board: str, producer: str) -> dict:
+    """The metadata of a calibration fitted from board views (`CalibrationResult.summary()`): the medium and
+    distance it holds for, the board, its quality indicators and provenance. One set of keys for the command
+    line, the calibration node and the demo."""
+    return {"medium": medium, "calibration_distance_m": distance_m, "board": str(board), **provenance(producer),
+            **{k: summary[k] for k in FIT_KEYS if k in summary},
+            "halves": {k: v for k, v in summary.get("halves", {}).items() if k != "z"},
+            "projection_std_px": {k: summary["projection_std_px"][k] for k in ("median", "max")
+                                  if k in summary.get("projection_std_px", {})}}
 
 
 def quality_rms(calibration: CalibrationFile) -> float:

@@ -15,8 +15,11 @@ import numpy as np
 
 from .board import BoardSpec
 from .frames import IMAGE_SUFFIXES, read_image
-from .synthetic import (
+from .sim.synthetic import (
+    BOARD,
+    DISTANCE_M,
     ENDOSCOPE,
+    VIEWS,
     FlatPort,
     board_views,
     bush_scene,
@@ -27,9 +30,6 @@ from .synthetic import (
 )
 
 SYNTHETIC_SCENES = ("cube", "bush", "board", "board_then_cube")
-SYNTHETIC_BOARD = "chessboard:9x6:0.04"  # what the synthetic calibration views show (calibration_node's default)
-SYNTHETIC_DISTANCE_M = 0.7
-SYNTHETIC_VIEWS = 15
 
 
 class SourceError(RuntimeError):
@@ -52,7 +52,7 @@ class SyntheticSource:
         self.scene = None
         if self.scene_name in ("cube", "bush"):
             self.scene = cube_scene() if self.scene_name == "cube" else bush_scene()
-        self.board_frames = SYNTHETIC_VIEWS * board_passes if scene in ("board", "board_then_cube") else 0
+        self.board_frames = VIEWS * board_passes if scene in ("board", "board_then_cube") else 0
         self.loop_board = scene == "board"
         self._rng = np.random.default_rng(seed)
         self._poses = None
@@ -66,9 +66,9 @@ class SyntheticSource:
 
     def _board_view(self, k: int) -> np.ndarray:
         if k not in self._board_cache:
-            board = BoardSpec.parse(SYNTHETIC_BOARD)
+            board = BoardSpec.parse(BOARD)
             if self._poses is None:
-                self._poses = board_views(self.camera, board, SYNTHETIC_VIEWS, SYNTHETIC_DISTANCE_M,
+                self._poses = board_views(self.camera, board, VIEWS, DISTANCE_M,
                                           np.random.default_rng(3), port=self.port)
             image = render_board_views(self.camera, board, [self._poses[k]], port=self.port, noise_sigma=0.0)[0]
             self._board_cache[k] = image
@@ -81,10 +81,10 @@ class SyntheticSource:
         k = self.index
         self.index += 1
         if self.board_frames and (self.loop_board or k < self.board_frames):
-            grey = self._noisy(self._board_view(k % SYNTHETIC_VIEWS))
+            grey = self._noisy(self._board_view(k % VIEWS))
             return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
         if self._clean_scene is None:
-            self._clean_scene = render_scene(self.camera, self.scene, SYNTHETIC_DISTANCE_M, self.port, noise_sigma=0.0)
+            self._clean_scene = render_scene(self.camera, self.scene, DISTANCE_M, self.port, noise_sigma=0.0)
         return self._noisy(self._clean_scene)
 
     def release(self) -> None:

@@ -19,7 +19,7 @@ from veg_area_ros.calib_io import write_calibration
 from veg_area_ros.cdr import encode_image
 from veg_area_ros.cli import main as veg_area
 from veg_area_ros.frames import read_image
-from veg_area_ros.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, cube_scene, render_scene
+from veg_area_ros.sim.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, cube_scene, render_scene
 
 
 @pytest.fixture(scope="module")

@@ -16,9 +16,9 @@ from veg_area_ros.calib_io import CalibrationFileError, from_camera_info_dict, t
 from veg_area_ros.camera_info import info_to_camera
 from veg_area_ros.cdr import ImageMessageError, decode_camera_info, decode_image, encode_image
 from veg_area_ros.frames import header_size, jpeg_structure_problem
-from veg_area_ros.scale import TargetsError, TargetsSpec
+from veg_area_ros.sim.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS
 from veg_area_ros.strict_yaml import StrictYamlError, load_text
-from veg_area_ros.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS
+from veg_area_ros.targets import TargetsError, TargetsSpec
 
 FUZZ = settings(max_examples=300, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
 

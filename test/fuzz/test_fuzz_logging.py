@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from veg_area_ros.ros.common import CountedWarnings
+from veg_area_ros.ros.health import CountedWarnings
 
 
 class FakeLogger:

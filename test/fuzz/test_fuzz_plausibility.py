@@ -18,8 +18,16 @@ from veg_area_ros.camera_info import info_to_camera
 from veg_area_ros.camera_model import implausibility
 from veg_area_ros.cdr import CameraInfoFields, Header
 from veg_area_ros.classify import Classifier
-from veg_area_ros.scale import TargetsError, TargetsSpec
-from veg_area_ros.synthetic import DSLR, ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, FlatPort, cube_scene, render_scene
+from veg_area_ros.sim.synthetic import (
+    DSLR,
+    ENDOSCOPE,
+    SCENE_DICTIONARY,
+    SCENE_MARKERS,
+    FlatPort,
+    cube_scene,
+    render_scene,
+)
+from veg_area_ros.targets import TargetsError, TargetsSpec
 
 ABSURD = [dict(k1=1e6), dict(k1=-1e3), dict(k1=-2.0), dict(p1=0.5), dict(c=1.0), dict(aspect=10.0),
           dict(xp=1e5)]

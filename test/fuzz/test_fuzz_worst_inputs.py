@@ -20,7 +20,7 @@ import pytest
 import yaml
 
 from veg_area_ros.calib_io import to_camera_info_dict, write_calibration
-from veg_area_ros.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, cube_scene, render_scene
+from veg_area_ros.sim.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, cube_scene, render_scene
 
 REPO = Path(__file__).resolve().parents[2]
 MEMORY_LIMIT = 500 * 2**20  # the cap on a refusal

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 import time
 from collections import deque
 
@@ -24,54 +23,49 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 
-from ..area import AreaMeasurer, PortAreaMeasurer, draw_overlay
-from ..calib_io import CalibrationFileError, read_calibration
+from ..area import draw_overlay
+from ..calib_io import read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, decode_image, stamp_ns, unstamped
-from ..classify import AREA_MODES, CHANNELS, OBJECTS, Classifier, ClassifyError
+from ..classify import AREA_MODES, CHANNELS, OBJECTS, ClassifyError
 from ..idealize import FrameSizeError
 from ..latest import FrameTally
-from ..scale import TargetsError, TargetsSpec
-from ..synthetic import SCENE_DICTIONARY, SCENE_MARKERS
-from .common import (
-    ANY_INFO_QOS,
-    IMAGE_QOS,
-    PER_FRAME_INFO_QOS,
-    RESULT_QOS,
-    CountedWarnings,
-    InputWatch,
-    declare,
-    publish_safely,
-)
+from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, MeasurementSettings
+from ..sim.synthetic import scene_targets
+from ..targets import TargetsError, TargetsSpec
+from .health import CountedWarnings, InputWatch, publish_safely
 from .messages import ImageMessageError, image_bytes
+from .params import declare, read_start_file
+from .qos import ANY_INFO_QOS, IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS
+from .run import run_nodes
 
 BUSY_GAP_NS = 1_000_000  # callbacks closer than 1 ms: the node never waited for messages in between
-TUNABLE = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "targets_file",
-           "area_mode", "levels")
-
-
-def default_targets() -> TargetsSpec:
-    """The synthetic scene's four markers: what the built-in default camera shows."""
-    return TargetsSpec.from_dict({"dictionary": SCENE_DICTIONARY,
-                                  "markers": {k: list(v) for k, v in SCENE_MARKERS.items()}})
+DEFAULTS = MeasurementSettings()
+# the parameters that are MeasurementSettings, tunable at run time (`ros2 param set`), and targets_file
+SETTINGS = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "area_mode", "levels")
+TUNABLE = (*SETTINGS, "targets_file")
 
 
 class AreaNode(Node):
     def __init__(self, name: str = "area_node", **kwargs):
         super().__init__(name, **kwargs)
-        declare(self, "threshold", 120.0, "Grey level separating object and background.", low=0.0, high=255.0)
-        declare(self, "threshold_mode", "fixed", "'fixed' uses `threshold`; 'otsu' picks it in the ROI.",
-                choices=("fixed", "otsu"))
-        declare(self, "object", "dark", "Object darker/brighter than the background, or greener.", choices=OBJECTS)
-        declare(self, "channel", "grey", "Band the threshold acts on.", choices=CHANNELS)
-        declare(self, "roi", [0.0], "Region of interest x1,y1,x2,y2,... in idealized pixels; [0.0] = inside "
-                "the targets, markers excluded.")
-        declare(self, "open_px", 0, "Morphological opening radius (removes specks).", low=0, high=50)
-        declare(self, "close_px", 0, "Morphological closing radius (fills pin-holes).", low=0, high=50)
+        declare(self, "threshold", 120.0, "Grey level separating object and background, used when "
+                "threshold_mode is 'fixed'.", low=0.0, high=255.0)
+        declare(self, "threshold_mode", DEFAULTS.threshold_mode, "'otsu' picks the threshold in the ROI of each "
+                "frame; 'fixed' uses `threshold`.", choices=THRESHOLD_MODES)
+        declare(self, "object", DEFAULTS.object, "Object darker/brighter than the background, or greener.",
+                choices=OBJECTS)
+        declare(self, "channel", DEFAULTS.channel, "Band the threshold acts on.", choices=CHANNELS)
+        declare(self, "roi", list(NO_ROI), "Region of interest x1,y1,x2,y2,... in idealized pixels; [0.0] = "
+                "inside the targets, markers excluded.")
+        declare(self, "open_px", DEFAULTS.open_px, "Morphological opening radius (removes specks).", low=0, high=50)
+        declare(self, "close_px", DEFAULTS.close_px, "Morphological closing radius (fills pin-holes).", low=0,
+                high=50)
         declare(self, "targets_file", "", "Targets YAML; '' = the synthetic scene's four markers.")
-        declare(self, "area_mode", "subpixel", "'subpixel': each edge pixel counts its object share from its grey "
-                "level; 'count': whole pixels, as in the paper.", choices=AREA_MODES)
-        declare(self, "levels", [0.0], "Sub-pixel mode: [object, background] grey levels; [0.0] = from each frame.")
+        declare(self, "area_mode", DEFAULTS.area_mode, "'subpixel': each edge pixel counts its object share from "
+                "its grey level; 'count': whole pixels, as in the paper.", choices=AREA_MODES)
+        declare(self, "levels", list(NO_LEVELS), "Sub-pixel mode: [object, background] grey levels; [0.0] = "
+                "from each frame.")
         self.uncalibrated = declare(self, "uncalibrated_frames", "drop",
                                     "Frames before any calibration: 'drop' (throttled warning) or 'measure' "
                                     "(as an uncalibrated camera, flagged calibrated=false).",
@@ -90,22 +84,24 @@ class AreaNode(Node):
         self.mask_pub = self.create_publisher(Image, "mask", IMAGE_QOS)
         self.rect_pub = self.create_publisher(Image, "image_rect", IMAGE_QOS)
         self.overlay_pub = self.create_publisher(Image, "overlay", IMAGE_QOS)
+        self.warn = CountedWarnings(self.get_logger())
         self.file_camera = None
         self.port_camera = None  # a flat port's exact model from calibration_file, for frames of its camera
-        if calibration_file:
-            try:
-                calibration = read_calibration(calibration_file)
-                self.camera, self.port_camera = calibration.camera, calibration.port_camera()
-                self.file_camera = calibration.camera
-                port = " (lens and flat port: the exact refraction model)" if self.port_camera else ""
-                self.get_logger().info(f"calibration from {calibration_file}{port}")
-            except CalibrationFileError as exc:
-                self.get_logger().error(f"{exc}; waiting for camera_info instead")
-        self.settings = {p: self.get_parameter(p).value for p in TUNABLE}
+        calibration = read_start_file(self, "calibration_file", lambda: read_calibration(calibration_file),
+                                      "waiting for camera_info instead") if calibration_file else None
+        if calibration is not None:
+            self.camera, self.port_camera = calibration.camera, calibration.port_camera()
+            self.file_camera = calibration.camera
+            port = " (lens and flat port: the exact refraction model)" if self.port_camera else ""
+            self.get_logger().info(f"calibration from {calibration_file}{port}")
+        self.settings = self._settings({})  # a value out of range or choices at start: the node does not start
         # read when targets_file is set (set it again to re-read an edited file), not at every new calibration
-        self.targets = self._load_targets(self.settings["targets_file"])  # invalid start parameters: the node fails
+        targets_file = self.get_parameter("targets_file").value
+        self.targets = read_start_file(self, "targets_file", lambda: self._load_targets(targets_file),
+                                       "no frame is measured until targets_file is set to a readable file")
         self.measurer = self._build(self.settings, self.camera, self.targets)
-        self.add_on_set_parameters_callback(self._on_parameters)
+        self.add_on_set_parameters_callback(self._check_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
         self._info_seen = b""  # the last camera_info without its stamp
         # two subscriptions: latched (a calibration published before this node started) and one that every
         # publisher matches (volatile drivers, bag replay); a camera_info heard on both is handled once
@@ -115,55 +111,56 @@ class AreaNode(Node):
                                      raw=True, event_callbacks=quiet),
             self.create_subscription(CameraInfo, "camera_info", self._on_camera_info_received, ANY_INFO_QOS,
                                      raw=True)]
+        self._take_unavailable = False
         self.create_subscription(Image, "image_raw", self._on_frame, IMAGE_QOS, raw=True)
         self.input_watch = InputWatch(self, "image_raw")
-        self.warn = CountedWarnings(self.get_logger())
 
     @staticmethod
     def _load_targets(path: str) -> TargetsSpec:
-        return TargetsSpec.load(path) if path else default_targets()
+        return TargetsSpec.load(path) if path else scene_targets()
 
-    def _build(self, settings: dict, camera, targets: TargetsSpec) -> AreaMeasurer:
-        """A measurer for these settings; raises ValueError (ClassifyError, ...) with the reason."""
-        if settings["threshold_mode"] not in ("fixed", "otsu"):
-            raise ClassifyError(f"threshold_mode must be fixed or otsu, got {settings['threshold_mode']!r}")
-        threshold = "otsu" if settings["threshold_mode"] == "otsu" else float(settings["threshold"])
-        classifier = Classifier(threshold=threshold, object=settings["object"], channel=settings["channel"],
-                                open_px=int(settings["open_px"]), close_px=int(settings["close_px"]))
-        roi = list(settings["roi"])
-        if roi == [0.0] or not roi:
-            polygon = None
-        else:
-            if len(roi) % 2 or len(roi) < 6 or not all(math.isfinite(v) for v in roi):
-                raise ClassifyError("roi needs at least 3 x,y pairs of finite numbers (or [0.0] for the default)")
-            polygon = roi
-        levels = list(settings["levels"])
-        if settings["area_mode"] not in AREA_MODES:
-            raise ClassifyError(f"area_mode must be one of {', '.join(AREA_MODES)}, got {settings['area_mode']!r}")
-        options = dict(roi=polygon, area_mode=settings["area_mode"], levels=None if levels in ([0.0], []) else levels)
-        if self.port_camera is not None and camera == self.file_camera:  # not a camera_info that replaced it
-            return PortAreaMeasurer(self.port_camera, targets, classifier, **options)
-        return AreaMeasurer(camera, targets, classifier, **options)
+    def _settings(self, changed: dict) -> MeasurementSettings:
+        """The measurement settings from the parameters, with `changed` (name -> value) over them; raises
+        ValueError (ClassifyError) with the reason."""
+        value = {name: self.get_parameter(name).value for name in SETTINGS} | changed
+        return MeasurementSettings(object=value["object"], channel=value["channel"], roi=value["roi"],
+                                   open_px=value["open_px"], close_px=value["close_px"],
+                                   area_mode=value["area_mode"], levels=value["levels"],
+                                   ).with_threshold(value["threshold_mode"], value["threshold"])
 
-    def _on_parameters(self, parameters) -> SetParametersResult:
-        proposed = dict(self.settings)
-        for parameter in parameters:
-            if parameter.name in proposed:
-                proposed[parameter.name] = parameter.value
-            elif parameter.name == "uncalibrated_frames" and parameter.value not in ("drop", "measure"):
-                return SetParametersResult(successful=False, reason="uncalibrated_frames must be drop or measure")
+    def _build(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None):
+        """A measurer for these settings (None without targets); raises ValueError with the reason."""
+        if targets is None:
+            return None
+        port_camera = self.port_camera if camera == self.file_camera else None  # not a camera_info that replaced it
+        return settings.measurer(camera, targets, port_camera)
+
+    def _check_parameters(self, parameters) -> SetParametersResult:
+        """A run-time change is accepted only if it builds a measurer (nothing is changed here)."""
+        changed = {p.name: p.value for p in parameters}
+        if changed.get("uncalibrated_frames", "drop") not in ("drop", "measure"):
+            return SetParametersResult(successful=False, reason="uncalibrated_frames must be drop or measure")
         try:
-            targets = self.targets
-            if any(parameter.name == "targets_file" for parameter in parameters):
-                targets = self._load_targets(proposed["targets_file"])
-            measurer = self._build(proposed, self.camera, targets)
+            settings = self._settings({k: v for k, v in changed.items() if k in SETTINGS})
+            targets = self._load_targets(changed["targets_file"]) if "targets_file" in changed else self.targets
+            self._build(settings, self.camera, targets)
         except (ValueError, OSError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        self.settings, self.targets, self.measurer = proposed, targets, measurer
-        for parameter in parameters:
-            if parameter.name == "uncalibrated_frames":
-                self.uncalibrated = parameter.value
         return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters) -> None:
+        names = {p.name for p in parameters}
+        if "uncalibrated_frames" in names:
+            self.uncalibrated = self.get_parameter("uncalibrated_frames").value
+        if not names & set(TUNABLE):
+            return
+        try:
+            if "targets_file" in names:
+                self.targets = self._load_targets(self.get_parameter("targets_file").value)
+            self.settings = self._settings({})
+            self.measurer = self._build(self.settings, self.camera, self.targets)
+        except (ValueError, OSError) as exc:  # the file changed between the check and now
+            self.get_logger().error(f"parameters set but not applied ({exc}); measuring as before")
 
     def _busy_between(self, start_ns: int, end_ns: int) -> bool:
         """Whether the node spent most of the time from start to end (ns, the system clock) in its callbacks:
@@ -221,7 +218,12 @@ class AreaNode(Node):
                 try:
                     with subscription.handle:
                         taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
-                except AttributeError:  # another rclpy without this call: counted as the executor delivers them
+                except AttributeError as exc:  # an rclpy without this call: counted as the executor delivers them
+                    if not self._take_unavailable:
+                        self._take_unavailable = True
+                        self.get_logger().warning(f"this rclpy cannot take waiting camera_info ({exc}): skipped "
+                                                  "frames are counted as the executor delivers camera_info and may "
+                                                  "be under-counted at full rate")
                     return
                 if taken is None:
                     break
@@ -262,6 +264,9 @@ class AreaNode(Node):
             return
         header = fields.header
         self.frames.took(header.nanoseconds, time.time_ns(), self._busy_between)
+        if self.measurer is None:
+            self.warn("frame not measured", "no targets: set targets_file to a readable targets YAML")
+            return
         if self.camera is None and self.uncalibrated == "drop":
             self.warn("frame dropped", "no calibration yet (camera_info or calibration_file); set "
                       "uncalibrated_frames:=measure to measure them uncalibrated")
@@ -296,8 +301,6 @@ class AreaNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    from .common import run_nodes
-
     return run_nodes([AreaNode], args)
 
 

@@ -3,7 +3,6 @@ and serves it: `camera_info` (latched), `set_camera_info`, and the YAML at `came
 
 from __future__ import annotations
 
-import datetime as dt
 import json
 import math
 import os
@@ -15,15 +14,24 @@ from sensor_msgs.srv import SetCameraInfo
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from .. import __version__
 from ..board import BoardSpec, BoardSpecError
-from ..calib_io import CalibrationFileError, camera_info_url_to_path, quality_rms, read_calibration, write_calibration
+from ..calib_io import (
+    camera_info_url_to_path,
+    fit_metadata,
+    provenance,
+    quality_rms,
+    read_calibration,
+    write_calibration,
+)
 from ..calibration import NEW_POSE_DISTANCE, CalibrationError, View, calibrate, coverage_grid, pose_signature
 from ..camera_model import BrownCamera
 from ..cdr import decode_image
-from ..sources import SYNTHETIC_BOARD
-from .common import IMAGE_QOS, LATCHED_QOS, RESULT_QOS, CountedWarnings, InputWatch, declare, publish_safely
+from ..sim.synthetic import BOARD as SYNTHETIC_BOARD
+from .health import CountedWarnings, InputWatch, publish_safely
 from .messages import ImageMessageError, camera_to_info, info_to_camera
+from .params import declare, read_start_file
+from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
+from .run import run_nodes
 
 
 class CalibrationNode(Node):
@@ -61,11 +69,9 @@ class CalibrationNode(Node):
         self.create_service(Trigger, "~/calibrate", self._on_calibrate)
         self.create_service(SetCameraInfo, "set_camera_info", self._on_set_camera_info)
         if self.path is not None and self.path.exists():
-            try:
-                existing = read_calibration(self.path)
-            except CalibrationFileError as exc:
-                self.get_logger().error(f"not serving the existing calibration: {exc}")
-            else:
+            existing = read_start_file(self, "camera_info_url", lambda: read_calibration(self.path),
+                                       "serving no calibration until a fit or set_camera_info")
+            if existing is not None:
                 self._serve(existing.camera, quality_rms(existing), persist=False)
                 self.get_logger().info(f"serving {self.path} (RMS {self.rms:.3f} px)")
 
@@ -129,11 +135,7 @@ class CalibrationNode(Node):
                     "kept the served calibration (use set_camera_info to replace it)")
             self._report(text, warnings=warnings)
             return False, text
-        metadata = {"medium": self.medium, "calibration_distance_m": self.distance, "board": str(self.board),
-                    "date": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-                    "software": f"veg_area_ros {__version__} calibration_node", "rms_px": result.rms_px,
-                    "max_residual_px": result.max_residual_px, "views_used": result.views_used,
-                    "std": result.summary()["std"], "warnings": warnings}
+        metadata = fit_metadata(result.summary(), self.medium, self.distance, str(self.board), "calibration_node")
         self._serve(result.camera, result.rms_px, persist=True, metadata=metadata)
         text = (f"calibrated on {result.views_used} views: RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} "
                 f"fy {result.camera.fy:.2f} cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}")
@@ -169,7 +171,7 @@ class CalibrationNode(Node):
             return response
         # an explicit replacement by the user: persisted and served whatever its RMS (unknown here)
         failed = self._serve(camera, math.inf, persist=True, metadata={"source": "set_camera_info",
-                                                                       "date": dt.datetime.now(dt.UTC).isoformat()})
+                                                                       **provenance("calibration_node")})
         self.fitted = True
         if failed:  # served, but a service must not say a failed write succeeded
             response.success, response.status_message = False, f"camera_info set and served but {failed}"
@@ -180,8 +182,6 @@ class CalibrationNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    from .common import run_nodes
-
     return run_nodes([CalibrationNode], args)
 
 

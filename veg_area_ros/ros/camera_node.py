@@ -10,11 +10,14 @@ from rclpy.node import Node
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 
-from ..calib_io import CalibrationFileError, camera_info_url_to_path, read_calibration
+from ..calib_io import camera_info_url_to_path, read_calibration
 from ..cdr import restamp
 from ..sources import SYNTHETIC_SCENES, DeviceSource, SourceError, open_source
-from .common import IMAGE_QOS, LATCHED_QOS, declare, publish_safely
+from .health import publish_safely
 from .messages import camera_to_info, image_bytes
+from .params import declare, read_start_file
+from .qos import IMAGE_QOS, LATCHED_QOS
+from .run import run_nodes
 
 
 class CameraNode(Node):
@@ -40,29 +43,22 @@ class CameraNode(Node):
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
         self.camera_info = None
         path = camera_info_url_to_path(url)
-        if path is not None:
-            try:
-                calibration = read_calibration(path)
-            except CalibrationFileError as exc:
-                self.get_logger().error(f"camera_info not published: {exc}")
-            else:
-                # serialized once; each frame only changes its stamp
-                self.camera_info = serialize_message(camera_to_info(calibration.camera, self.frame_id))
-                self.get_logger().info(f"camera_info from {path}")
+        calibration = read_start_file(self, "camera_info_url", lambda: read_calibration(path),
+                                      "publishing image_raw without camera_info") if path is not None else None
+        if calibration is not None:  # serialized once; each frame only changes its stamp
+            self.camera_info = serialize_message(camera_to_info(calibration.camera, self.frame_id))
+            self.get_logger().info(f"camera_info from {path}")
         self.source = open_source(source, loop, width, height, scene, medium)
         self.source_name = source
         self.timer = self.create_timer(1.0 / rate, self._tick)
-        self.add_on_set_parameters_callback(self._on_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
         self.get_logger().info(f"publishing {source} on {self.image_pub.topic_name} at {rate:g} Hz")
 
-    def _on_parameters(self, parameters):
-        from rcl_interfaces.msg import SetParametersResult
-
-        for parameter in parameters:
+    def _apply_parameters(self, parameters) -> None:
+        for parameter in parameters:  # rate_hz's range is checked by its descriptor
             if parameter.name == "rate_hz":
                 self.timer.cancel()
                 self.timer = self.create_timer(1.0 / parameter.value, self._tick)
-        return SetParametersResult(successful=True)
 
     def _tick(self) -> None:
         try:
@@ -90,8 +86,6 @@ class CameraNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    from .common import run_nodes
-
     return run_nodes([CameraNode], args)
 
 

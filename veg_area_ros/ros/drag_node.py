@@ -13,7 +13,10 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from ..drag import AXES, WATER_DENSITY, DragAligner, check_axis, component
-from .common import RESULT_QOS, declare, publish_safely
+from .health import publish_safely
+from .params import declare
+from .qos import RESULT_QOS
+from .run import run_nodes
 
 
 def _seconds(stamp) -> float:
@@ -73,8 +76,6 @@ class DragNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    from .common import run_nodes
-
     return run_nodes([DragNode], args)
 
 

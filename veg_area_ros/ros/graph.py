@@ -9,8 +9,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
@@ -18,64 +16,60 @@ from std_msgs.msg import String
 from .area_node import AreaNode
 from .calibration_node import CalibrationNode
 from .camera_node import CameraNode
-from .common import RESULT_QOS, ensure_ros_environment, log_transport
+from .qos import RESULT_QOS
+from .run import EXIT_FAILED, EXIT_OK, run_nodes
 
 
 def run_graph(output: Path, measurements: int = 10, timeout_s: float = 300.0, rate_hz: float = 10.0,
               say=print) -> int:
-    """Run camera -> calibration -> area until `measurements` calibrated Af values are in; print them
-    against the rendered cube's true area. 0 on success, 1 on timeout."""
-    transport = ensure_ros_environment()
+    """Run camera -> calibration -> area (run_nodes, as graph_node) until `measurements` calibrated Af values
+    are in; print them against the rendered cube's true area. 0 on success, 1 on timeout, 130 on Ctrl-C."""
     output.mkdir(parents=True, exist_ok=True)
     calibration_file = output / "graph_calibration.yaml"
     calibration_file.unlink(missing_ok=True)  # the demo calibrates from scratch every run
-    rclpy.init(args=[])
-    log_transport(transport)
-    executor = SingleThreadedExecutor()
-    nodes: list[Node] = []
-    try:
-        camera = CameraNode(parameter_overrides=[Parameter("rate_hz", value=rate_hz)])
-        calibration = CalibrationNode(parameter_overrides=[
-            Parameter("camera_info_url", value=f"file://{calibration_file.resolve()}")])
-        area = AreaNode()
-        listener = Node("veg_area_demo")
-        nodes = [camera, calibration, area, listener]
-        results: list[dict] = []
+    results: list[dict] = []
+    truth: list[float] = []
+
+    def camera() -> CameraNode:
+        node = CameraNode(parameter_overrides=[Parameter("rate_hz", value=rate_hz)])
+        truth.append(node.source.true_area_m2)
+        say(f"graph: synthetic underwater endoscope -> calibration_node -> area_node (truth Af {truth[0]:.6f} m²)")
+        return node
+
+    def listener() -> Node:
+        node = Node("veg_area_demo")
 
         def on_info(msg: String) -> None:
             summary = json.loads(msg.data)
             if summary["calibrated"]:
                 results.append(summary)
 
-        listener.create_subscription(String, "projected_area/info", on_info, RESULT_QOS)
-        for node in nodes:
-            executor.add_node(node)
-        truth = camera.source.true_area_m2
-        say(f"graph: synthetic underwater endoscope -> calibration_node -> area_node (truth Af {truth:.6f} m²)")
-        deadline = time.monotonic() + timeout_s
-        while len(results) < measurements and time.monotonic() < deadline:
-            executor.spin_once(timeout_sec=0.1)
-        if len(results) < measurements:
-            say(f"graph: only {len(results)} calibrated measurements within {timeout_s:.0f} s")
-            return 1
-        areas = np.array([r["area_m2"] for r in results])
-        std = float(np.mean([r["area_std_m2"] for r in results]))
-        error = 100 * (areas.mean() / truth - 1)
-        say(f"Af over {len(areas)} frames: {areas.mean():.6f} m² ± {std:.6f} (frame-to-frame sd "
-            f"{areas.std():.2g}); true {truth:.6f} m²; error {error:+.3f} %")
-        say(f"calibration served and written to {calibration_file}")
-        return 0
-    finally:
-        for node in nodes:
-            executor.remove_node(node)
-            node.destroy_node()
-        rclpy.try_shutdown()
+        node.create_subscription(String, "projected_area/info", on_info, RESULT_QOS)
+        return node
+
+    def calibration() -> CalibrationNode:
+        return CalibrationNode(parameter_overrides=[
+            Parameter("camera_info_url", value=f"file://{calibration_file.resolve()}")])
+
+    deadline = time.monotonic() + timeout_s
+    code = run_nodes([camera, calibration, AreaNode, listener], args=[],
+                     until=lambda: len(results) >= measurements or time.monotonic() > deadline)
+    if code:
+        return code
+    if len(results) < measurements:
+        say(f"graph: only {len(results)} calibrated measurements within {timeout_s:.0f} s")
+        return EXIT_FAILED
+    areas = np.array([r["area_m2"] for r in results[:measurements]])
+    std = float(np.mean([r["area_std_m2"] for r in results[:measurements]]))
+    error = 100 * (areas.mean() / truth[0] - 1)
+    say(f"Af over {len(areas)} frames: {areas.mean():.6f} m² ± {std:.6f} (frame-to-frame sd "
+        f"{areas.std():.2g}); true {truth[0]:.6f} m²; error {error:+.3f} %")
+    say(f"calibration served and written to {calibration_file}")
+    return EXIT_OK
 
 
 def main(argv: list[str] | None = None) -> int:
     """graph_node: the three nodes composed in one process, each with its own parameters and names."""
-    from .common import run_nodes
-
     return run_nodes([CameraNode, CalibrationNode, AreaNode], argv if argv is not None else sys.argv)
 
 

@@ -1,6 +1,9 @@
-"""numpy <-> sensor_msgs/Image and BrownCamera <-> sensor_msgs/CameraInfo (no cv_bridge)."""
+"""numpy <-> sensor_msgs/Image and BrownCamera <-> sensor_msgs/CameraInfo (no cv_bridge), and the rclpy class of
+a message type named as in a bag."""
 
 from __future__ import annotations
+
+import importlib
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -10,12 +13,13 @@ from ..camera_info import camera_info_fields, info_to_camera
 from ..camera_model import BrownCamera
 from ..cdr import ImageMessageError, encode_image, frame_pixels, image_layout
 
-__all__ = ["ImageMessageError", "camera_to_info", "image_bytes", "image_to_msg", "info_to_camera", "msg_to_image"]
+__all__ = ["ImageMessageError", "camera_to_info", "image_bytes", "image_to_msg", "info_to_camera", "message_class",
+           "msg_to_image"]
 
 
 def image_bytes(image: np.ndarray, stamp: Time, frame_id: str) -> bytes:
     """A serialized sensor_msgs/Image for `publisher.publish(bytes)`: one copy of the pixels, no Python
-    message object (issue #7; the bytes are rclpy's own, tested in test_cdr)."""
+    message object (the bytes are rclpy's own, tested in test_cdr)."""
     return encode_image(image, stamp.sec, stamp.nanosec, frame_id)
 
 
@@ -46,3 +50,9 @@ def camera_to_info(camera: BrownCamera, frame_id: str = "camera", stamp: Time | 
     msg.width, msg.height, msg.distortion_model = fields["width"], fields["height"], fields["distortion_model"]
     msg.d, msg.k, msg.r, msg.p = fields["d"], fields["k"], fields["r"], fields["p"]
     return msg
+
+
+def message_class(msgtype: str):
+    """'sensor_msgs/msg/Image' -> the rclpy message class."""
+    package, kind, name = msgtype.split("/")
+    return getattr(importlib.import_module(f"{package}.{kind}"), name)

@@ -11,8 +11,9 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..bags import OfferedQos, play_messages, play_topics
-from .common import declare
-from .record_node import message_class
+from .messages import message_class
+from .params import declare
+from .run import run_nodes
 
 
 def qos_profile(offered: OfferedQos) -> QoSProfile:
@@ -68,8 +69,6 @@ class PlayNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    from .common import run_nodes
-
     return run_nodes([PlayNode], args)
 
 

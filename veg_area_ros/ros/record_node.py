@@ -9,7 +9,6 @@ exit code 1 (a mistyped name records nothing)."""
 from __future__ import annotations
 
 import datetime as dt
-import importlib
 import os
 import time
 from pathlib import Path
@@ -19,7 +18,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from ..bags import STORAGES, BagError, BagRecorder, OfferedQos
 from ..cdr import ImageMessageError, stamp_ns
-from .common import declare
+from .messages import message_class
+from .params import declare
+from .run import run_nodes
 
 DEFAULT_TOPICS = ["image_raw", "camera_info", "projected_area", "projected_area/info"]
 
@@ -36,12 +37,6 @@ def process_start_ns() -> int:
         return int((boot + int(fields[19]) / os.sysconf("SC_CLK_TCK")) * 1e9)
     except (OSError, ValueError, IndexError, StopIteration):
         return time.time_ns()
-
-
-def message_class(msgtype: str):
-    """'sensor_msgs/msg/Image' -> the rclpy message class."""
-    package, kind, name = msgtype.split("/")
-    return getattr(importlib.import_module(f"{package}.{kind}"), name)
 
 
 class RecordNode(Node):
@@ -160,8 +155,6 @@ class RecordNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    from .common import run_nodes
-
     return run_nodes([RecordNode], args)
 
 

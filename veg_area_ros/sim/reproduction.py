@@ -19,14 +19,16 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .area import AreaMeasurer, PortAreaMeasurer
-from .board import BoardSpec
-from .calibration import View, calibrate
-from .camera_model import BrownCamera
-from .classify import Classifier
-from .scale import TargetsSpec
+from ..area import AreaMeasurer, PortAreaMeasurer
+from ..board import BoardSpec
+from ..calibration import View, calibrate
+from ..camera_model import BrownCamera
+from ..classify import Classifier
+from ..targets import TargetsSpec
 from .synthetic import (
+    BOARD,
     CUBE_SIDE_M,
+    DISTANCE_M,
     DSLR,
     ENDOSCOPE,
     SCENE_DICTIONARY,
@@ -40,8 +42,6 @@ from .synthetic import (
     render_scene,
 )
 
-DISTANCE_M = 0.7
-BOARD = "chessboard:9x6:0.04"
 THRESHOLD = 120  # midway between the object (40) and the board (200): what a researcher would pick
 
 # Paper, Table 1 (cube, endoscope): error of Af in % without / with calibration
@@ -195,7 +195,7 @@ def port_rows(distances: tuple[float, ...] = (0.4, 0.55, 0.7, 1.0, 1.2), offsets
     """The absorbed-model calibration (underwater, at 0.7 m) against the explicit flat-port model (the air
     calibration and the port) at other distances, the endoscope in the water tank's port. The two
     calibrations are made here (seed 3) unless given."""
-    from .flat_port import FlatPortCamera
+    from ..flat_port import FlatPortCamera
 
     setup, tank = SETUPS["endoscope"], next(c for c in CONDITIONS if c.name == "water tank")
     air_condition = next(c for c in CONDITIONS if c.name == "air")

@@ -13,9 +13,15 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from .board import BoardSpec
-from .camera_model import BrownCamera
-from .flat_port import FlatPort, air_rays_to, rays_in_water
+from ..board import BoardSpec
+from ..camera_model import BrownCamera
+from ..flat_port import FlatPort, air_rays_to, rays_in_water
+from ..targets import TargetsSpec
+
+# the synthetic set-up: camera, calibration board and object at the paper's 0.7 m, 15 calibration views
+DISTANCE_M = 0.7
+BOARD = "chessboard:9x6:0.04"
+VIEWS = 15
 
 # a typical cheap 640x480 underwater endoscope: short focal length and strong barrel distortion
 ENDOSCOPE = BrownCamera(640, 480, c=520.0, xp=326.0, yp=236.5, aspect=1.004,
@@ -205,6 +211,12 @@ SCENE_MARKERS = {0: (-0.22, -0.16), 1: (0.22, -0.16), 2: (0.22, 0.16), 3: (-0.22
 SCENE_DICTIONARY = "DICT_4X4_50"
 
 
+def scene_targets() -> TargetsSpec:
+    """The scene's four markers as a targets file would give them: what the built-in default camera shows."""
+    return TargetsSpec.from_dict({"dictionary": SCENE_DICTIONARY,
+                                  "markers": {k: list(v) for k, v in SCENE_MARKERS.items()}})
+
+
 @dataclass(frozen=True)
 class Scene:
     texture: np.ndarray  # grey, covering `extent` of the object plane
@@ -316,7 +328,7 @@ def twig_scene(widths_m: tuple[float, ...] = (0.0015, 0.0025, 0.004), length: fl
     return _compose_scene(coverage, pixels_per_metre, marker_size, background, object_level)
 
 
-def render_scene(camera: BrownCamera, scene: Scene, distance: float = 0.7, port: FlatPort | None = None,
+def render_scene(camera: BrownCamera, scene: Scene, distance: float = DISTANCE_M, port: FlatPort | None = None,
                  tilt_deg: float = 0.0, roll_deg: float = 4.0, noise_sigma: float = 1.0, seed: int = 0,
                  blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3,
                  centre: tuple[float, float] = (0.0, 0.0), object_offset: float = 0.0) -> np.ndarray:

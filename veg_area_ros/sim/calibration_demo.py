@@ -10,15 +10,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .board import BoardSpec
-from .calib_io import write_calibration
-from .calibration import PARAM_NAMES, CalibrationResult, View, calibrate
-from .camera_model import BrownCamera
-from .synthetic import ENDOSCOPE, FlatPort, board_views, render_board_views
-
-BOARD = "chessboard:9x6:0.04"
-DISTANCE_M = 0.7
-VIEWS = 15
+from ..board import BoardSpec
+from ..calib_io import write_calibration
+from ..calibration import PARAM_NAMES, CalibrationResult, View, calibrate
+from ..camera_model import BrownCamera
+from .synthetic import BOARD, DISTANCE_M, ENDOSCOPE, VIEWS, FlatPort, board_views, render_board_views
 
 
 def _calibrate_synthetic(board: BoardSpec, port: FlatPort | None, seed: int, say) -> tuple[CalibrationResult, list]:
@@ -79,7 +75,7 @@ def run_demo(output: Path, quiet: bool = False) -> int:
     metadata = {"medium": "water", "calibration_distance_m": DISTANCE_M, "board": BOARD, "synthetic": True,
                 **{k: water.summary()[k] for k in ("rms_px", "max_residual_px", "views_used", "std", "warnings")}}
     write_calibration(path, water.camera, "synthetic_endoscope", metadata)
-    from .report import write_calibration_report
+    from ..report import write_calibration_report
 
     written = write_calibration_report(water, output / "report_water")
     print(f"\ncalibration written to {path}; report in {written[0].parent}")

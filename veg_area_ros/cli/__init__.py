@@ -1,0 +1,46 @@
+"""`veg-area`: the command line for researchers without ROS, on the same core as the nodes.
+
+    veg-area calibrate IMAGES_OR_DIR_OR_VIDEO... --board SPEC -o calib.yaml [--json] [--report DIR]
+    veg-area calibrate [UNDERWATER_VIEWS...] --port flat:D:T:N --lens air.yaml -o water.yaml
+    veg-area measure IMAGE_OR_DIR_OR_VIDEO_OR_BAG... --calibration calib.yaml|none|bag --targets targets.yaml
+    veg-area record [TOPICS...] | play BAG | bag-recover BAG NEW_BAG
+    veg-area vogel TABLE.csv | BAGS...
+    veg-area demo | calibration-demo
+
+Exit codes (cli.common): 0 success, 1 failed (with a one-line reason on stderr), 2 usage error, 3 refused to
+replace a better calibration, 130 interrupted (what was done so far is kept).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from .. import __version__
+from . import bags, calibrate, demos, flume, measure
+from .common import EXIT_INTERRUPTED, CliError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="veg-area", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--version", action="version", version=f"veg_area_ros {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    calibrate.add_parser(sub)
+    measure.add_parser(sub)
+    bags.add_parsers(sub)
+    flume.add_parser(sub)
+    demos.add_parsers(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except CliError as exc:
+        print(f"veg-area {args.command}: {exc}", file=sys.stderr)
+        return exc.code
+    except KeyboardInterrupt:
+        print(f"veg-area {args.command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED

@@ -1,0 +1,7 @@
+"""`python -m veg_area_ros.cli`: the `veg-area` command."""
+
+import sys
+
+from . import main
+
+sys.exit(main())

@@ -1,0 +1,145 @@
+"""`veg-area measure --jobs N` over several inputs: each input (video, bag, image or folder) measured by its
+own worker process, N at a time, with one progress line; a CSV + plot per input and batch_summary.csv."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import multiprocessing
+import os
+import queue
+import signal
+import statistics
+import time
+import traceback
+from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
+from dataclasses import replace
+from pathlib import Path
+
+from .common import EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, progress, write_csv
+from .measure import MeasureJob, measure
+
+BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "std_area_m2", "csv", "error")
+PROGRESS_EVERY_S = 2.0
+
+
+def batch_csv_paths(inputs: list[str], folder: Path) -> list[Path]:
+    """<stem>_area.csv per input; inputs sharing a stem are told apart by their position."""
+    stems = [Path(i.rstrip("/")).stem or "input" for i in inputs]
+    return [folder / (f"{k + 1:02d}_{stem}_area.csv" if stems.count(stem) > 1 else f"{stem}_area.csv")
+            for k, stem in enumerate(stems)]
+
+
+def _ignore_ctrl_c() -> None:
+    """Batch workers leave Ctrl-C to the main process, which asks them to stop between frames: interrupted
+    anywhere (an idle worker, one writing its CSV), a worker would break the pool and lose the others' work."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _summary(source: str, csv_path: str, error: str = "") -> dict:
+    """One input's row of batch_summary.csv before anything was measured."""
+    return {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "std_area_m2": "", "csv": csv_path,
+            "error": error}
+
+
+def _measure_one(job: MeasureJob, position: int, progress_queue, stopping) -> dict:
+    """Input number `position` of a batch, in a worker process: its CSV and plot, and a one-line summary."""
+    source, csv_path = job.inputs[0], job.csv
+    summary = _summary(source, csv_path)
+    try:
+        code, rows = measure(job, on_frame=lambda index, total: progress_queue.put((position, index, total)),
+                             stop=stopping.is_set)
+    except CliError as exc:
+        summary["error"] = str(exc)
+        return summary
+    if code == EXIT_INTERRUPTED:
+        summary["error"] = f"interrupted after {len(rows)} frames"
+    areas = [r["area_m2"] for r in rows if not r["error"] and "area_m2" in r]
+    summary.update(frames=len(rows), measured=len(areas))
+    if areas:
+        summary["mean_area_m2"] = statistics.fmean(areas)
+        summary["std_area_m2"] = statistics.stdev(areas) if len(areas) > 1 else 0.0
+    return summary
+
+
+def _outcome(future, source: str, csv_path: str) -> dict:
+    """A worker's summary; a worker that never began or that crashed is a row that says so."""
+    try:
+        return future.result()
+    except CancelledError:
+        return _summary(source, "", "interrupted before it began")
+    except Exception as exc:  # a bug or a killed worker: its input failed, the others go on
+        detail = "".join(traceback.format_exception_only(exc)).strip()
+        return _summary(source, csv_path, f"worker failed: {detail}")
+
+
+def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
+    if job.csv:
+        raise CliError("--csv names one file; a batch writes <input>_area.csv per input into --output-dir",
+                       EXIT_USAGE)
+    if job.idealized:
+        raise CliError("--idealized is for one input at a time (frames of several inputs would mix)", EXIT_USAGE)
+    if job.overlay and Path(job.overlay).suffix.lower() in (".png", ".jpg", ".jpeg"):
+        raise CliError(f"--overlay {job.overlay} names one image; give a folder for a batch", EXIT_USAGE)
+    folder.mkdir(parents=True, exist_ok=True)
+    inputs = list(job.inputs)
+    workers = min(jobs or os.cpu_count() or 1, len(inputs))
+    context = multiprocessing.get_context("spawn")  # workers start clean (OpenCV threads, no forked state)
+    csv_paths = [str(path) for path in batch_csv_paths(inputs, folder)]  # by position: an input may come twice
+    say = progress(job.quiet)
+    say(f"batch: {len(inputs)} inputs, {workers} at a time")
+    with context.Manager() as manager, ProcessPoolExecutor(workers, mp_context=context,
+                                                           initializer=_ignore_ctrl_c) as pool:
+        progress_queue, stopping = manager.Queue(), manager.Event()
+        pending = {}
+        for k, source in enumerate(inputs):
+            one = replace(job, inputs=(source,), csv=csv_paths[k], json=False, quiet=True,
+                          overlay=str(Path(job.overlay) / Path(csv_paths[k]).stem) if job.overlay else None)
+            pending[pool.submit(_measure_one, one, k, progress_queue, stopping)] = k
+        done_frames: dict[int, tuple[int, int]] = {}
+        summaries: dict[int, dict] = {}
+        last_line = 0.0
+        interrupted = False
+        try:
+            while pending:
+                finished, _ = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    k = pending.pop(future)
+                    summaries[k] = _outcome(future, inputs[k], csv_paths[k])
+                    state = summaries[k]["error"] or f"{summaries[k]['measured']} frames measured"
+                    say(f"batch: {inputs[k]} done: {state}")
+                with contextlib.suppress(queue.Empty):
+                    while True:
+                        k, index, total = progress_queue.get_nowait()
+                        done_frames[k] = (index, total)
+                if time.monotonic() - last_line > PROGRESS_EVERY_S and pending and done_frames:
+                    frames = sum(i for i, _ in done_frames.values())
+                    total = sum(t for _, t in done_frames.values())
+                    say(f"batch: {len(summaries)}/{len(inputs)} inputs done; {frames} of {total} frames "
+                        "measured in the inputs begun")
+                    last_line = time.monotonic()
+        except KeyboardInterrupt:  # the workers stop after their current frame and keep what they measured
+            interrupted = True
+            stopping.set()
+            for future in pending:
+                future.cancel()
+            for future, k in pending.items():
+                summaries[k] = _outcome(future, inputs[k], csv_paths[k])
+    rows = [summaries[k] for k in range(len(inputs))]
+    summary_path = folder / "batch_summary.csv"
+    write_csv(summary_path, BATCH_COLUMNS, rows)
+    for row in rows:
+        if job.json:  # one object per input (the frames are in its CSV)
+            print(json.dumps(row), flush=True)
+            continue
+        mean = f"Af = {row['mean_area_m2']:.6g} m² (sd {row['std_area_m2']:.2g}) over {row['measured']} frames" \
+            if row["measured"] else f"not measured: {row['error'] or 'no frame measured'}"
+        print(f"{row['input']}: {mean}", flush=True)
+    say(f"batch summary: {summary_path}")
+    if interrupted:
+        say("batch interrupted: what each input measured so far is in its CSV")
+        return EXIT_INTERRUPTED
+    failed = [row["input"] for row in rows if not row["measured"]]
+    if failed:
+        raise CliError(f"{len(failed)} of {len(rows)} inputs gave no measurement: {', '.join(failed)}")
+    return EXIT_OK

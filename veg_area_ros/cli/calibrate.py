@@ -1,0 +1,266 @@
+"""`veg-area calibrate`: self-calibrating bundle adjustment from board images or videos, or a flat port fitted
+in front of an air calibration (`--port --lens`); writes a camera_info YAML, refusing to replace a better one."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .common import EXIT_REFUSED, EXIT_USAGE, CliError, positive_float, progress, unwritable
+
+VIEWS_PER_VIDEO = 60  # consecutive frames add little but time
+
+
+def add_parser(sub) -> None:
+    cal = sub.add_parser("calibrate", help="self-calibrating bundle adjustment from board images or videos")
+    cal.add_argument("inputs", nargs="*", help="images, folders of images, videos (underwater views with --port)")
+    cal.add_argument("--board",
+                     help="chessboard:COLSxROWS:SQUARE_M | charuco:SXxSY:SQUARE_M:MARKER_M:DICT | "
+                          "circles:COLSxROWS:SPACING_M (asymmetric grid) | circles:COLSxROWS:SPACING_M:symmetric")
+    cal.add_argument("-o", "--output", required=True, help="camera_info YAML to write")
+    cal.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
+    cal.add_argument("--report", metavar="DIR", help="write residual and coverage plots (PNG) here")
+    cal.add_argument("--medium", default="unspecified", choices=["air", "water", "unspecified"],
+                     help="medium of the calibration: say it (recorded as 'unspecified' otherwise)")
+    cal.add_argument("--distance", type=positive_float, default=None,
+                     help="camera-to-board distance of the calibration, metres (recorded in the file)")
+    cal.add_argument("--camera-name", default="camera")
+    cal.add_argument("--loss", default="linear", choices=["linear", "huber", "soft_l1", "cauchy"],
+                     help="robust loss for the bundle adjustment")
+    cal.add_argument("--outlier-sigma", type=positive_float, default=4.0,
+                     help="reject points beyond this many robust standard deviations")
+    cal.add_argument("--no-outlier-rejection", action="store_true")
+    cal.add_argument("--video-step", type=int, default=0,
+                     help=f"use every Nth video frame (0: about {VIEWS_PER_VIDEO} per video)")
+    cal.add_argument("--force", action="store_true", help="replace the output even if it holds a better fit")
+    cal.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    cal.add_argument("--port", metavar="flat:DISTANCE_M:THICKNESS_M:N_GLASS",
+                     help="an explicit flat port in front of the --lens air calibration: fitted (normal, distance) "
+                          "from the underwater views given, or taken as measured when none are given")
+    cal.add_argument("--lens", metavar="AIR_YAML", help="the lens's calibration in air (with --port)")
+    cal.add_argument("--water-index", type=positive_float, default=1.333, help="refractive index of the water")
+    cal.add_argument("--fit-water-index", action="store_true", help="fit the water's index too (with --port)")
+    cal.add_argument("--absorbed-distance", type=positive_float, default=0.7, metavar="M",
+                     help="distance of the plane for the absorbed plumb_bob equivalent written for ROS tools")
+    cal.set_defaults(func=cmd_calibrate)
+
+
+@dataclass
+class BoardViews:
+    """The board views found in the inputs, and what was skipped and why (file names)."""
+
+    views: list = field(default_factory=list)
+    image_size: tuple[int, int] | None = None
+    seen: int = 0
+    unreadable: list[str] = field(default_factory=list)
+    no_board: list[str] = field(default_factory=list)
+    wrong_size: list[str] = field(default_factory=list)
+    repeated: list[str] = field(default_factory=list)
+
+
+def collect_views(files: list[Path], board, step: int, say, image_size: tuple[int, int] | None = None,
+                  size_source: str = "the first image") -> BoardViews:
+    """Detect the board in every frame (every `step`th of a video), with a progress line per frame. Frames of
+    another size than `image_size` (default: the first readable frame's) are skipped; in a video, a pose held
+    still over several frames counts once."""
+    from ..calibration import View, same_pose
+    from ..frames import iter_frames
+
+    found = BoardViews(image_size=image_size)
+    last_kept: dict[str, object] = {}  # per video: the last view kept
+    for frame in iter_frames(files, step):
+        found.seen += 1
+        seen = found.seen
+        if frame.image is None:
+            found.unreadable.append(frame.name)
+            say(f"[{seen}] {frame.name}: skipped, {frame.problem}")
+            continue
+        size = (frame.image.shape[1], frame.image.shape[0])
+        if found.image_size is None:
+            found.image_size = size
+        elif size != found.image_size:
+            found.wrong_size.append(frame.name)
+            say(f"[{seen}] {frame.name}: skipped, {size[0]}x{size[1]} differs from {size_source}'s "
+                f"{found.image_size[0]}x{found.image_size[1]}")
+            continue
+        detection = board.detect(frame.image)
+        if detection is None:
+            found.no_board.append(frame.name)
+            say(f"[{seen}] {frame.name}: no {board.kind} board found")
+            continue
+        if frame.time_s is not None:  # a video frame: the board held still for a while is one view, not many
+            video = frame.name.rsplit("#", 1)[0]
+            if video in last_kept and same_pose(detection, last_kept[video], found.image_size):
+                found.repeated.append(frame.name)
+                say(f"[{seen}] {frame.name}: same pose as the view before it, counted once")
+                continue
+            last_kept[video] = detection
+        found.views.append(View(frame.name, detection))
+        say(f"[{seen}] {frame.name}: {len(detection)} board points")
+    return found
+
+
+def _board_and_files(args: argparse.Namespace):
+    from ..board import BoardSpec, BoardSpecError
+    from ..frames import InputError, expand_inputs
+
+    try:
+        board = BoardSpec.parse(args.board)
+    except BoardSpecError as exc:
+        raise CliError(str(exc), EXIT_USAGE) from exc
+    try:
+        return board, expand_inputs(args.inputs)
+    except InputError as exc:
+        raise CliError(str(exc)) from exc
+
+
+def cmd_calibrate(args: argparse.Namespace) -> int:
+    from ..calib_io import CalibrationFileError, fit_metadata, quality_rms, read_calibration, write_calibration
+    from ..calibration import CalibrationError, calibrate
+    from ..frames import VIDEO_SUFFIXES, video_frame_count
+
+    say = progress(args.quiet)
+    output = Path(args.output)
+    problem = unwritable(output, folder=False)
+    if problem:
+        raise CliError(f"-o {output}: {problem}; nothing was calibrated", EXIT_USAGE)
+    if args.port or args.lens:
+        return _calibrate_port(args, say)
+    if not args.inputs or not args.board:
+        raise CliError("give the board (--board) and its images", EXIT_USAGE)
+    board, files = _board_and_files(args)
+
+    previous = None
+    if output.exists() and not args.force:
+        try:
+            previous = read_calibration(output)
+        except CalibrationFileError as exc:
+            raise CliError(f"{output} exists and is not a readable calibration ({exc}); "
+                           "use --force to replace it", EXIT_REFUSED) from exc
+
+    step = args.video_step
+    if step <= 0:
+        counts = [video_frame_count(f) for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
+        step = max(1, max(counts, default=0) // VIEWS_PER_VIDEO)
+    found = collect_views(files, board, step, say)
+
+    if args.medium == "unspecified":
+        say("warning: --medium not given: the calibration is recorded with medium 'unspecified' (say air or water: "
+            "a calibration holds only in the medium it was made in)")
+    if not found.views:
+        if found.image_size is None:
+            raise CliError(f"no readable image among the inputs ({len(found.unreadable)} unreadable)")
+        hint = ""
+        if board.kind == "circles":
+            hint = (f" (looked for {'a symmetric' if board.symmetric else 'an asymmetric'} grid; for the other "
+                    f"kind write circles:{board.cols}x{board.rows}:{board.square:g}"
+                    f"{'' if board.symmetric else ':symmetric'})")
+        raise CliError(f"no {board} board found in any of {found.seen} images{hint}; supported boards: chessboard, "
+                       "charuco, circles (asymmetric, or :symmetric)")
+    try:
+        result = calibrate(found.views, found.image_size, robust_loss=args.loss,
+                           outlier_sigma=None if args.no_outlier_rejection else args.outlier_sigma, progress=say)
+    except CalibrationError as exc:
+        raise CliError(str(exc)) from exc
+
+    summary = result.summary()
+    summary.update(unreadable=found.unreadable, no_board=found.no_board, wrong_size=found.wrong_size,
+                   repeated_poses=found.repeated, output=str(output))
+    if previous is not None and previous.camera.image_size == result.camera.image_size \
+            and quality_rms(previous) < result.rms_px:
+        raise CliError(
+            f"{output} holds a better calibration (RMS {quality_rms(previous):.4f} px) than this one "
+            f"({result.rms_px:.4f} px); kept it. Use --force to replace it, or write elsewhere with -o",
+            EXIT_REFUSED)
+    write_calibration(output, result.camera, args.camera_name,
+                      fit_metadata(summary, args.medium, args.distance, str(board), "veg-area calibrate"))
+    if args.report:
+        from ..report import write_calibration_report
+
+        for path in write_calibration_report(result, args.report):
+            say(f"report: {path}")
+    for warning in result.warnings:
+        say(f"warning: {warning}")
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        print(format_calibration(result, output))
+    return 0
+
+
+def _calibrate_port(args: argparse.Namespace, say) -> int:
+    """`calibrate --port ... --lens air.yaml [underwater views]`: the port fitted from the views (or as measured)
+    in front of the air calibration; written as the absorbed plumb_bob equivalent at --absorbed-distance with
+    the lens and port in the file's veg_area_ros block."""
+    from ..calib_io import CalibrationFileError, plain, provenance, read_calibration, write_calibration
+    from ..flat_port import PORT_KEY, FlatPort, FlatPortCamera, PortError, absorbed_at_distance, fit_port, port_to_dict
+
+    if not (args.port and args.lens):
+        raise CliError("--port and --lens go together: the port's numbers and the lens's air calibration",
+                       EXIT_USAGE)
+    try:
+        start = FlatPort.parse(args.port, args.water_index)
+        lens_file = read_calibration(args.lens)
+    except (PortError, CalibrationFileError) as exc:
+        raise CliError(str(exc), EXIT_USAGE) from exc
+    if lens_file.metadata.get("medium") not in ("air", None):
+        say(f"warning: {args.lens} says medium {lens_file.metadata.get('medium')!r}; --lens wants the air calibration")
+    lens = lens_file.camera
+    std: dict[str, float] = {}
+    summary: dict = {"port": "as measured"}
+    port = start
+    if args.inputs:
+        if not args.board:
+            raise CliError("give the board (--board) of the underwater views", EXIT_USAGE)
+        board, files = _board_and_files(args)
+        found = collect_views(files, board, max(1, args.video_step), say, lens.image_size, "the lens calibration")
+        views = [(view.detection.object_points, view.detection.image_points) for view in found.views]
+        if len(views) < 2:
+            raise CliError(f"{len(views)} underwater view(s) with the board: a port fit needs 2 or more")
+        try:
+            fit = fit_port(lens, views, start, fit_water_index=args.fit_water_index)
+        except PortError as exc:
+            raise CliError(str(exc)) from exc
+        port, std = fit.port, fit.std
+        summary = {"port": "fitted", "views": len(views), "rms_px": fit.rms_px, "view_rms_px": fit.view_rms_px,
+                   "std": std}
+        say(f"port fitted from {len(views)} views: distance {port.distance * 1000:.2f} ± "
+            f"{std['distance'] * 1000:.2f} mm, tilt {math.degrees(port.tilt_x_rad):.3f}° / "
+            f"{math.degrees(port.tilt_y_rad):.3f}° (± {math.degrees(std['tilt_x_rad']):.3f}° / "
+            f"{math.degrees(std['tilt_y_rad']):.3f}°), RMS {fit.rms_px:.3f} px")
+    camera = FlatPortCamera(lens, port)
+    absorbed, residual = absorbed_at_distance(camera, args.absorbed_distance)
+    metadata = {"medium": "water", **provenance("veg-area calibrate --port"), "lens_file": str(args.lens),
+                PORT_KEY: port_to_dict(camera, std, args.absorbed_distance),
+                "absorbed_residual_px": residual, **{k: v for k, v in summary.items() if k != "std"}}
+    write_calibration(args.output, absorbed, args.camera_name, metadata)
+    summary.update(output=str(args.output), distance_m=port.distance, tilt_x_deg=float(math.degrees(port.tilt_x_rad)),
+                   tilt_y_deg=float(math.degrees(port.tilt_y_rad)), water_index=port.water_index,
+                   absorbed_residual_px=residual)
+    if args.json:
+        print(json.dumps(plain(summary)))
+    else:
+        print(f"flat port written to {args.output} (plumb_bob equivalent at {args.absorbed_distance:g} m: "
+              f"largest misfit {residual:.2f} px)")
+    return 0
+
+
+def format_calibration(result, output: Path) -> str:
+    """The fit's quality indicators and parameters with their three uncertainties, as a table."""
+    cam, std = result.camera, result.std
+    lines = [f"calibration written to {output}",
+             f"views used {result.views_used}, rejected {len(result.rejected_views)}; "
+             f"RMS {result.rms_px:.4f} px, mean {result.mean_px:.4f} px, max {result.max_residual_px:.4f} px",
+             f"{'param':>6} {'value':>14} {'std':>12} {'(covariance':>12} {'views)':>10}"]
+    lines += [f"{name:>6} {value:14.6g} {std[name]:12.3g} {result.std_covariance[name]:12.3g} "
+              f"{result.std_views[name]:10.3g}" for name, value in cam.parameters().items()]
+    if result.halves:
+        lines.append(f"two halves of the views: parameters differ by up to {result.halves['max_z']:.1f} combined "
+                     f"std; projection by {result.halves['projection_difference_px']['max']:.2f} px at most")
+    lines.append(f"projection uncertainty over the covered image: median "
+                 f"{result.projection_std_px['median']:.3f} px, max {result.projection_std_px['max']:.3f} px")
+    lines += [f"warning: {w}" for w in result.warnings]
+    return "\n".join(lines)

@@ -1,0 +1,72 @@
+"""What every command shares: exit codes, the one-line error, progress on stderr, argument types, the
+check that an output can be written before any work, and CSV tables written atomically."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import math
+import sys
+import tempfile
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from ..calib_io import write_atomic
+
+EXIT_OK = 0
+EXIT_FAILED = 1  # with a one-line reason on stderr
+EXIT_USAGE = 2  # as argparse exits on a usage error
+EXIT_REFUSED = 3  # refused to replace a better calibration
+EXIT_INTERRUPTED = 130  # Ctrl-C, what was done so far kept (128 + SIGINT, as a shell reports it)
+
+
+class CliError(Exception):
+    """A failure reported as one line, without a traceback."""
+
+    def __init__(self, message: str, code: int = EXIT_FAILED):
+        super().__init__(message)
+        self.code = code
+
+
+def progress(quiet: bool) -> Callable[[str], None]:
+    """A function printing progress lines on stderr, or nothing when quiet."""
+    def say(message: str) -> None:
+        if not quiet:
+            print(message, file=sys.stderr, flush=True)
+    return say
+
+
+def positive_float(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def unwritable(path: Path, folder: bool) -> str | None:
+    """Why `path` (a file, or a folder to write into) cannot be written here, or None: checked before any work
+    by creating (and removing) a temporary file where it would go (permissions alone miss /proc as root)."""
+    if path.exists() and folder and not path.is_dir():
+        return "exists and is not a folder"
+    if path.exists() and not folder and path.is_dir():
+        return "is a folder, not a file"
+    where = path if folder and path.exists() else path.parent
+    while not where.exists():
+        where = where.parent
+    if not where.is_dir():
+        return f"{where} is a file, not a folder"
+    try:
+        with tempfile.TemporaryFile(dir=where):
+            pass
+    except OSError as exc:
+        return f"cannot be written in {where} ({exc.strerror or exc})"
+    return None
+
+
+def write_csv(path: Path, columns: Sequence[str], rows: list[dict]) -> None:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, columns, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(rows)
+    write_atomic(path, buffer.getvalue())

@@ -1,0 +1,68 @@
+"""`veg-area vogel`: the Vogel exponent (Cd·Af ∝ U^psi) of a plant from an experiment table or from bags of
+flume runs (force, velocity and Af recorded together), with its confidence interval and a log-log plot."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from .common import EXIT_USAGE, CliError, positive_float
+
+
+def add_parser(sub) -> None:
+    vog = sub.add_parser("vogel", help="fit the Vogel exponent (Cd·Af ∝ U^psi) to an experiment table, with "
+                         "its confidence interval and a log-log plot")
+    vog.add_argument("inputs", nargs="+", metavar="TABLE_OR_BAGS",
+                     help="a CSV with velocity_m_s, force_n, area_m2 (optional density) per run, or rosbag2 bags "
+                          "recorded with force, velocity and projected_area, one run each")
+    vog.add_argument("--force-axis", default="+x",
+                     help="bags: force component along the flow, +x .. -z (a minus sign: --force-axis=-y)")
+    vog.add_argument("--velocity-axis", default="+x", help="bags: velocity component along the flow")
+    vog.add_argument("--force-topic", default="/force", help="bags: geometry_msgs/WrenchStamped topic")
+    vog.add_argument("--velocity-topic", default="/velocity", help="bags: geometry_msgs/TwistStamped topic")
+    vog.add_argument("--area-topic", default="/projected_area", help="bags: Af topic (Vector3Stamped, x = Af)")
+    vog.add_argument("--density", type=positive_float, default=998.2, help="water density, kg/m³")
+    vog.add_argument("--confidence", type=float, default=0.95)
+    vog.add_argument("--plot", help="PNG (default: the first input's name + .vogel.png)")
+    vog.add_argument("--json", action="store_true")
+    vog.set_defaults(func=cmd_vogel)
+
+
+
+def cmd_vogel(args: argparse.Namespace) -> int:
+    from ..bags import BagError, bag_run
+    from ..drag import DragError, plot_vogel, read_runs, runs_to_vogel, vogel_fit
+    from ..frames import is_bag
+
+    bags = [Path(i) for i in args.inputs if is_bag(Path(i))]
+    if (bags and len(bags) != len(args.inputs)) or (not bags and len(args.inputs) != 1):
+        raise CliError("give one experiment table (CSV), or rosbag2 bags (one run each)", EXIT_USAGE)
+    try:
+        if bags:
+            runs = [bag_run(b, args.force_axis, args.velocity_axis, args.force_topic, args.velocity_topic,
+                            args.area_topic) for b in bags]
+            for run in runs:
+                print(f"{run['run']}: U = {run['velocity_m_s']:.4g} m/s, F = {run['force_n']:.4g} N, "
+                      f"Af = {run['area_m2']:.4g} m² ({run['samples']['force']} force, "
+                      f"{run['samples']['velocity']} velocity, {run['samples']['area']} Af samples)",
+                      file=sys.stderr)
+            velocity, cd_area = runs_to_vogel(runs, args.density, "bags")
+        else:
+            velocity, cd_area = read_runs(args.inputs[0], args.density)
+        fit = vogel_fit(velocity, cd_area, args.confidence)
+    except (DragError, BagError) as exc:
+        raise CliError(str(exc)) from exc
+    plot = Path(args.plot) if args.plot else Path(args.inputs[0].rstrip("/")).with_suffix(".vogel.png")
+    plot_vogel(velocity, cd_area, fit, plot)
+    result = {"exponent": fit.exponent, "interval": list(fit.interval), "confidence": fit.confidence,
+              "coefficient_m2": fit.coefficient, "r_squared": fit.r_squared, "runs": fit.runs, "plot": str(plot)}
+    if args.json:
+        print(json.dumps(result))
+    else:
+        low, high = fit.interval
+        print(f"Vogel exponent psi = {fit.exponent:.4f}, {fit.confidence:.0%} interval [{low:.4f}, {high:.4f}] "
+              f"({fit.runs} runs, R² {fit.r_squared:.4f}); Cd·Af = {fit.coefficient:.4g} m² x U^psi")
+        print(f"plot: {plot}")
+    return 0

@@ -1,0 +1,121 @@
+"""The process around the nodes: the ROS environment (log folder, transport), signals that stop the spin
+loop between callbacks, and one `run_nodes` used by every node's `main`, the composed graph and the demo."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import traceback
+from collections.abc import Callable
+
+import rclpy
+from rclpy.node import Node
+
+from ..transport import Transport, buffer_warning, choose_transport
+
+
+def ensure_ros_environment() -> Transport:
+    """Before rclpy.init(): HOME or ROS_LOG_DIR (rclpy needs one; a service manager may give neither), and the
+    transport (veg_area_ros.transport's rule), which is returned to be logged once the node is up."""
+    if "HOME" not in os.environ and "ROS_LOG_DIR" not in os.environ:
+        os.environ["ROS_LOG_DIR"] = "/tmp/veg_area_ros_log"
+    transport = choose_transport(dict(os.environ))
+    transport.apply(os.environ)
+    return transport
+
+
+def log_transport(transport: Transport) -> None:
+    """The transport in use, once per process, and what may keep images from other machines."""
+    from rclpy.logging import get_logger
+
+    logger = get_logger("veg_area_ros")
+    logger.info(f"transport: {transport.description}")
+    warning = buffer_warning(transport)
+    if warning:
+        logger.warning(warning)
+
+
+class StopOnSignal:
+    """Ctrl-C / SIGTERM ask the spin loop to stop after the callback that is running: rclpy's own handlers
+    raise KeyboardInterrupt wherever Python happens to be, e.g. between a bag record and its count (a bag
+    whose metadata then disagrees with its data). A second signal interrupts at once (a callback that hangs);
+    none does while the nodes close (a recorder writing its bag's summary)."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.closing = False
+        self._previous = {number: signal.signal(number, self._handle) for number in self.SIGNALS}
+
+    def _handle(self, number: int, frame) -> None:
+        if self.closing:
+            os.write(2, b"veg_area_ros: closing (files are being written)\n")
+            return
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        os.write(2, b"veg_area_ros: stopping after the current callback (again to interrupt it)\n")
+
+    def restore(self) -> None:
+        for number, handler in self._previous.items():
+            signal.signal(number, handler)
+
+
+EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None,
+              until: Callable[[], bool] | None = None) -> int:
+    """Create the nodes, spin them in one executor until Ctrl-C / SIGTERM / shutdown or `until()` is true,
+    clean up. Exit code 0 on a clean stop (a node may set `stop_requested`, e.g. at the end of a video), 1 on
+    a failure, 2 on a mistyped environment, 130 when a second Ctrl-C interrupted a callback. `args`: the
+    process's command line (default sys.argv), with its --ros-args."""
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.logging import get_logger
+    from rclpy.signals import SignalHandlerOptions
+
+    try:
+        transport = ensure_ros_environment()
+    except ValueError as exc:  # a mistyped VEG_AREA_TRANSPORT
+        print(f"veg_area_ros: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    # rclpy's handlers stay out; ours go in after init, so a slow rcl_init is still interrupted as usual
+    rclpy.init(args=args if args is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    stop = StopOnSignal()
+    log_transport(transport)
+    executor = SingleThreadedExecutor()
+    nodes: list[Node] = []
+    code = EXIT_OK
+    try:
+        for factory in factories:
+            nodes.append(factory())
+            executor.add_node(nodes[-1])
+        while rclpy.ok() and not stop.requested and not any(getattr(n, "stop_requested", False) for n in nodes) \
+                and not (until is not None and until()):
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except ExternalShutdownException:
+                raise
+            except Exception:  # a callback's bug must not end a measurement run: said, and the nodes go on
+                get_logger("veg_area_ros").error(
+                    f"a callback failed, the nodes go on:\n{traceback.format_exc()}", throttle_duration_sec=10.0)
+    except KeyboardInterrupt:
+        code = EXIT_INTERRUPTED
+    except ExternalShutdownException:
+        pass
+    except Exception as exc:  # a node that cannot start (a value out of range, no such device) says why
+        print(f"veg_area_ros: {exc}", file=sys.stderr)
+        code = EXIT_FAILED
+    finally:
+        stop.closing = True
+        try:
+            for node in nodes:
+                node.destroy_node()
+            if rclpy.ok():
+                rclpy.try_shutdown()
+        finally:
+            stop.restore()
+    # a node may end its run with a failure of its own (a recorder whose topics never appeared)
+    return code or max((getattr(node, "exit_code", 0) for node in nodes), default=0)

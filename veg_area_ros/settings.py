@@ -1,0 +1,90 @@
+"""The researcher's measurement settings (threshold, object, band, ROI, morphology, area mode, levels, sweep
+step) with one set of defaults and one validation, shared by `veg-area measure` and the area node, and the
+measurer they build for a camera. No ROS here.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from .area import AreaMeasurer, PortAreaMeasurer
+from .camera_model import BrownCamera
+from .classify import AREA_MODES, Classifier, ClassifyError, check_levels, check_polygon
+from .flat_port import FlatPortCamera
+from .targets import TargetsSpec
+
+THRESHOLD_MODES = ("fixed", "otsu")
+NO_ROI = (0.0,)  # how a ROS parameter (typed, never empty on the command line) says "inside the targets"
+NO_LEVELS = (0.0,)
+
+
+def roi_polygon(values) -> list[float] | None:
+    """The ROI rule: a flat x1,y1,x2,y2,... list of at least three finite corner pairs enclosing area, or
+    None (empty, or [0.0]) for the default region inside the targets. ClassifyError says why not."""
+    values = [float(v) for v in (values or ())]
+    if not values or tuple(values) == NO_ROI:
+        return None
+    if len(values) % 2 or len(values) < 6 or not all(math.isfinite(v) for v in values):
+        raise ClassifyError("the ROI needs at least 3 x,y corner pairs of finite numbers, in idealized-image pixels")
+    check_polygon(values)
+    return values
+
+
+def given_levels(values) -> tuple[float, float] | None:
+    """[object, background] grey levels, or None (empty, or [0.0]) to estimate them in each frame."""
+    values = list(values or ())
+    if not values or tuple(values) == NO_LEVELS:
+        return None
+    return check_levels(values)
+
+
+@dataclass(frozen=True)
+class MeasurementSettings:
+    """How each frame is classified and measured. `threshold` is a grey level 0..255 or 'otsu' (picked per
+    frame inside the ROI); `roi` a flat polygon in idealized pixels or None (inside the targets, markers
+    excluded); `levels` the object's and background's grey levels or None (estimated per frame)."""
+
+    threshold: float | str = "otsu"
+    object: str = "dark"
+    channel: str = "grey"
+    roi: tuple[float, ...] | None = None
+    open_px: int = 0
+    close_px: int = 0
+    area_mode: str = "subpixel"
+    levels: tuple[float, float] | None = None
+    sweep_step: float = 5.0
+
+    def __post_init__(self) -> None:
+        roi = roi_polygon(self.roi)
+        object.__setattr__(self, "roi", None if roi is None else tuple(roi))
+        object.__setattr__(self, "levels", given_levels(self.levels))
+        if self.area_mode not in AREA_MODES:
+            raise ClassifyError(f"area_mode must be one of {', '.join(AREA_MODES)}, got {self.area_mode!r}")
+        if not (math.isfinite(self.sweep_step) and self.sweep_step > 0):
+            raise ClassifyError(f"the sweep step must be a positive number of grey levels, got {self.sweep_step}")
+        self.classifier()  # threshold, object, channel and morphology checked once, here
+
+    @property
+    def threshold_mode(self) -> str:
+        return "otsu" if self.threshold == "otsu" else "fixed"
+
+    def with_threshold(self, mode: str, value: float) -> MeasurementSettings:
+        """The node's two parameters (threshold_mode, threshold) as one setting."""
+        if mode not in THRESHOLD_MODES:
+            raise ClassifyError(f"threshold_mode must be fixed or otsu, got {mode!r}")
+        return replace(self, threshold="otsu" if mode == "otsu" else float(value))
+
+    def classifier(self) -> Classifier:
+        return Classifier(threshold=self.threshold, object=self.object, channel=self.channel,
+                          open_px=int(self.open_px), close_px=int(self.close_px))
+
+    def measurer(self, camera: BrownCamera | None, targets: TargetsSpec,
+                 port_camera: FlatPortCamera | None = None) -> AreaMeasurer | PortAreaMeasurer:
+        """The measurer for frames of `camera` (None: uncalibrated); with `port_camera`, the exact flat-port model
+        of that camera's calibration file. Raises ClassifyError or TargetsError with the reason."""
+        options = dict(roi=None if self.roi is None else list(self.roi), threshold_delta=self.sweep_step,
+                       area_mode=self.area_mode, levels=self.levels)
+        if port_camera is not None:
+            return PortAreaMeasurer(port_camera, targets, self.classifier(), **options)
+        return AreaMeasurer(camera, targets, self.classifier(), **options)
