@@ -1,4 +1,4 @@
-"""Camera -> Af over ROS 2, end to end (issue #7): the package's camera_node and area_node as separate
+"""Camera -> Af over ROS 2, end to end: the package's camera_node and area_node as separate
 processes (pre-serialized frames, raw subscription, newest-frame worker) next to the same pipeline written
 with plain rclpy Image messages (message objects both ways, measuring in the subscription callback), at
 640x480 and 3872x2592, in one run, confined to this machine like the tests. Prints Af results per second

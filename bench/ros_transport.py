@@ -1,4 +1,4 @@
-"""Images over ROS 2 on one machine (issue #6): delivered frames/s and mean/p99 latency for 640x480 and
+"""Images over ROS 2 on one machine: delivered frames/s and mean/p99 latency for 640x480 and
 3872x2592 bgr8, best-effort and reliable QoS, between two processes and composed in one executor, under the
 shipped shared-memory profile (`shm`, what the nodes use) and Fast DDS as it comes (`default`), in one run,
 confined to this machine like the tests.

@@ -1,5 +1,5 @@
 """What the ROS 2 benchmarks share: running confined to this machine exactly as the tests do (a private
-network namespace with only loopback and a private /dev/shm, test/ros_harness.py), child processes that are
+network namespace with only loopback and a private /dev/shm, veg_area_ros.ros.confine), child processes that are
 always reaped, the two transport configurations, latency figures and memory per process."""
 
 from __future__ import annotations
@@ -17,10 +17,9 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-sys.path.insert(1, str(REPO / "test"))
+sys.path.insert(0, str(REPO))  # the source tree's package, not an installed copy
 
-from ros_harness import confined, netns_available, remove_new_shm, ros_environment  # noqa: E402
+from veg_area_ros.ros.confine import confined, netns_available, remove_new_shm, ros_environment, shm_files  # noqa: E402
 
 INSIDE = "--inside"
 TRANSPORTS = ("shm", "default")
@@ -30,7 +29,7 @@ def run_confined(script: Path, argv: list[str]) -> int:
     """Run `script --inside argv...` confined to this machine and stream what it prints; returns its exit code."""
     print("confinement:", "private network namespace (loopback only) and private /dev/shm" if netns_available()
           else "none available: shared-memory profile only, /dev/shm cleaned afterwards", flush=True)
-    before = set(os.listdir("/dev/shm"))
+    before = shm_files()
     with tempfile.TemporaryDirectory(prefix="veg_area_bench_") as home:
         env = ros_environment(Path(home), 1)
         command = confined([sys.executable, str(script), INSIDE, *argv])
@@ -57,7 +56,7 @@ def role_command(script: Path, role: str, spec: dict) -> list[str]:
 
 def transport_environment(transport: str, domain: int) -> dict[str, str]:
     """`shm`: the shipped shared-memory profile (what the nodes use by default); `default`: Fast DDS as it comes,
-    discovery limited to this host (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, as the issue measured it)."""
+    discovery limited to this host (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)."""
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
     if transport == "default":
         env.pop("FASTDDS_DEFAULT_PROFILES_FILE", None)

@@ -465,10 +465,10 @@ def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
     from sensor_msgs.msg import CameraInfo
     from std_msgs.msg import String
 
-    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene
+    from veg_area_ros.sim.synthetic import DISTANCE_M, ENDOSCOPE, cube_scene, render_scene
 
     calibration, still = air_endoscope_calibration(), Path("cube.png").resolve()
-    cv2.imwrite(str(still), render_scene(ENDOSCOPE, cube_scene(), 0.7))
+    cv2.imwrite(str(still), render_scene(ENDOSCOPE, cube_scene(), DISTANCE_M))
     rclpy.init()
     probe = Node("probe")
     published: list[int] = []
@@ -480,7 +480,9 @@ def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
     probe.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)),
                               QoSProfile(depth=100_000, reliability=ReliabilityPolicy.RELIABLE))
     nodes.start("area_node")
-    time.sleep(3.0)
+    deadline = time.monotonic() + 30  # the camera starts once the area node takes images (its subscription seen)
+    while probe.count_subscribers("image_raw") < 1 and time.monotonic() < deadline:
+        rclpy.spin_once(probe, timeout_sec=0.05)
     camera = nodes.start("camera_node", source=str(still), loop=True, rate_hz=1000.0,
                          camera_info_url=f"file://{calibration}")
     try:

@@ -1,4 +1,4 @@
-"""Projected area on synthetic scenes with a known cube face (issue #3 core): idealize, scale, classify."""
+"""Projected area on synthetic scenes with a known cube face: idealize, scale, classify."""
 
 import cv2
 import numpy as np

@@ -1,4 +1,4 @@
-"""Af from precomputed raw-pixel weights (issue #7): agreement with the paper's idealize-then-count path,
+"""Af from precomputed raw-pixel weights: agreement with the paper's idealize-then-count path,
 exactness of the weights, their reuse while the targets stay put, and the windowed marker tracking."""
 
 import cv2

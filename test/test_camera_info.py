@@ -1,5 +1,5 @@
-"""One mapping between BrownCamera and camera_info (issue #20): a file, a message and CDR fields refuse the same
-things for the same reason (the message path used to cut eight coefficients to five without a word)."""
+"""One mapping between BrownCamera and camera_info: a file, a message and CDR fields refuse the same things for
+the same reason (none cuts eight distortion coefficients to five without a word)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The CDR codec for sensor_msgs/Image and CameraInfo (issue #7), byte for byte against rclpy's own
+"""The CDR codec for sensor_msgs/Image and CameraInfo byte for byte against rclpy's own
 serialization (except alignment padding, which rclpy leaves uninitialised), and its refusals."""
 
 from __future__ import annotations

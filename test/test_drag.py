@@ -1,4 +1,4 @@
-"""Drag coefficients and the Vogel exponent (issue #5 core): known Cd from noisy, unsynchronised streams;
+"""Drag coefficients and the Vogel exponent: known Cd from noisy, unsynchronised streams;
 a known exponent inside its reported interval; the `veg-area vogel` command."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The explicit flat-port model (issue #19): exact projection both ways, the port fitted from a few underwater
+"""The explicit flat-port model: exact projection both ways, the port fitted from a few underwater
 views and an air calibration, and Af under water without an underwater board, on renders whose port is tilted
 and has glass."""
 

@@ -1,4 +1,4 @@
-"""Counting the frames the area node skipped while measuring (issue #7), from per-frame camera_info stamps."""
+"""Counting the frames the area node skipped while measuring, from per-frame camera_info stamps."""
 
 from __future__ import annotations
 

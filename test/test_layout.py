@@ -79,11 +79,53 @@ def test_installed_node_executable_starts_and_stops_cleanly(prefix, tmp_path):
     process = subprocess.Popen([str(prefix / "lib" / "veg_area_ros" / "area_node")], env=env,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        time.sleep(4)
-        assert process.poll() is None, process.stdout.read()
+        started = ""  # its first log line says the transport: rclpy is up and the node is being made
+        deadline = time.monotonic() + 60
+        while "transport:" not in started and process.poll() is None and time.monotonic() < deadline:
+            started += process.stdout.readline()
+        assert "transport:" in started and process.poll() is None, started + process.stdout.read()
         process.send_signal(signal.SIGINT)
         assert process.wait(20) == 0
     finally:
         if process.poll() is None:
             process.kill()
             process.wait()
+
+
+def _package_imports(path: Path) -> set[str]:
+    """The veg_area_ros modules (dotted, below the package) and the top-level packages a file imports."""
+    import ast
+
+    package = path.relative_to(REPO).with_suffix("").parts[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level:
+            base = package[:len(package) - node.level + 1]
+            found.add(".".join((*base, *(node.module.split(".") if node.module else ()))))
+        elif isinstance(node, ast.ImportFrom):
+            found.add(node.module)
+        elif isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+    return found
+
+
+def test_imports_only_go_down_the_architecture():
+    """The README's picture as a rule: the core imports neither rclpy nor the nodes nor the command line, and
+    the simulator only through the camera node's sources; no node imports another but the composed graph."""
+    root = REPO / "veg_area_ros"
+    for path in root.glob("*.py"):
+        imports = _package_imports(path)
+        assert not {i for i in imports if i.split(".")[0] == "rclpy"}, path
+        assert not {i for i in imports if i.startswith(("veg_area_ros.ros", "veg_area_ros.cli"))}, path
+        if path.name != "sources.py":
+            assert not {i for i in imports if i.startswith("veg_area_ros.sim")}, path
+    for path in (root / "sim").glob("*.py"):
+        assert not {i for i in _package_imports(path) if i.startswith(("veg_area_ros.ros", "veg_area_ros.cli"))}
+    nodes = {p.stem for p in (root / "ros").glob("*_node.py")}
+    assert {"area_node", "camera_node", "calibration_node"} <= nodes
+    for path in (root / "ros").glob("*.py"):
+        imported = {i.rsplit(".", 1)[-1] for i in _package_imports(path) if i.startswith("veg_area_ros.ros.")}
+        assert not (imported & nodes) or path.stem == "graph", (path, imported & nodes)
+    for path in (root / "cli").glob("*.py"):
+        uses_ros = any(i.startswith("veg_area_ros.ros") for i in _package_imports(path))
+        assert not uses_ros or path.stem in ("bags", "demos"), path

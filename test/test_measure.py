@@ -1,4 +1,4 @@
-"""`veg-area measure` (issue #3): images, videos, JSON, CSV, overlays, and bad input with a clear message."""
+"""`veg-area measure`: images, videos, JSON, CSV, overlays, and bad input with a clear message."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ SCENE = cube_scene()
 
 @pytest.fixture(scope="module")
 def workspace(tmp_path_factory):
-    """A water calibration, a targets file as the issue writes it, and an underwater frame of the cube."""
+    """A water calibration, a targets file as a user writes it, and an underwater frame of the cube."""
     folder = tmp_path_factory.mktemp("measure")
     write_calibration(folder / "water.yaml", calibrated_endoscope("water"), "endoscope", {"medium": "water"})
     lines = ["dictionary: DICT_4X4_50", "markers:            # marker id: centre [x, y], metres"]

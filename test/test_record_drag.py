@@ -1,5 +1,5 @@
 """Recording with rosbags, recovering a killed recording, offline measurement of a bag equal to the live
-node's (issue #5), and the drag node on synthetic instrument streams."""
+node's, and the drag node on synthetic instrument streams."""
 
 from __future__ import annotations
 
@@ -185,7 +185,7 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
     # bound
     # The weights are carried over the frames each run measured: a frame the live node skipped or lost (a loaded
     # machine) changes its sequence, and from then on the two agree within their weight error bounds (each run's
-    # Af is within its bound of a fresh build), no longer to 1e-9.
+    # Af is within its bound of a fresh build), not to 1e-9.
     same_start = first_frames == [first]
     for stamp in common:
         info = live_info.get(stamp, {})
@@ -210,3 +210,34 @@ def test_drag_node_recovers_a_known_drag_coefficient(tmp_path):
     # each Cd carries its Af message's exact stamp (an exact-time join with projected_area must match)
     sent = {tuple(stamp) for stamp in result["area_stamps"]}
     assert all(tuple(stamp) in sent for stamp in result["received_stamps"]), result["received_stamps"][:5]
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_the_recorder_says_when_it_cannot_keep_a_killed_recording(tmp_path, storage):
+    """Crash safety needs rosbags' storage internals (MCAP chunks and file, a sqlite connection): present, each
+    chunk reaches the file as it is written; renamed in another rosbags, the recorder says so instead of
+    silently writing a bag that a kill would empty."""
+    from veg_area_ros.bags import BagRecorder
+
+    recorder = BagRecorder(tmp_path / "bag", storage)
+    assert recorder.crash_safety_problem is None
+    recorder.add_topic("/chatter", "std_msgs/msg/String")
+    recorder.write("/chatter", 1, bytes(8))
+    recorder.close()
+
+    class Opaque:  # a storage whose internals were renamed
+        def __init__(self, inner):
+            self.inner = inner
+
+        def __getattr__(self, name):
+            if name in ("chunks", "bio", "conn"):
+                raise AttributeError(name)
+            return getattr(self.inner, name)
+
+    renamed = BagRecorder(tmp_path / "renamed", storage)
+    renamed._writer.storage = Opaque(renamed._writer.storage)
+    renamed.crash_safety_problem = renamed._check_crash_safety()
+    assert "a recording that is killed loses" in renamed.crash_safety_problem
+    renamed.add_topic("/chatter", "std_msgs/msg/String")
+    renamed.write("/chatter", 1, bytes(8))  # still records
+    assert renamed.counts["/chatter"] == 1

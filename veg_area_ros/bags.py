@@ -72,6 +72,7 @@ class BagRecorder:
         self._chunks_flushed = 0
         self._last_commit = time.monotonic()
         self.counts: dict[str, int] = {}
+        self.crash_safety_problem = self._check_crash_safety()
 
     def add_topic(self, topic: str, msgtype: str, offered: list[OfferedQos] = ()) -> None:
         """Register a topic of type `pkg/msg/Name` (its definition comes from ROS 2 Kilted's) with the QoS its
@@ -84,15 +85,26 @@ class BagRecorder:
             topic, msgtype, typestore=self._types, offered_qos_profiles=[q.to_rosbags() for q in offered])
         self.counts[topic] = 0
 
+    def _check_crash_safety(self) -> str | None:
+        """Why a killed recording would lose what was written (the rosbags writer's storage offers no way to push
+        it to the file: an MCAP chunk list and file, or a sqlite connection, which are its internals), or None."""
+        storage = self._writer.storage
+        if (hasattr(storage, "chunks") and hasattr(storage, "bio")) or hasattr(storage, "conn"):
+            return None
+        return (f"the rosbags writer ({type(storage).__name__}) has neither an MCAP chunk list and file nor a "
+                "sqlite connection to flush: a recording that is killed loses what was not closed")
+
     def write(self, topic: str, timestamp_ns: int, data: bytes | memoryview) -> None:
         self._writer.write(self._connections[topic], timestamp_ns, data)
         self.counts[topic] += 1
+        if self.crash_safety_problem:
+            return
         storage = self._writer.storage
-        chunks = getattr(storage, "chunks", None)
-        if chunks is not None and len(chunks) != self._chunks_flushed:  # MCAP: a chunk went to the file
-            storage.bio.flush()
-            self._chunks_flushed = len(chunks)
-        elif hasattr(storage, "conn") and time.monotonic() - self._last_commit > SQLITE_COMMIT_SECONDS:
+        if hasattr(storage, "chunks"):
+            if len(storage.chunks) != self._chunks_flushed:  # MCAP: a chunk went to the file
+                storage.bio.flush()
+                self._chunks_flushed = len(storage.chunks)
+        elif time.monotonic() - self._last_commit > SQLITE_COMMIT_SECONDS:
             storage.conn.commit()
             self._last_commit = time.monotonic()
 
@@ -299,8 +311,12 @@ def play_topics(path: str | Path, names: list[str] | None = None) -> list[PlayTo
         for connection in reader.connections:
             if names and connection.topic not in names and connection.topic.lstrip("/") not in names:
                 continue
+            try:
+                profiles = connection.ext.offered_qos_profiles
+            except AttributeError as exc:  # rosbags' connection record without the field rosbag2 writes
+                raise BagError(f"{path}: the offered QoS of {connection.topic} cannot be read ({exc})") from exc
             offered = [OfferedQos(q.reliability.name.lower(), q.durability.name.lower(), q.history.name.lower(),
-                                  int(q.depth)) for q in getattr(connection.ext, "offered_qos_profiles", [])]
+                                  int(q.depth)) for q in profiles]
             topics[connection.topic] = PlayTopic(connection.topic, connection.msgtype, offered)
     finally:
         reader.close()

@@ -210,7 +210,7 @@ def camera_info_url_to_path(url: str) -> Path | None:
     """A camera_info URL as camera_info_manager reads it: `file:///absolute/path.yaml`, or
     `package://<package>/<path>` (in that package's installed share folder); a plain absolute or ~ path is
     taken too; '' = none. Anything else is a ValueError with the reason (`file://sub/x.yaml` names a host,
-    not a folder: it used to become /x.yaml)."""
+    not a folder, and is refused rather than read as /x.yaml)."""
     if not url:
         return None
     if url.startswith("package://"):

@@ -41,8 +41,8 @@ def config_file(name: str) -> str | None:
         from ament_index_python.packages import get_package_share_directory
 
         candidates.insert(0, Path(get_package_share_directory("veg_area_ros")) / "config" / name)
-    except Exception:  # not in an ament prefix (PackageNotFoundError) or no ament_index_python
-        pass
+    except (ImportError, LookupError):  # no ament_index_python, or not in an ament prefix (PackageNotFoundError)
+        pass  # the other candidates are looked at
     return next((str(path) for path in candidates if path.is_file()), None)
 
 

@@ -1,4 +1,4 @@
-"""Throttled node warnings account for every refusal (22 bad frames used to leave 18 unsaid)."""
+"""Throttled node warnings account for every refusal: what the throttle hid is counted in a later line."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The issue's classes of bad input replayed through `veg-area` as a user runs it, each in its own process under
+"""Classes of bad input replayed through `veg-area` as a user runs it, each in its own process under
 a time and memory watch: no traceback, no result that is wrong with exit 0, every refusal in under 2 s (beyond
 the interpreter's start-up, measured in the same run) and 500 MB, and no existing file lost."""
 
@@ -23,7 +23,7 @@ from veg_area_ros.calib_io import to_camera_info_dict, write_calibration
 from veg_area_ros.sim.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, cube_scene, render_scene
 
 REPO = Path(__file__).resolve().parents[2]
-MEMORY_LIMIT = 500 * 2**20  # the issue's cap on a refusal
+MEMORY_LIMIT = 500 * 2**20  # what a refusal may cost at most
 TIME_LIMIT_S = 2.0
 ADDRESS_SPACE_CAP = 4 * 2**30  # a runaway input fails fast here instead of taking the machine's 24 GB
 

@@ -13,6 +13,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
+from ..calib_io import write_atomic
 from .area_node import AreaNode
 from .calibration_node import CalibrationNode
 from .camera_node import CameraNode
@@ -64,7 +65,10 @@ def run_graph(output: Path, measurements: int = 10, timeout_s: float = 300.0, ra
     error = 100 * (areas.mean() / truth[0] - 1)
     say(f"Af over {len(areas)} frames: {areas.mean():.6f} m² ± {std:.6f} (frame-to-frame sd "
         f"{areas.std():.2g}); true {truth[0]:.6f} m²; error {error:+.3f} %")
-    say(f"calibration served and written to {calibration_file}")
+    result = {"areas_m2": areas.tolist(), "mean_area_m2": float(areas.mean()), "area_std_m2": std,
+              "true_area_m2": truth[0], "error_pct": float(error), "calibration": str(calibration_file)}
+    write_atomic(output / "graph_result.json", json.dumps(result, indent=1))
+    say(f"calibration served and written to {calibration_file}; the figures in {output / 'graph_result.json'}")
     return EXIT_OK
 
 

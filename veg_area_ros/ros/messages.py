@@ -31,7 +31,7 @@ def image_to_msg(image: np.ndarray, stamp: Time, frame_id: str) -> Image:
     msg.header.frame_id = frame_id
     msg.height, msg.width = image.shape[:2]
     msg.encoding, msg.is_bigendian, msg.step = encoding, 0, step
-    msg.data = np.ascontiguousarray(image).tobytes()  # bytes: the fast path into the message (see issue #6)
+    msg.data = np.ascontiguousarray(image).tobytes()  # bytes: rclpy's fast path into the message
     return msg
 
 

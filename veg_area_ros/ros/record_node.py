@@ -63,6 +63,8 @@ class RecordNode(Node):
         self.discovery = self.create_timer(0.2, self._discover)
         what = "every topic" if self.everything else ", ".join(self.wanted)
         self.get_logger().info(f"recording {what} into {self.output} ({storage})")
+        if self.recorder.crash_safety_problem:
+            self.get_logger().warning(self.recorder.crash_safety_problem)
 
     def _stop(self) -> None:
         self.stop_requested = True
