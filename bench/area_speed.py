@@ -31,11 +31,10 @@ from veg_area_ros.classify import Classifier
 from veg_area_ros.sim.synthetic import (
     DSLR,
     ENDOSCOPE,
-    SCENE_DICTIONARY,
-    SCENE_MARKERS,
     FlatPort,
     cube_scene,
     render_scene,
+    scene_targets,
 )
 from veg_area_ros.targets import TargetsSpec
 
@@ -45,8 +44,7 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=30)
     parser.add_argument("--video-frames", type=int, default=600, help="frames of the video case (0: skip)")
     args = parser.parse_args()
-    targets = TargetsSpec.from_dict({"dictionary": SCENE_DICTIONARY,
-                                     "markers": {k: list(v) for k, v in SCENE_MARKERS.items()}})
+    targets = scene_targets()
     for camera in (ENDOSCOPE, DSLR):
         frames = [render_scene(camera, cube_scene(), 0.7, FlatPort(), seed=seed,
                                supersample=1 if camera is DSLR else 3) for seed in range(4)]

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -370,11 +371,10 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
 
         # bad calibrations: a camera_info beyond any camera (refused: the served one stays), then the targets file
         # spoiled on disk before a new calibration comes (the file was read when set: the calibration applies)
-        from veg_area_ros.sim.synthetic import SCENE_DICTIONARY, SCENE_MARKERS
+        from veg_area_ros.sim.synthetic import scene_targets_content
 
         targets = Path("targets.yaml").resolve()
-        targets.write_text(f"dictionary: {SCENE_DICTIONARY}\nmarkers:\n"
-                           + "".join(f"  {k}: [{x}, {y}]\n" for k, (x, y) in SCENE_MARKERS.items()))
+        targets.write_text(yaml.safe_dump(scene_targets_content()))
         done = set_parameter("targets_file", str(targets))
         out["targets_file_set"] = None if done is None else done.results[0].successful
         set_parameter("threshold", 120.0)
@@ -851,7 +851,7 @@ def scenario_bad_start_files(options: dict, nodes: Nodes) -> dict:
     from std_msgs.msg import String
 
     from veg_area_ros.ros.qos import RESULT_QOS
-    from veg_area_ros.sim.synthetic import SCENE_DICTIONARY, SCENE_MARKERS
+    from veg_area_ros.sim.synthetic import scene_targets_content
 
     corrupt = Path("corrupt.yaml").resolve()
     corrupt.write_text("image_width: [640\n")
@@ -886,8 +886,7 @@ def scenario_bad_start_files(options: dict, nodes: Nodes) -> dict:
         out["measured_without_targets"] = len(infos)
         out["alive_before_fix"] = nodes.alive()
         targets = Path("targets.yaml").resolve()
-        targets.write_text(f"dictionary: {SCENE_DICTIONARY}\nmarkers:\n"
-                           + "".join(f"  {k}: [{x}, {y}]\n" for k, (x, y) in SCENE_MARKERS.items()))
+        targets.write_text(yaml.safe_dump(scene_targets_content()))
         client = probe.create_client(SetParameters, "area_node/set_parameters")
         client.wait_for_service(timeout_sec=20)
         future = client.call_async(SetParameters.Request(

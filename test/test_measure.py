@@ -14,7 +14,13 @@ from helpers import calibrated_endoscope, run_cli
 
 from veg_area_ros.calib_io import write_calibration
 from veg_area_ros.sim.reproduction import run as reproduce
-from veg_area_ros.sim.synthetic import ENDOSCOPE, SCENE_MARKERS, FlatPort, cube_scene, render_scene
+from veg_area_ros.sim.synthetic import (
+    ENDOSCOPE,
+    FlatPort,
+    cube_scene,
+    render_scene,
+    scene_targets_content,
+)
 
 SCENE = cube_scene()
 
@@ -24,8 +30,9 @@ def workspace(tmp_path_factory):
     """A water calibration, a targets file as a user writes it, and an underwater frame of the cube."""
     folder = tmp_path_factory.mktemp("measure")
     write_calibration(folder / "water.yaml", calibrated_endoscope("water"), "endoscope", {"medium": "water"})
-    lines = ["dictionary: DICT_4X4_50", "markers:            # marker id: centre [x, y], metres"]
-    lines += [f"  {k}: [{x}, {y}]" for k, (x, y) in SCENE_MARKERS.items()]
+    content = scene_targets_content()
+    lines = [f"dictionary: {content['dictionary']}", "markers:            # marker id: centre [x, y], metres"]
+    lines += [f"  {k}: [{x}, {y}]" for k, (x, y) in content["markers"].items()]
     (folder / "targets.yaml").write_text("\n".join(lines) + "\n")
     cv2.imwrite(str(folder / "cube.png"), render_scene(ENDOSCOPE, SCENE, 0.7, FlatPort()))
     return folder

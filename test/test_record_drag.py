@@ -16,7 +16,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
 from veg_area_ros.cdr import decode_image
-from veg_area_ros.sim.synthetic import SCENE_DICTIONARY, SCENE_MARKERS
+from veg_area_ros.sim.synthetic import scene_targets_content
 
 pytestmark = pytest.mark.timeout(400)
 
@@ -153,8 +153,7 @@ def test_killed_recording_is_recovered_but_for_the_last_chunk(recorded, tmp_path
 def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path):
     folder, _ = recorded
     targets = tmp_path / "targets.yaml"
-    targets.write_text(yaml.safe_dump({"dictionary": SCENE_DICTIONARY,
-                                       "markers": {k: list(v) for k, v in SCENE_MARKERS.items()}}))
+    targets.write_text(yaml.safe_dump(scene_targets_content()))
     store = get_typestore(Stores.ROS2_KILTED)
     live, live_std, live_info, first_frames = {}, {}, {}, []
     with Reader(folder / "closed_bag") as reader:

@@ -19,7 +19,12 @@ from veg_area_ros.calib_io import write_calibration
 from veg_area_ros.cdr import encode_image
 from veg_area_ros.cli import main as veg_area
 from veg_area_ros.frames import read_image
-from veg_area_ros.sim.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, cube_scene, render_scene
+from veg_area_ros.sim.synthetic import (
+    ENDOSCOPE,
+    cube_scene,
+    render_scene,
+    scene_targets_content,
+)
 
 
 @pytest.fixture(scope="module")
@@ -27,8 +32,7 @@ def workspace(tmp_path_factory):
     """The true endoscope's calibration, the scene's targets, and the cube in air as a PNG and a JPEG."""
     folder = tmp_path_factory.mktemp("files")
     write_calibration(folder / "camera.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
-    (folder / "targets.yaml").write_text(yaml.safe_dump(
-        {"dictionary": SCENE_DICTIONARY, "markers": {k: list(map(float, v)) for k, v in SCENE_MARKERS.items()}}))
+    (folder / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
     frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
     cv2.imwrite(str(folder / "cube.png"), frame)
     cv2.imwrite(str(folder / "cube.jpg"), frame, [cv2.IMWRITE_JPEG_QUALITY, 95])

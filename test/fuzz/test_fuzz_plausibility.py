@@ -21,11 +21,11 @@ from veg_area_ros.classify import Classifier
 from veg_area_ros.sim.synthetic import (
     DSLR,
     ENDOSCOPE,
-    SCENE_DICTIONARY,
     SCENE_MARKERS,
     FlatPort,
     cube_scene,
     render_scene,
+    scene_targets_content,
 )
 from veg_area_ros.targets import TargetsError, TargetsSpec
 
@@ -57,7 +57,7 @@ def test_absurd_models_are_refused_from_a_file_and_from_camera_info(tmp_path, ca
 
 
 def _targets(markers: dict, side: float | None = None) -> TargetsSpec:
-    content = {"dictionary": SCENE_DICTIONARY, "markers": {k: list(map(float, v)) for k, v in markers.items()}}
+    content = scene_targets_content(markers)
     if side is not None:
         content["marker_side_m"] = side
     return TargetsSpec.from_dict(yaml.safe_load(yaml.safe_dump(content)))

@@ -20,7 +20,12 @@ import pytest
 import yaml
 
 from veg_area_ros.calib_io import to_camera_info_dict, write_calibration
-from veg_area_ros.sim.synthetic import ENDOSCOPE, SCENE_DICTIONARY, SCENE_MARKERS, cube_scene, render_scene
+from veg_area_ros.sim.synthetic import (
+    ENDOSCOPE,
+    cube_scene,
+    render_scene,
+    scene_targets_content,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 MEMORY_LIMIT = 500 * 2**20  # what a refusal may cost at most
@@ -95,8 +100,7 @@ ALIAS_BOMB = "a: &a [lol, lol, lol, lol, lol, lol, lol, lol, lol]\n" + "".join(
 def workspace(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("worst")
     write_calibration(folder / "camera.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
-    markers = {k: list(map(float, v)) for k, v in SCENE_MARKERS.items()}
-    (folder / "targets.yaml").write_text(yaml.safe_dump({"dictionary": SCENE_DICTIONARY, "markers": markers}))
+    (folder / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
     frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
     cv2.imwrite(str(folder / "cube.png"), frame)
     (folder / "bomb.png").write_bytes(png_declaring(100000, 100000))
@@ -113,15 +117,16 @@ def workspace(tmp_path_factory) -> Path:
     text = yaml.safe_dump(info, sort_keys=False)
     (folder / "alias_name.yaml").write_text(text.replace("camera_name: endoscope",
                                                          "camera_name: &n [x, x, x]\nbomb: [*n, *n, *n]"))
-    longer = [v * 1.06 for v in info["camera_matrix"]["data"]]  # a second camera_matrix: the last one won before
+    longer = [v * 1.06 for v in info["camera_matrix"]["data"]]  # a second camera_matrix: a plain load takes the last
     (folder / "duplicate_key.yaml").write_text(f"{text}camera_matrix:\n  rows: 3\n  cols: 3\n  data: {longer}\n")
     write_calibration(folder / "k1.yaml", replace(ENDOSCOPE, k1=1e6), "endoscope")
+    markers = scene_targets_content()["markers"]
     ids = sorted(markers)
     permuted = {a: markers[b] for a, b in zip(ids, ids[1:] + ids[:1], strict=True)}
-    (folder / "permuted.yaml").write_text(yaml.safe_dump({"dictionary": SCENE_DICTIONARY, "markers": permuted}))
+    (folder / "permuted.yaml").write_text(yaml.safe_dump(scene_targets_content(permuted)))
     mistyped = dict(markers)
     mistyped[ids[2]] = [markers[ids[2]][0] * 10, markers[ids[2]][1]]
-    (folder / "mistyped.yaml").write_text(yaml.safe_dump({"dictionary": SCENE_DICTIONARY, "markers": mistyped}))
+    (folder / "mistyped.yaml").write_text(yaml.safe_dump(scene_targets_content(mistyped)))
     (folder / "a_file").write_text("not a folder")
     return folder
 

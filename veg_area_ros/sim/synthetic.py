@@ -211,10 +211,15 @@ SCENE_MARKERS = {0: (-0.22, -0.16), 1: (0.22, -0.16), 2: (0.22, 0.16), 3: (-0.22
 SCENE_DICTIONARY = "DICT_4X4_50"
 
 
+def scene_targets_content(markers: dict[int, tuple[float, float]] | None = None) -> dict:
+    """A targets file's content (YAML-ready) for the scene's four markers, or for `markers` in its dictionary."""
+    markers = SCENE_MARKERS if markers is None else markers
+    return {"dictionary": SCENE_DICTIONARY, "markers": {int(k): [float(x), float(y)] for k, (x, y) in markers.items()}}
+
+
 def scene_targets() -> TargetsSpec:
-    """The scene's four markers as a targets file would give them: what the built-in default camera shows."""
-    return TargetsSpec.from_dict({"dictionary": SCENE_DICTIONARY,
-                                  "markers": {k: list(v) for k, v in SCENE_MARKERS.items()}})
+    """The scene's four markers as a targets file gives them: what the built-in default camera shows."""
+    return TargetsSpec.from_dict(scene_targets_content())
 
 
 @dataclass(frozen=True)
