@@ -171,7 +171,7 @@ def test_the_command_line_fits_writes_and_measures_with_a_port(tmp_path):
     calibration = read_calibration(tmp_path / "fitted.yaml")
     assert calibration.port_camera() is not None and calibration.metadata["medium"] == "water"
     plain = yaml.safe_load((tmp_path / "fitted.yaml").read_text())
-    assert plain["distortion_model"] == "plumb_bob" and plain["camera_matrix"]["data"][0] > 1.2 * 520
+    assert plain["distortion_model"] == "plumb_bob" and plain["camera_matrix"]["data"][0] > 1.2 * ENDOSCOPE.fx
 
     scene, targets = _scene(0.55)
     cv2.imwrite(str(tmp_path / "cube.png"), render_scene(ENDOSCOPE, scene, 0.55, UNDERWATER))

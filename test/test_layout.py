@@ -124,8 +124,10 @@ def test_imports_only_go_down_the_architecture():
     nodes = {p.stem for p in (root / "ros").glob("*_node.py")}
     assert {"area_node", "camera_node", "calibration_node"} <= nodes
     for path in (root / "ros").glob("*.py"):
-        imported = {i.rsplit(".", 1)[-1] for i in _package_imports(path) if i.startswith("veg_area_ros.ros.")}
+        imports = _package_imports(path)
+        imported = {i.rsplit(".", 1)[-1] for i in imports if i.startswith("veg_area_ros.ros.")}
         assert not (imported & nodes) or path.stem == "graph", (path, imported & nodes)
+        assert not {i for i in imports if i.startswith("veg_area_ros.sim")}, path  # defaults come from sources
     for path in (root / "cli").glob("*.py"):
         uses_ros = any(i.startswith("veg_area_ros.ros") for i in _package_imports(path))
         assert not uses_ros or path.stem in ("bags", "demos"), path

@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
+from veg_area_ros.sim.synthetic import CUBE_SIDE_M
 from veg_area_ros.sources import FolderSource, SourceError, SyntheticSource, VideoSource, open_source
 
 
@@ -81,4 +82,4 @@ def test_synthetic_source_shows_board_views_then_the_cube():
     source.index = source.board_frames  # skip the rest of the board views
     cube = source.read()
     assert cube.shape == (480, 640, 3) and not np.array_equal(cube, first)
-    assert source.true_area_m2 == pytest.approx(0.1027**2, rel=1e-6)
+    assert source.true_area_m2 == pytest.approx(CUBE_SIDE_M**2, rel=1e-6)

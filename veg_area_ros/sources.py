@@ -27,9 +27,17 @@ from .sim.synthetic import (
     degrade,
     render_board_views,
     render_scene,
+    scene_targets,
 )
+from .targets import TargetsSpec
 
 SYNTHETIC_SCENES = ("cube", "bush", "board", "board_then_cube")
+DEFAULT_BOARD = BOARD  # the board the built-in synthetic camera shows: the calibration node's default
+
+
+def default_targets() -> TargetsSpec:
+    """The targets the built-in synthetic camera shows: the area node's default."""
+    return scene_targets()
 
 
 class SourceError(RuntimeError):

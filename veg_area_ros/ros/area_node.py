@@ -31,7 +31,7 @@ from ..classify import AREA_MODES, CHANNELS, OBJECTS, ClassifyError
 from ..idealize import FrameSizeError
 from ..latest import FrameTally
 from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, MeasurementSettings
-from ..sim.synthetic import scene_targets
+from ..sources import default_targets
 from ..targets import TargetsError, TargetsSpec
 from .health import CountedWarnings, InputWatch, publish_safely
 from .messages import ImageMessageError, image_bytes
@@ -117,7 +117,7 @@ class AreaNode(Node):
 
     @staticmethod
     def _load_targets(path: str) -> TargetsSpec:
-        return TargetsSpec.load(path) if path else scene_targets()
+        return TargetsSpec.load(path) if path else default_targets()
 
     def _settings(self, changed: dict) -> MeasurementSettings:
         """The measurement settings from the parameters, with `changed` (name -> value) over them; raises

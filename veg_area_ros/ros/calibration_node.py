@@ -26,7 +26,7 @@ from ..calib_io import (
 from ..calibration import NEW_POSE_DISTANCE, CalibrationError, View, calibrate, coverage_grid, pose_signature
 from ..camera_model import BrownCamera
 from ..cdr import decode_image
-from ..sim.synthetic import BOARD as SYNTHETIC_BOARD
+from ..sources import DEFAULT_BOARD
 from .health import CountedWarnings, InputWatch, publish_safely
 from .messages import ImageMessageError, camera_to_info, info_to_camera
 from .params import declare, read_start_file
@@ -37,7 +37,7 @@ from .run import run_nodes
 class CalibrationNode(Node):
     def __init__(self, name: str = "calibration_node", **kwargs):
         super().__init__(name, **kwargs)
-        board_text = declare(self, "board", SYNTHETIC_BOARD, "Board spec, as for `veg-area calibrate --board`.",
+        board_text = declare(self, "board", DEFAULT_BOARD, "Board spec, as for `veg-area calibrate --board`.",
                              read_only=True)
         self.medium = declare(self, "medium", "water", "Medium the calibration is made in.", choices=("air", "water"))
         self.distance = declare(self, "calibration_distance_m", 0.7, "Camera-to-board distance, metres.",

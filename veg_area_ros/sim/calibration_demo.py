@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from ..board import BoardSpec
-from ..calib_io import write_calibration
+from ..calib_io import fit_metadata, write_calibration
 from ..calibration import PARAM_NAMES, CalibrationResult, View, calibrate
 from ..camera_model import BrownCamera
 from .synthetic import BOARD, DISTANCE_M, ENDOSCOPE, VIEWS, FlatPort, board_views, render_board_views
@@ -72,8 +72,7 @@ def run_demo(output: Path, quiet: bool = False) -> int:
 
     output.mkdir(parents=True, exist_ok=True)
     path = output / "endoscope_water.yaml"
-    metadata = {"medium": "water", "calibration_distance_m": DISTANCE_M, "board": BOARD, "synthetic": True,
-                **{k: water.summary()[k] for k in ("rms_px", "max_residual_px", "views_used", "std", "warnings")}}
+    metadata = {**fit_metadata(water.summary(), "water", DISTANCE_M, BOARD, "calibration-demo"), "synthetic": True}
     write_calibration(path, water.camera, "synthetic_endoscope", metadata)
     from ..report import write_calibration_report
 
