@@ -328,10 +328,12 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         median = set_parameter("threshold_mode", "median")
         out["bad_threshold_mode"] = None if median is None else [median.results[0].successful,
                                                                  median.results[0].reason]
-        fixed = set_parameter("threshold_mode", "fixed")  # the default is otsu, as on the command line
-        out["fixed_threshold_mode"] = None if fixed is None else fixed.results[0].successful
-        good = set_parameter("threshold", 60.0)
+        good = set_parameter("threshold", 60.0)  # the default mode is otsu, as on the command line: kept, said
         out["good_threshold"] = None if good is None else good.results[0].successful
+        fixed = set_parameter("threshold_mode", "fixed")
+        out["fixed_threshold_mode"] = None if fixed is None else fixed.results[0].successful
+        spin_until(lambda: any("kept for later" in line for line in area_log), 5)
+        out["threshold_kept_lines"] = [line for line in area_log if "kept for later" in line]
         mark = len(infos)
         spin_until(lambda: len(calibrated(mark)) >= 6, 30)
         out["thresholds_after_change"] = sorted({i["threshold"] for i in calibrated(mark)[3:]})

@@ -72,7 +72,8 @@ def test_parameters_are_validated_and_change_at_run_time(graph):
     assert not ok and "lies outside the 640x480 image" in reason
     ok, reason = graph["bad_threshold_mode"]  # accepted, it would behave as fixed
     assert not ok and "fixed or otsu" in reason
-    assert graph["fixed_threshold_mode"] is True and graph["good_threshold"] is True
+    assert graph["good_threshold"] is True and graph["fixed_threshold_mode"] is True
+    assert len(graph["threshold_kept_lines"]) == 1 and "set threshold_mode:=fixed" in graph["threshold_kept_lines"][0]
     assert graph["thresholds_after_change"] == [60.0]
     ok, reason = graph["bad_area_mode"]
     assert not ok and "subpixel, count" in reason

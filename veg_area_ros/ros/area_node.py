@@ -161,6 +161,10 @@ class AreaNode(Node):
             self.measurer = self._build(self.settings, self.camera, self.targets)
         except (ValueError, OSError) as exc:  # the file changed between the check and now
             self.get_logger().error(f"parameters set but not applied ({exc}); measuring as before")
+            return
+        if "threshold" in names and self.settings.threshold_mode == "otsu":
+            self.get_logger().warning(f"threshold {self.get_parameter('threshold').value:g} kept for later: "
+                                      "threshold_mode is otsu; set threshold_mode:=fixed to use it")
 
     def _busy_between(self, start_ns: int, end_ns: int) -> bool:
         """Whether the node spent most of the time from start to end (ns, the system clock) in its callbacks:
