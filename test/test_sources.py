@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 
 from veg_area_ros.sim.synthetic import CUBE_SIDE_M
-from veg_area_ros.sources import FolderSource, SourceError, SyntheticSource, VideoSource, open_source
+from veg_area_ros.sources import FileSource, SourceError, SyntheticSource, open_source
 
 
 def test_folder_ends_loops_and_reports_unreadable_frames(tmp_path):
     cv2.imwrite(str(tmp_path / "a.png"), np.zeros((16, 24, 3), np.uint8))
     (tmp_path / "b.png").write_bytes(b"not an image")
     source = open_source(str(tmp_path))
-    assert isinstance(source, FolderSource) and source.read().shape == (16, 24, 3)
+    assert isinstance(source, FileSource) and source.read().shape == (16, 24, 3)
     with pytest.raises(SourceError, match=r"b\.png"):
         source.read()
     assert source.read() is None  # the end, cleanly
@@ -44,7 +44,7 @@ def test_video_end_and_loop(tmp_path):
         writer.write(np.full((24, 32, 3), 40 * k, np.uint8))
     writer.release()
     once = open_source(str(path))
-    assert isinstance(once, VideoSource)
+    assert isinstance(once, FileSource)
     assert [once.read() is not None for _ in range(4)] == [True, True, True, False]
     looping = open_source(str(path), loop=True)
     assert all(looping.read() is not None for _ in range(7))
@@ -83,3 +83,19 @@ def test_synthetic_source_shows_board_views_then_the_cube():
     cube = source.read()
     assert cube.shape == (480, 640, 3) and not np.array_equal(cube, first)
     assert source.true_area_m2 == pytest.approx(CUBE_SIDE_M**2, rel=1e-6)
+
+
+def test_a_bag_is_a_source_like_the_command_lines_input(tmp_path):
+    """Files reach the camera node through the command line's reader: a recorded bag's images play too."""
+    from veg_area_ros.bags import BagRecorder
+    from veg_area_ros.cdr import encode_image
+
+    recorder = BagRecorder(tmp_path / "run", "mcap")
+    recorder.add_topic("/image_raw", "sensor_msgs/msg/Image")
+    for k in range(2):
+        recorder.write("/image_raw", k + 1, encode_image(np.full((24, 32, 3), 50 * k, np.uint8), k, 0, "camera"))
+    recorder.close()
+    source = open_source(str(tmp_path / "run"))
+    frames = [source.read() for _ in range(3)]
+    assert [f is None for f in frames] == [False, False, True]
+    assert [int(f[0, 0, 0]) for f in frames[:2]] == [0, 50]

@@ -1,5 +1,6 @@
-"""Frame sources for the camera node and the graph: a synthetic underwater endoscope (the built-in default),
-a V4L2/USB device, a video file, an image folder or glob. No ROS here.
+"""Live frame sources for the camera node and the graph, one protocol: a synthetic underwater endoscope (the
+built-in default), a V4L2/USB device, and files (images, folders, globs, videos, bags) read as the command line
+reads them (`frames`). No ROS here.
 
 `read()` returns the next frame, None at the end of a file source, and raises SourceError for a frame that
 could not be had (unreadable file, device not delivering): the caller logs it and carries on or retries.
@@ -14,7 +15,7 @@ import cv2
 import numpy as np
 
 from .board import BoardSpec
-from .frames import IMAGE_SUFFIXES, read_image
+from .frames import IMAGE_SUFFIXES, InputError, expand_inputs, iter_frames
 from .sim.synthetic import (
     BOARD,
     DISTANCE_M,
@@ -99,62 +100,59 @@ class SyntheticSource:
         pass
 
 
-class VideoSource:
-    def __init__(self, path: str, loop: bool = False):
-        self.path = path
+LOOP_CACHE_FRAMES = 16  # a looped input of at most this many frames is decoded once (test patterns at any rate)
+
+
+class FileSource:
+    """Image files, folders, videos or rosbag2 bags, read by `frames.iter_frames` as the command line reads
+    them. The end returns None, or starts over with `loop`; a looped input of at most LOOP_CACHE_FRAMES frames
+    is decoded once. An unreadable frame raises SourceError naming it."""
+
+    def __init__(self, paths: list[Path], loop: bool = False):
+        try:
+            self.files = expand_inputs(paths)
+        except InputError as exc:
+            raise SourceError(str(exc)) from exc
         self.loop = loop
-        self._capture = cv2.VideoCapture(path)
-        if not self._capture.isOpened():
-            raise SourceError(f"{path}: not a video OpenCV can open")
+        self._frames = iter_frames(self.files)
+        self._first_pass: list[np.ndarray | str] | None = [] if loop else None  # while it may be replayed
+        self._replay: list[np.ndarray | str] | None = None
+        self._next = 0
 
     def read(self) -> np.ndarray | None:
-        ok, image = self._capture.read()
-        if ok:
-            return image
-        if not self.loop:
-            return None
-        self._capture.release()
-        self._capture = cv2.VideoCapture(self.path)
-        ok, image = self._capture.read()
-        if not ok:
-            raise SourceError(f"{self.path}: no frame after rewinding")
-        return image
+        if self._replay is not None:
+            item = self._replay[self._next % len(self._replay)]
+            self._next += 1
+        else:
+            item = self._read_file()
+            if item is None:
+                return None
+        if isinstance(item, str):
+            raise SourceError(item)
+        return item
 
-    def release(self) -> None:
-        self._capture.release()
-
-
-LOOP_CACHE_FRAMES = 16  # a looped folder of at most this many images is decoded once (test patterns at any rate)
-
-
-class FolderSource:
-    def __init__(self, files: list[Path], loop: bool = False):
-        if not files:
-            raise SourceError("no image files found")
-        self.files = files
-        self.loop = loop
-        self.index = 0
-        self._cache: dict[int, np.ndarray] | None = {} if loop and len(files) <= LOOP_CACHE_FRAMES else None
-
-    def read(self) -> np.ndarray | None:
-        if self.index >= len(self.files):
+    def _read_file(self) -> np.ndarray | str | None:
+        """The next frame decoded (or why it could not be), None at the end of an input not looped."""
+        frame = next(self._frames, None)
+        if frame is None:
             if not self.loop:
                 return None
-            self.index = 0
-        index = self.index
-        self.index += 1
-        if self._cache is not None and index in self._cache:
-            return self._cache[index]
-        path = self.files[index]
-        image, problem = read_image(path)
-        if image is None:
-            raise SourceError(f"{path.name} {problem}")
-        if self._cache is not None:
-            self._cache[index] = image
-        return image
+            if self._first_pass:  # short: replayed from memory from now on
+                self._replay, self._next = self._first_pass, 1
+                return self._replay[0]
+            self._frames = iter_frames(self.files)
+            frame = next(self._frames, None)
+            if frame is None:
+                raise SourceError(f"{self.files[0]}: no frame after starting over")
+        item = frame.image if frame.image is not None else f"{frame.name} {frame.problem}"
+        if self._first_pass is not None:
+            self._first_pass.append(item)
+            if len(self._first_pass) > LOOP_CACHE_FRAMES:
+                self._first_pass = None
+        return item
 
     def release(self) -> None:
-        pass
+        self._frames.close()  # a video's capture is released by its generator
 
 
 class DeviceSource:
@@ -188,20 +186,16 @@ class DeviceSource:
 
 def open_source(source: str, loop: bool = False, width: int = 0, height: int = 0,
                 synthetic_scene: str = "board_then_cube", synthetic_medium: str = "water"):
-    """`synthetic`, a device (index or /dev/video*), a video file, an image folder or a glob pattern."""
+    """`synthetic`, a device (index or /dev/video*), a video file, an image folder, a rosbag2 bag or a glob."""
     if source == "synthetic":
         return SyntheticSource(synthetic_scene, synthetic_medium)
     if source.isdigit() or source.startswith("/dev/video"):
         return DeviceSource(int(source) if source.isdigit() else source, width, height)
     path = Path(source)
-    if path.is_dir():
-        return FolderSource(sorted(p for p in path.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES), loop)
-    if path.is_file():
-        if path.suffix.lower() in IMAGE_SUFFIXES:
-            return FolderSource([path], loop)
-        return VideoSource(str(path), loop)  # a video, or a file OpenCV may still open as one
+    if path.exists():  # a folder, an image, a video (or a file OpenCV may still open as one), a bag
+        return FileSource([path], loop)
     matches = sorted(Path(p) for p in glob.glob(source) if Path(p).suffix.lower() in IMAGE_SUFFIXES)
     if matches:
-        return FolderSource(matches, loop)
-    raise SourceError(f"source {source!r} is not 'synthetic', a device, a video, an image folder or a glob "
-                      "that matches images")
+        return FileSource(matches, loop)
+    raise SourceError(f"source {source!r} is not 'synthetic', a device, a video, an image folder, a bag or a "
+                      "glob that matches images")

@@ -24,7 +24,8 @@ class CameraNode(Node):
     def __init__(self, name: str = "camera_node", **kwargs):
         super().__init__(name, **kwargs)
         source = declare(self, "source", "synthetic",
-                         "'synthetic', a V4L2 device (index or /dev/videoN), a video file, an image folder or glob.",
+                         "'synthetic', a V4L2 device (index or /dev/videoN), a video file, an image folder or glob, "
+                         "a rosbag2 bag.",
                          read_only=True)
         self.frame_id = declare(self, "frame_id", "camera", "frame_id of the published headers.")
         rate = declare(self, "rate_hz", 10.0, "Frames per second published.", low=0.1, high=1000.0)
