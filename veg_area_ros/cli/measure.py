@@ -232,7 +232,6 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
                           {"idealized_from": str(Path(job.calibration).resolve())})
     rows: list[dict] = []
-    measured = 0
     interrupted = False
     try:
         for index, frame in enumerate(iter_frames(files, job.video_step, job.image_topic), 1):
@@ -256,7 +255,6 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                 row["error"] = str(exc)
                 say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
             else:
-                measured += 1
                 row.update(result.summary())
                 if result.missing_targets:
                     say(f"[{index}/{total}] {frame.name}: targets not found: markers {result.missing_targets}")
@@ -281,6 +279,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                 raise KeyboardInterrupt
     except KeyboardInterrupt:  # Ctrl-C on a long video or bag: what was measured is kept (CSV, plot)
         interrupted = True
+    # counted from the rows: the frame in hand when Ctrl-C came is left out of both
+    measured = sum(1 for row in rows if not row["error"])
 
     if csv_path is not None and measured == 0 and csv_path.exists():  # an error-only table must not replace one
         say(f"time series not written: no frame was measured (the existing {csv_path} is kept)")
