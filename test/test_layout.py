@@ -131,3 +131,83 @@ def test_imports_only_go_down_the_architecture():
     for path in (root / "cli").glob("*.py"):
         uses_ros = any(i.startswith("veg_area_ros.ros") for i in _package_imports(path))
         assert not uses_ros or path.stem in ("bags", "demos"), path
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """Every module of the package and the package modules it imports (at the top or inside a function alike:
+    a lazy import still ties the two together)."""
+    import ast
+
+    root = REPO / "veg_area_ros"
+
+    def name(path: Path) -> str:
+        parts = path.relative_to(REPO).with_suffix("").parts
+        return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+    modules = {name(path): path for path in root.rglob("*.py")}
+    graph = {}
+    for module, path in modules.items():
+        package = path.relative_to(REPO).with_suffix("").parts[:-1]
+        found = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                base = ".".join(package[:len(package) - node.level + 1]) if node.level else ""
+                target = ".".join(filter(None, (base, node.module or "")))
+                for alias in node.names:  # `from . import area` names a module, `from .area import X` does not
+                    found.add(f"{target}.{alias.name}" if f"{target}.{alias.name}" in modules else target)
+            elif isinstance(node, ast.Import):
+                found.update(alias.name for alias in node.names)
+        graph[module] = {m for m in found if m in modules and m != module}
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (Tarjan): each is an import circle."""
+    import sys
+
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    circles = []
+    sys.setrecursionlimit(max(sys.getrecursionlimit(), 10 * len(graph)))
+
+    def visit(module: str) -> None:
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        for other in graph[module]:
+            if other not in index:
+                visit(other)
+                low[module] = min(low[module], low[other])
+            elif other in stack:
+                low[module] = min(low[module], index[other])
+        if low[module] == index[module]:
+            component = []
+            while True:
+                other = stack.pop()
+                component.append(other)
+                if other == module:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return circles
+
+
+def test_no_module_imports_one_that_imports_it_back():
+    """Imports only go down: no circle between modules, directly or around several (lazy imports count)."""
+    assert _cycles(_module_graph()) == []
+
+
+def test_the_circle_finder_finds_circles():
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": {"e2"}, "e2": {"e"}}
+    assert sorted(_cycles(graph)) == [["a", "b", "c"], ["e", "e2"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_the_ground_floor_imports_nothing_of_the_package():
+    graph = _module_graph()
+    assert graph["veg_area_ros.files"] == set()
+    assert "veg_area_ros.files" in graph["veg_area_ros.calib_io"] and "veg_area_ros.files" in graph["veg_area_ros.frames"]

@@ -22,8 +22,8 @@ from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 
-from .calib_io import write_atomic
 from .cdr import CameraInfoFields, ImageFields, decode_camera_info, decode_image
+from .files import write_atomic
 from .strict_yaml import load_text, read_text
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"

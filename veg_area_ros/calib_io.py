@@ -11,10 +11,8 @@ the idealized image this package measures.
 from __future__ import annotations
 
 import datetime as dt
-import glob
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +23,7 @@ import yaml
 from . import __version__
 from .camera_info import camera_from_info, camera_info_fields
 from .camera_model import BrownCamera, check_plausible
+from .files import write_atomic
 from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
 from .strict_yaml import StrictYamlError, load_text, read_text
 
@@ -80,58 +79,6 @@ def plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     return value
-
-
-def _umask() -> int:
-    """The process's umask, read without changing it where the kernel says (Linux), else by setting it back."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    except (OSError, ValueError):
-        pass
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-def _writer_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def _remove_orphans(path: Path) -> None:
-    """Temp files of `path` left by a writer that was killed (SIGKILL runs no clean-up): their name holds the
-    writer's pid, and a pid that no longer runs cannot finish them."""
-    for orphan in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
-        pid = orphan.name[len(path.name) + 2:].split(".", 1)[0]
-        if pid.isdigit() and int(pid) != os.getpid() and not _writer_alive(int(pid)):
-            orphan.unlink(missing_ok=True)
-
-
-def write_atomic(path: str | os.PathLike, text: str) -> None:
-    """Write via a temporary file in the same folder and rename, so readers never see half a file; the file
-    gets the mode the umask gives any new file (mkstemp's own is 0600), and a killed writer's leftovers of
-    the same file are removed."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _remove_orphans(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fchmod(handle.fileno(), 0o666 & ~_umask())
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def write_calibration(path: str | os.PathLike, camera: BrownCamera, camera_name: str = "camera",

@@ -12,9 +12,8 @@ from collections.abc import Sequence
 import numpy as np
 
 from .camera_model import BrownCamera, check_plausible
-from .frames import MAX_IMAGE_PIXELS
+from .files import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE
 
-MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in a camera_info are corrupt
 PLUMB_BOB_SIZES = (0, 4, 5, 8, 12, 14)  # OpenCV's lengths; beyond the fifth they must be zero (rational terms)
 
 

@@ -18,6 +18,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .files import MAX_IMAGE_PIXELS
+
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp"}
 VIDEO_SUFFIXES = {".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv"}
 
@@ -44,7 +46,6 @@ def is_bag(path: Path) -> bool:
 
 
 JPEG_STANDALONE_MARKERS = {0x01, *range(0xD0, 0xD9)}  # TEM, restarts, start of image: no length follows
-MAX_IMAGE_PIXELS = 64_000_000  # six times the 3872x2592 DSLR; a 20000x20000 PNG took 9 GB and minutes to refuse
 MIN_IMAGE_SIDE = 16  # smaller holds no board and no targets
 
 

@@ -29,6 +29,7 @@ from .sim.synthetic import (
     render_board_views,
     render_scene,
     scene_targets,
+    scene_targets_content,
 )
 from .targets import TargetsSpec
 
@@ -39,6 +40,11 @@ DEFAULT_BOARD = BOARD  # the board the built-in synthetic camera shows: the cali
 def default_targets() -> TargetsSpec:
     """The targets the built-in synthetic camera shows: the area node's default."""
     return scene_targets()
+
+
+def default_targets_content() -> dict:
+    """The same targets as a targets file's content (YAML-ready), for a user to measure a saved frame."""
+    return scene_targets_content()
 
 
 class SourceError(RuntimeError):
@@ -92,6 +98,13 @@ class SyntheticSource:
         if self.board_frames and (self.loop_board or k < self.board_frames):
             grey = self._noisy(self._board_view(k % VIEWS))
             return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
+        return self.scene_frame()
+
+    def scene_frame(self) -> np.ndarray | None:
+        """One frame of the measured scene (with the sensor's noise), whatever the source is showing now; None
+        for a board-only source."""
+        if self.scene is None:
+            return None
         if self._clean_scene is None:
             self._clean_scene = render_scene(self.camera, self.scene, DISTANCE_M, self.port, noise_sigma=0.0)
         return self._noisy(self._clean_scene)

@@ -13,6 +13,7 @@ A profile the user set (FASTDDS_DEFAULT_PROFILES_FILE) or another RMW_IMPLEMENTA
 
 from __future__ import annotations
 
+import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,17 +34,32 @@ class Transport:
             environ["FASTDDS_DEFAULT_PROFILES_FILE"] = self.profile
 
 
-def config_file(name: str) -> str | None:
-    """A file of the package's config/: installed share/ (ament index or this Python prefix) or the source tree."""
-    candidates = [Path(sys.prefix) / "share" / "veg_area_ros" / "config" / name,
-                  Path(__file__).resolve().parents[1] / "config" / name]
-    try:
-        from ament_index_python.packages import get_package_share_directory
+def config_locations(name: str, environ: dict | None = None) -> list[tuple[Path, str]]:
+    """Where a file of the package's config/ may be, best first, each with how it was found: the ament index
+    (a sourced ROS 2 or colcon install), beside the running interpreter's prefix (an unsourced `.venv`, where
+    colcon installed into the venv itself), then the source tree. No ament environment is a normal state, not
+    an error: the index is then skipped."""
+    environ = os.environ if environ is None else environ
+    found: list[tuple[Path, str]] = []
+    for prefix in filter(None, environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)):
+        # the ament index's rule (share/ament_index/resource_index/packages/<name>) without importing it
+        if (Path(prefix) / "share" / "ament_index" / "resource_index" / "packages" / "veg_area_ros").is_file():
+            found.append((Path(prefix) / "share" / "veg_area_ros" / "config" / name, "ament index"))
+            break
+    found.append((Path(sys.prefix) / "share" / "veg_area_ros" / "config" / name, "this interpreter's prefix"))
+    found.append((Path(__file__).resolve().parents[1] / "config" / name, "the source tree"))
+    return found
 
-        candidates.insert(0, Path(get_package_share_directory("veg_area_ros")) / "config" / name)
-    except (ImportError, LookupError):  # no ament_index_python, or not in an ament prefix (PackageNotFoundError)
-        pass  # the other candidates are looked at
-    return next((str(path) for path in candidates if path.is_file()), None)
+
+def find_config(name: str, environ: dict | None = None) -> tuple[str, str] | None:
+    """The first existing file of `config_locations` and how it was found, or None."""
+    return next(((str(path), how) for path, how in config_locations(name, environ) if path.is_file()), None)
+
+
+def config_file(name: str, environ: dict | None = None) -> str | None:
+    """A file of the package's config/ (see `config_locations`), or None."""
+    found = find_config(name, environ)
+    return found[0] if found else None
 
 
 def choose_transport(environ: dict) -> Transport:
@@ -62,11 +78,14 @@ def choose_transport(environ: dict) -> Transport:
     if wanted == "default":
         return Transport("default", None, "Fast DDS defaults (VEG_AREA_TRANSPORT=default): camera-sized "
                          "best-effort images are mostly lost")
-    profile = config_file(PROFILES[wanted])
-    if profile is None:
-        return Transport("default", None, f"Fast DDS defaults: config/{PROFILES[wanted]} not found in this install")
+    found = find_config(PROFILES[wanted], environ)
+    if found is None:
+        looked = ", ".join(str(path) for path, _ in config_locations(PROFILES[wanted], environ))
+        return Transport("default", None, f"Fast DDS defaults: config/{PROFILES[wanted]} not found (looked in "
+                         f"{looked}): camera-sized best-effort images are mostly lost")
+    profile, how = found
     reach = "this machine and others over UDP" if wanted == "auto" else "this machine only"
-    return Transport(wanted, profile, f"veg_area_ros '{wanted}' ({reach}): {profile}")
+    return Transport(wanted, profile, f"veg_area_ros '{wanted}' ({reach}): {profile} (found via {how})")
 
 
 def buffer_warning(transport: Transport, proc: Path = Path("/proc/sys/net/core")) -> str | None:

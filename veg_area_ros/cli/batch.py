@@ -17,7 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .common import EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, progress, write_csv
-from .measure import MeasureJob, measure
+from .measure_job import MeasureJob, measure
 
 BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "std_area_m2", "csv", "error")
 PROGRESS_EVERY_S = 2.0

@@ -12,7 +12,7 @@ import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..calib_io import write_atomic
+from ..files import write_atomic
 
 EXIT_OK = 0
 EXIT_FAILED = 1  # with a one-line reason on stderr

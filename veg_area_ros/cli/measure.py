@@ -1,23 +1,17 @@
-"""`veg-area measure`: Af of every frame of images, folders, videos and rosbag2 bags, with a CSV time series,
-its plot, overlays and idealized frames; several inputs go to worker processes (`cli.batch`)."""
+"""`veg-area measure`: its options and its dispatch. One input (or `--jobs 1`) is measured here by
+`cli.measure_job`; several inputs with `--jobs N` go to worker processes (`cli.batch`)."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import sys
-from collections.abc import Callable
-from dataclasses import dataclass, fields
 from pathlib import Path
 
 from ..settings import MeasurementSettings
-from .common import EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, positive_float, progress, unwritable, write_csv
+from .batch import measure_batch
+from .common import EXIT_USAGE, CliError, positive_float
+from .measure_job import MeasureJob, measure
 
-CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "area_mode",
-               "subpixel_applied", "pixel_count", "count_area_m2", "threshold", "scale_std_m2", "threshold_std_m2",
-               "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2", "object_plane_offset_m",
-               "scale_m_per_px", "scale_kind", "calibrated", "missing_targets", "error")
 DEFAULTS = MeasurementSettings()
 
 
@@ -99,219 +93,10 @@ def add_parser(sub) -> None:
     mea.set_defaults(func=cmd_measure)
 
 
-@dataclass(frozen=True)
-class MeasureJob:
-    """One `measure` run over its inputs: what the command line asked for, checked; a batch gives each worker
-    its own copy with one input."""
-
-    inputs: tuple[str, ...]
-    calibration: str  # a YAML file, 'none' or 'bag'
-    targets: str
-    settings: MeasurementSettings
-    image_topic: str | None = None
-    start_time: float = -math.inf
-    end_time: float = math.inf
-    video_step: int = 1
-    csv: str | None = None
-    overlay: str | None = None
-    idealized: str | None = None
-    json: bool = False
-    quiet: bool = False
-
-    @classmethod
-    def from_args(cls, args: argparse.Namespace) -> MeasureJob:
-        from ..classify import ClassifyError
-
-        if args.video_step < 1:
-            raise CliError("--video-step must be 1 or more", EXIT_USAGE)
-        try:
-            settings = MeasurementSettings(threshold=args.threshold, object=args.object, channel=args.channel,
-                                           roi=args.roi, open_px=args.open, close_px=args.close,
-                                           area_mode=args.area_mode, levels=args.levels,
-                                           sweep_step=args.sweep_step)
-        except ClassifyError as exc:
-            raise CliError(str(exc), EXIT_USAGE) from exc
-        names = {f.name for f in fields(cls)} - {"settings", "inputs"}
-        return cls(inputs=tuple(args.inputs), settings=settings, **{name: getattr(args, name) for name in names})
-
-
 def cmd_measure(args: argparse.Namespace) -> int:
     if args.jobs < 0:
         raise CliError("--jobs must be 0 (every core) or more", EXIT_USAGE)
     job = MeasureJob.from_args(args)
     if args.jobs != 1 and len(args.inputs) > 1:
-        from .batch import measure_batch
-
         return measure_batch(job, args.jobs, Path(args.output_dir))
     return measure(job)[0]
-
-
-def frame_file_name(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(name).stem) + ".png"
-
-
-def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
-            stop: Callable[[], bool] | None = None) -> tuple[int, list[dict]]:
-    """Measure every frame of the job's inputs; (exit code, CSV rows; EXIT_INTERRUPTED when interrupted, with
-    what was measured so far). `on_frame(index, total)` (a batch worker) replaces the per-frame lines on stdout;
-    `stop()` true (the batch was interrupted) ends the series as Ctrl-C does."""
-    import cv2
-
-    from ..area import NO_CALIBRATION_FOR_OFFSET, draw_overlay
-    from ..bags import BagError, bag_image_count
-    from ..calib_io import CalibrationFileError, read_calibration, write_calibration
-    from ..camera_info import info_to_camera
-    from ..classify import ClassifyError
-    from ..frames import (
-        IMAGE_SUFFIXES,
-        VIDEO_SUFFIXES,
-        InputError,
-        expand_inputs,
-        is_bag,
-        iter_frames,
-        video_frame_count,
-    )
-    from ..idealize import FrameSizeError
-    from ..targets import TargetsError, TargetsSpec
-
-    say = progress(job.quiet)
-    camera = port_camera = file_camera = None
-    from_bag = job.calibration.lower() == "bag"  # each frame with the camera_info recorded before it
-    if job.calibration.lower() not in ("none", "bag"):
-        try:
-            calibration = read_calibration(job.calibration)
-        except CalibrationFileError as exc:
-            raise CliError(str(exc)) from exc
-        camera, port_camera = calibration.camera, calibration.port_camera()
-        file_camera = camera
-    try:
-        targets = TargetsSpec.load(job.targets)
-    except TargetsError as exc:
-        raise CliError(str(exc)) from exc
-    try:
-        files = expand_inputs(list(job.inputs))
-    except InputError as exc:
-        raise CliError(str(exc)) from exc
-    videos = [f for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
-    bags = [f for f in files if is_bag(f)]
-    if from_bag and len(bags) != len(files):
-        raise CliError("--calibration bag needs rosbag2 inputs (their recorded camera_info)", EXIT_USAGE)
-    try:
-        bag_frames = sum(bag_image_count(b, job.image_topic) for b in bags)
-    except BagError as exc:
-        raise CliError(str(exc)) from exc
-    total = (sum(video_frame_count(v) // job.video_step for v in videos) + bag_frames
-             + len(files) - len(videos) - len(bags))
-    series = videos + bags
-    csv_path = Path(job.csv) if job.csv else (Path(f"{series[0].stem}_area.csv") if series else None)
-    single_overlay = job.overlay and Path(job.overlay).suffix.lower() in IMAGE_SUFFIXES
-    for option, value, folder in (("--overlay", job.overlay, not single_overlay), ("--csv", job.csv, False),
-                                  ("--idealized", job.idealized, True)):
-        if value:
-            problem = unwritable(Path(value), folder)
-            if problem:
-                raise CliError(f"{option} {value}: {problem}; nothing was measured", EXIT_USAGE)
-    if single_overlay and total > 1:
-        raise CliError(f"--overlay {job.overlay} names one image but the input has {total} frames; "
-                       "give a folder", EXIT_USAGE)
-
-    if targets.object_plane_offset_m is not None and camera is None and not from_bag:
-        raise CliError(NO_CALIBRATION_FOR_OFFSET)
-
-    def new_measurer(camera):
-        try:  # the exact port model for frames of the port file's camera, not its plumb_bob stand-in
-            return job.settings.measurer(camera, targets, port_camera if camera is file_camera else None)
-        except ClassifyError as exc:
-            raise CliError(str(exc), EXIT_USAGE) from exc
-        except TargetsError as exc:
-            raise CliError(str(exc)) from exc
-
-    measurer = new_measurer(camera) if not from_bag else None
-    if job.idealized and camera is not None:
-        folder = Path(job.idealized)
-        write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
-                          {"idealized_from": str(Path(job.calibration).resolve())})
-    rows: list[dict] = []
-    interrupted = False
-    try:
-        for index, frame in enumerate(iter_frames(files, job.video_step, job.image_topic), 1):
-            row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
-            if frame.stamp is not None:
-                row["stamp_sec"], row["stamp_nanosec"] = frame.stamp
-                if not (job.start_time <= frame.time_s <= job.end_time):
-                    continue
-            try:
-                if frame.image is None:
-                    raise InputError(f"skipped: {frame.problem}")
-                if from_bag:  # as the live area node: the latest camera_info, a new measurer when it changes
-                    if frame.camera_info is None:
-                        raise InputError("no camera_info recorded before this frame")
-                    recorded = info_to_camera(frame.camera_info)
-                    if recorded != camera or measurer is None:
-                        camera = recorded
-                        measurer = new_measurer(camera)
-                result = measurer.measure(frame.image, keep_images=bool(job.overlay or job.idealized))
-            except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
-                row["error"] = str(exc)
-                say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
-            else:
-                row.update(result.summary())
-                if result.missing_targets:
-                    say(f"[{index}/{total}] {frame.name}: targets not found: markers {result.missing_targets}")
-                if on_frame is None and (not job.json or index % 25 == 0 or index == total):
-                    line = (f"[{index}/{total}] {frame.name}: Af = {result.area_m2:.6g} ± {result.area_std_m2:.2g} m² "
-                            f"({result.pixel_count} px, threshold {result.threshold:g}, {result.scale.kind} scale"
-                            f"{'' if result.calibrated else ', UNCALIBRATED'})")
-                    print(line, file=sys.stderr if job.json else sys.stdout, flush=True)
-                if job.overlay:
-                    target = Path(job.overlay) if single_overlay else Path(job.overlay) / frame_file_name(frame.name)
-                    target.parent.mkdir(parents=True, exist_ok=True)
-                    if not cv2.imwrite(str(target), draw_overlay(result)):
-                        say(f"[{index}/{total}] {frame.name}: overlay {target} could not be written")
-                if job.idealized and camera is not None:
-                    cv2.imwrite(str(Path(job.idealized) / frame_file_name(frame.name)), result.image)
-            if job.json:
-                print(json.dumps({k: v for k, v in row.items() if k != "error" or v}), flush=True)
-            rows.append(row)
-            if on_frame is not None:
-                on_frame(index, total)
-            if stop is not None and stop():
-                raise KeyboardInterrupt
-    except KeyboardInterrupt:  # Ctrl-C on a long video or bag: what was measured is kept (CSV, plot)
-        interrupted = True
-    # counted from the rows: the frame in hand when Ctrl-C came is left out of both
-    measured = sum(1 for row in rows if not row["error"])
-
-    if csv_path is not None and measured == 0 and csv_path.exists():  # an error-only table must not replace one
-        say(f"time series not written: no frame was measured (the existing {csv_path} is kept)")
-    elif csv_path is not None and rows:  # a new file lists every frame, with its error where there is one
-        write_area_csv(csv_path, rows)
-        say(f"time series: {csv_path}")
-        if len(rows) > 1:
-            say(f"plot: {_plot_series(rows, csv_path)}")
-    if interrupted:  # the frame in hand when Ctrl-C came is not in the rows
-        say(f"interrupted after {len(rows)} of {total} frames ({measured} measured)"
-            + (f"; the series so far: {csv_path}" if csv_path is not None and rows else ""))
-        return EXIT_INTERRUPTED, rows
-    if measured == 0:
-        reasons = sorted({r["error"] for r in rows})
-        raise CliError(f"no frame measured: {'; '.join(reasons)[:500]}")
-    if measured < len(rows):
-        say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
-    return EXIT_OK, rows
-
-
-def _plot_series(rows: list[dict], csv_path: Path) -> Path:
-    from ..report import plot_area_series
-
-    nan = float("nan")
-    timed = all(r["time_s"] is not None for r in rows)
-    return plot_area_series([r["time_s"] if timed else k for k, r in enumerate(rows)],
-                            [r.get("area_m2", nan) for r in rows], [r.get("area_std_m2", nan) for r in rows],
-                            csv_path.with_suffix(".png"), title=f"Projected area, {csv_path.stem}",
-                            time_label="time [s]" if timed else "frame")
-
-
-def write_area_csv(path: Path, rows: list[dict]) -> None:
-    write_csv(path, CSV_COLUMNS,
-              [{**row, "missing_targets": " ".join(map(str, row.get("missing_targets", [])))} for row in rows])

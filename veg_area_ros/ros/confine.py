@@ -14,23 +14,23 @@ import os
 import subprocess
 from pathlib import Path
 
+from ..transport import config_file
+
 SOURCE_ROOT = Path(__file__).resolve().parents[2]  # the folder holding veg_area_ros: PYTHONPATH of the children
 
 
-def _config_dir() -> Path:
-    """The Fast DDS profiles: the source tree's config/, else the installed share/veg_area_ros/config."""
-    tree = SOURCE_ROOT / "config"
-    if (tree / "fastdds.xml").exists():
-        return tree
-    import sys
-
-    return Path(sys.prefix) / "share" / "veg_area_ros" / "config"
+def _profile(name: str) -> str:
+    """A Fast DDS profile of the package's config/ (transport.config_file's rule: installed share/, or the tree)."""
+    path = config_file(name)
+    if path is None:
+        raise FileNotFoundError(f"config/{name} is neither installed nor in the source tree")
+    return path
 
 
 # the nodes' default profile (shared memory + UDP on every interface) where the namespace confines it; this
 # machine only (shared memory + UDP on 127.0.0.1) where there is no private namespace
-PROFILE = _config_dir() / "fastdds.xml"
-LOCAL_PROFILE = _config_dir() / "fastdds_local.xml"
+PROFILE = _profile("fastdds.xml")
+LOCAL_PROFILE = _profile("fastdds_local.xml")
 _domains = itertools.count((os.getpid() % 50) * 4 + 1)
 
 
@@ -54,7 +54,7 @@ def ros_environment(home: Path, domain: int) -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "VEG_AREA_"))}
     env.update(HOME=str(home), ROS_LOG_DIR=str(home / "ros_log"), PYTHONPATH=str(SOURCE_ROOT),
                ROS_DOMAIN_ID=str(domain), RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
-               FASTDDS_DEFAULT_PROFILES_FILE=str(PROFILE if netns_available() else LOCAL_PROFILE),
+               FASTDDS_DEFAULT_PROFILES_FILE=PROFILE if netns_available() else LOCAL_PROFILE,
                PYTHONUNBUFFERED="1")
     return env
 
@@ -72,13 +72,11 @@ def shm_files() -> set[str]:
     return {name for name in os.listdir("/dev/shm") if "fast" in name.lower()}
 
 
-def remove_new_shm(before: set[str]) -> list[str]:
-    """Remove the Fast DDS files a run added to the host's /dev/shm (a killed node leaves its own); the names
-    removed. Inside a private namespace there are none: its /dev/shm went with it."""
-    removed = sorted(shm_files() - before)
-    for leftover in removed:
+def remove_new_shm(before: set[str]) -> None:
+    """Remove the Fast DDS files a run added to the host's /dev/shm (a killed node leaves its own). Inside a
+    private namespace there are none: its /dev/shm went with it."""
+    for leftover in shm_files() - before:
         Path("/dev/shm", leftover).unlink(missing_ok=True)
-    return removed
 
 
 def run_confined(command: list[str], cwd: Path, timeout: float,

@@ -8,12 +8,15 @@ import sys
 import time
 from pathlib import Path
 
+import cv2
 import numpy as np
+import yaml
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import String
 
-from ..calib_io import write_atomic
+from ..files import write_atomic
+from ..sources import default_targets_content
 from .area_node import AreaNode
 from .calibration_node import CalibrationNode
 from .camera_node import CameraNode
@@ -30,10 +33,12 @@ def run_graph(output: Path, measurements: int = 10, timeout_s: float = 300.0, ra
     calibration_file.unlink(missing_ok=True)  # the demo calibrates from scratch every run
     results: list[dict] = []
     truth: list[float] = []
+    sources = []
 
     def camera() -> CameraNode:
         node = CameraNode(parameter_overrides=[Parameter("rate_hz", value=rate_hz)])
         truth.append(node.source.true_area_m2)
+        sources.append(node.source)
         say(f"graph: synthetic underwater endoscope -> calibration_node -> area_node (truth Af {truth[0]:.6f} m²)")
         return node
 
@@ -68,7 +73,13 @@ def run_graph(output: Path, measurements: int = 10, timeout_s: float = 300.0, ra
     result = {"areas_m2": areas.tolist(), "mean_area_m2": float(areas.mean()), "area_std_m2": std,
               "true_area_m2": truth[0], "error_pct": float(error), "calibration": str(calibration_file)}
     write_atomic(output / "graph_result.json", json.dumps(result, indent=1))
-    say(f"calibration served and written to {calibration_file}; the figures in {output / 'graph_result.json'}")
+    frame_file, targets_file = output / "cube_frame.png", output / "targets.yaml"
+    ok, png = cv2.imencode(".png", sources[0].scene_frame())
+    if ok:
+        write_atomic(frame_file, png.tobytes())
+    write_atomic(targets_file, yaml.safe_dump(default_targets_content(), sort_keys=False))
+    say(f"calibration served and written to {calibration_file}; the figures in {output / 'graph_result.json'}; "
+        f"a raw frame of the cube in {frame_file} and its targets in {targets_file}, to measure with veg-area measure")
     return EXIT_OK
 
 

@@ -1,0 +1,64 @@
+"""The ground floor every reader and writer shares: atomic writes, and the size limits inputs are held to.
+Imports nothing of the package, so any module may import it."""
+
+from __future__ import annotations
+
+import glob
+import os
+import tempfile
+from pathlib import Path
+
+MAX_IMAGE_PIXELS = 64_000_000  # six times the 3872x2592 DSLR; a 20000x20000 PNG took 9 GB and minutes to refuse
+MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in a camera_info are corrupt
+
+
+def _umask() -> int:
+    """The process's umask, read without changing it where the kernel says (Linux), else by setting it back."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _writer_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove_orphans(path: Path) -> None:
+    """Temp files of `path` left by a writer that was killed (SIGKILL runs no clean-up): their name holds the
+    writer's pid, and a pid that no longer runs cannot finish them."""
+    for orphan in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
+        pid = orphan.name[len(path.name) + 2:].split(".", 1)[0]
+        if pid.isdigit() and int(pid) != os.getpid() and not _writer_alive(int(pid)):
+            orphan.unlink(missing_ok=True)
+
+
+def write_atomic(path: str | os.PathLike, content: str | bytes) -> None:
+    """Write `content` (text as UTF-8, or bytes) via a temporary file in the same folder and rename, so readers
+    never see half a file; the file gets the mode the umask gives any new file (mkstemp's own is 0600), and a
+    killed writer's leftovers of the same file are removed."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _remove_orphans(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(content.encode("utf-8") if isinstance(content, str) else content)
+            handle.flush()
+            os.fchmod(handle.fileno(), 0o666 & ~_umask())
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
