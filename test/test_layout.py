@@ -210,4 +210,4 @@ def test_the_circle_finder_finds_circles():
 def test_the_ground_floor_imports_nothing_of_the_package():
     graph = _module_graph()
     assert graph["veg_area_ros.files"] == set()
-    assert "veg_area_ros.files" in graph["veg_area_ros.calib_io"] and "veg_area_ros.files" in graph["veg_area_ros.frames"]
+    assert all("veg_area_ros.files" in graph[f"veg_area_ros.{module}"] for module in ("calib_io", "frames", "bags"))

@@ -6,6 +6,7 @@
     veg-area record [TOPICS...] | play BAG | bag-recover BAG NEW_BAG
     veg-area vogel TABLE.csv | BAGS...
     veg-area demo | calibration-demo
+    veg-area doctor
 
 Exit codes (cli.common): 0 success, 1 failed (with a one-line reason on stderr), 2 usage error, 3 refused to
 replace a better calibration, 130 interrupted (what was done so far is kept).
@@ -18,7 +19,7 @@ import sys
 from collections.abc import Sequence
 
 from .. import __version__
-from . import bags, calibrate, demos, flume, measure
+from . import bags, calibrate, demos, doctor, flume, measure
 from .common import EXIT_INTERRUPTED, CliError
 
 
@@ -31,6 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     bags.add_parsers(sub)
     flume.add_parser(sub)
     demos.add_parsers(sub)
+    doctor.add_parser(sub)
     return parser
 
 
