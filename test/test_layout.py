@@ -70,12 +70,14 @@ def test_config_and_launch_are_installed_and_the_launch_file_is_valid_python(pre
 
 def test_installed_node_executable_starts_and_stops_cleanly(prefix, tmp_path):
     """What `ros2 run veg_area_ros area_node` runs: it starts, waits for frames, and exits 0 on SIGINT.
-    Confined to this machine by the shipped profile (shared memory, UDP on 127.0.0.1 only), private domain."""
+    Without any ament or Fast DDS setting (an unsourced .venv), so the node finds its own profile; kept on this
+    machine by the shipped local profile (shared memory, UDP on 127.0.0.1 only), private domain. The README's
+    test runs the same with the default profile, confined to a private network namespace."""
     import signal
     import time
 
-    env = dict(os.environ, HOME=str(tmp_path), ROS_DOMAIN_ID="199",
-               FASTDDS_DEFAULT_PROFILES_FILE=str(REPO / "config" / "fastdds_local.xml"))
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "AMENT_"))}
+    env.update(HOME=str(tmp_path), ROS_DOMAIN_ID="199", VEG_AREA_TRANSPORT="local")
     process = subprocess.Popen([str(prefix / "lib" / "veg_area_ros" / "area_node")], env=env,
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
@@ -84,6 +86,7 @@ def test_installed_node_executable_starts_and_stops_cleanly(prefix, tmp_path):
         while "transport:" not in started and process.poll() is None and time.monotonic() < deadline:
             started += process.stdout.readline()
         assert "transport:" in started and process.poll() is None, started + process.stdout.read()
+        assert "fastdds_local.xml (found via" in started, started
         process.send_signal(signal.SIGINT)
         assert process.wait(20) == 0
     finally:

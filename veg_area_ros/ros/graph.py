@@ -77,7 +77,7 @@ def run_graph(output: Path, measurements: int = 10, timeout_s: float = 300.0, ra
     ok, png = cv2.imencode(".png", sources[0].scene_frame())
     if ok:
         write_atomic(frame_file, png.tobytes())
-    write_atomic(targets_file, yaml.safe_dump(default_targets_content(), sort_keys=False))
+    write_atomic(targets_file, yaml.safe_dump(default_targets_content(), sort_keys=False, default_flow_style=None))
     say(f"calibration served and written to {calibration_file}; the figures in {output / 'graph_result.json'}; "
         f"a raw frame of the cube in {frame_file} and its targets in {targets_file}, to measure with veg-area measure")
     return EXIT_OK
