@@ -153,8 +153,8 @@ def test_thin_branches_gain_in_subpixel_mode(widths):
 @pytest.mark.parametrize("condition", ["water tank", "flume"])
 def test_bush_subpixel_is_no_worse_than_count(condition):
     """The bush at 0.7 m, in the water tank and in the flume (noise 4 DN, blur, 30 % uneven light): the
-    sub-pixel error and std are no larger than the count's. In the flume the background's spread leaves no
-    value that tells an edge's share, and sub-pixel mode says it counted whole pixels."""
+    sub-pixel error and std are no larger than the count's. In the flume the light is evened first (the
+    background's surface fitted to the frame) and the shares hold there too."""
     setting = next(c for c in CONDITIONS if c.name == condition)
     scene = bush_scene()
     frame = render_scene(ENDOSCOPE, scene, 0.7, setting.port, roll_deg=0.0, noise_sigma=setting.noise_sigma,
@@ -166,10 +166,11 @@ def test_bush_subpixel_is_no_worse_than_count(condition):
     assert errors["subpixel"] <= errors["count"] + 1e-12, errors
     assert results["subpixel"].area_std_m2 <= results["count"].area_std_m2 + 1e-12
     assert errors["subpixel"] * scene.true_area_m2 <= 2 * results["subpixel"].area_std_m2
+    summary = results["subpixel"].summary()
+    assert summary["subpixel_applied"] is True and errors["subpixel"] < 0.005
+    assert (summary["light"] is not None) == (condition == "flume")
     if condition == "flume":
-        assert results["subpixel"].summary()["subpixel_applied"] is False
-    else:
-        assert results["subpixel"].summary()["subpixel_applied"] is True and errors["subpixel"] < 0.005
+        assert summary["light"]["evened_by"] == "fitted" and 0.1 < summary["light"]["variation"] < 0.6
 
 
 def test_levels_from_a_histogram_and_the_fractions_they_give():

@@ -21,7 +21,7 @@ edge length, estimated by the mixed pixels), levels, noise and pure zones in sub
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -38,13 +38,16 @@ from .classify import (
     check_polygon,
     check_roi_in_image,
     polygon_roi,
+    pure_level,
 )
 from .flat_port import FlatPortCamera, PortError, absorbed_camera, estimate_pose
 from .idealize import Idealizer
+from .light import FlatField, check_background_frame, flat_field
 from .markers import DetectedMarker, detect_markers, marker_centre, track_markers
 from .scale import PlaneScale, marker_layout_problem
 from .targets import TargetsError, TargetsSpec
 
+INTERIOR_PX = 3  # a class's interior: this far inside it, a blurred edge (1 px sd) adds under 0.1 % of the contrast
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
 WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per frame
 ROI_TOLERANCE_PX = 0.5  # targets moved further than this (idealized px) since the weights were built: rebuild
@@ -79,6 +82,7 @@ class AreaResult:
     edge_length_px: float = 0.0  # the object's boundary in raw pixels, from its mixed pixels
     count_area_m2: float = 0.0  # Af of the whole-pixel count (equals area_m2 in count mode)
     subpixel_applied: bool = False  # sub-pixel mode used the shares (else it counted whole pixels)
+    flat_field: FlatField | None = field(default=None, repr=False)  # the uneven light evened before the shares
 
     def summary(self) -> dict:
         return {
@@ -97,6 +101,9 @@ class AreaResult:
             "edge_length_px": self.edge_length_px,
             "missing_targets": list(self.missing_targets), "sweep": [list(s) for s in self.sweep],
             "weight_error_bound": self.weight_error_bound,
+            "light": None if self.flat_field is None else {
+                "evened_by": self.flat_field.source, "variation": self.flat_field.variation,
+                "misfit": self.flat_field.misfit},
         }
 
 
@@ -139,11 +146,22 @@ class AreaMeasurer:
 
     def __init__(self, camera: BrownCamera | None, targets: TargetsSpec, classifier: Classifier,
                  roi: np.ndarray | None = None, threshold_delta: float = 5.0, area_mode: str = "subpixel",
-                 levels: tuple[float, float] | None = None):
+                 levels: tuple[float, float] | None = None, background: np.ndarray | None = None,
+                 even_light: bool = True):
         if area_mode not in AREA_MODES:
             raise ClassifyError(f"area mode must be one of {', '.join(AREA_MODES)}, got {area_mode!r}")
         self.area_mode = area_mode
         self.given_levels = check_levels(levels)
+        # sub-pixel shares under uneven light: the band evened by the background's surface (a frame of the empty
+        # scene, else fitted per frame); not for the excess-green index, which is no brightness
+        self.even_light = even_light and area_mode == "subpixel" and classifier.object != "green"
+        if background is not None and not self.even_light:
+            raise ClassifyError("a background frame evens the light for sub-pixel shares of a dark or bright "
+                                "object; it does not apply to " + ("count mode" if area_mode != "subpixel"
+                                                                   else "the excess-green index"))
+        if background is not None and camera is not None:
+            check_background_frame(background, (camera.image_size[1], camera.image_size[0]))
+        self.background_band = None if background is None else classifier.index_image(background)
         self.camera = camera
         self.idealizer = Idealizer(camera) if camera is not None else None
         self.targets = targets
@@ -158,6 +176,8 @@ class AreaMeasurer:
         self._weights: _Weights | None = None
         self._last_scale: PlaneScale | None = None  # the last frame's fit: where a hidden marker should be
         self.rebuilds = 0  # how often the weights were (re)built: once for a steady camera
+        self._unevenness: float | None = None  # this frame's light left uneven (relative), None: not known
+        self._pure_levels: Levels | None = None  # this frame's levels from the classes' interiors
 
     def _idealize_points(self, raw_pixels: np.ndarray) -> np.ndarray:
         """Raw-frame pixels -> the idealized image."""
@@ -326,7 +346,17 @@ class AreaMeasurer:
     def _levels(self, estimator: LevelEstimator, threshold: float) -> Levels | None:
         """The object/background levels at this threshold: estimated from the ROI's band histogram, or the
         user's with the spreads the histogram shows around them."""
+        if self._pure_levels is not None and self.given_levels is None:
+            pure = self._pure_levels
+            if self._unevenness is None:  # global means of a light that may vary: off by up to a spread
+                pure = replace(pure, object_error=None, background_error=None)
+            else:
+                pure = pure.with_unevenness(self._unevenness)
+            return pure if pure.resolvable() else None
         estimated = estimator.at(threshold)
+        if estimated is not None:
+            estimated = (replace(estimated, object_error=None, background_error=None) if self._unevenness is None
+                         else estimated.with_unevenness(self._unevenness))
         if self.given_levels is None:
             return estimated if estimated is not None and estimated.resolvable() else None
         object_level, background_level = self.given_levels
@@ -339,10 +369,22 @@ class AreaMeasurer:
         """Af of one raw frame. `keep_images` also returns the idealized frame, its ROI and the object mask
         in it (for overlays and the node's image topics; costs a remap)."""
         self._check_size(frame)
+        if self.background_band is not None:
+            check_background_frame(self.background_band, frame.shape)
         located = self._locate(frame)
         weights, factor, carried = self._weights_for(frame, located)
         band = self.classifier.index_image(frame[weights.window])
         threshold = self.classifier.resolve_threshold(band, weights.roi)
+        light = self._flat_field(band, weights, threshold) if self.even_light else None
+        # the light's unevenness left for the levels' errors; unknown (None) without a surface: a level may then
+        # be off by its whole spread
+        self._unevenness = None if light is None else light.unevenness
+        if light is not None and light.needed:
+            band = light.apply(band)
+            threshold = self.classifier.resolve_threshold(band, weights.roi)
+        else:
+            light = None
+        self._pure_levels = self._interior_levels(band, weights.roi, threshold) if self.even_light else None
         # area (m²) and number of the ROI's pixels at every band value, from one 2-D histogram
         histogram = cv2.calcHist([band, weights.levels], [0, 1], weights.roi, [256, WEIGHT_LEVELS],
                                  [0, 256, 0, WEIGHT_LEVELS]).astype(np.float64)
@@ -420,7 +462,7 @@ class AreaMeasurer:
             weight_error_bound=weights.error_bound + carried, area_mode=self.area_mode, levels=levels,
             subpixel_applied=applied,
             discretisation_std_m2=edge.discretisation, levels_std_m2=edge.levels, plane_offset_std_m2=offset_std,
-            edge_length_px=edge.length_px, count_area_m2=counted)
+            edge_length_px=edge.length_px, count_area_m2=counted, flat_field=light)
         if keep_images:
             raw_mask = np.zeros(frame.shape[:2], np.uint8)
             raw_mask[weights.window] = self.classifier.mask(band, weights.roi, threshold)
@@ -428,6 +470,32 @@ class AreaMeasurer:
             result.image = self.idealizer(frame) if self.idealizer is not None else frame
             result.roi = weights.roi_ideal
         return result
+
+    def _interior_levels(self, band: np.ndarray, roi: np.ndarray, threshold: float) -> Levels | None:
+        """Both levels from the pixels at least two pixels inside their class (and the ROI): no edge pixel,
+        blurred or not, pulls them towards each other, as it pulls a histogram's modes where an object is
+        mostly edge (a bush's twigs under blur and noise: its level 2.4 DN off, Af +0.9 %). None where a
+        class has too small an interior (twigs 1-3 px wide): the histogram's modes are used."""
+        kind = band <= threshold if self.classifier.object == "dark" else band > threshold
+        inside = roi > 0
+        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * INTERIOR_PX + 1, 2 * INTERIOR_PX + 1))
+        found = []
+        for members in (kind & inside, ~kind & inside):
+            interior = cv2.erode(members.astype(np.uint8), kernel)
+            found.append(pure_level(cv2.calcHist([band], [0], interior, [256], [0, 256]).ravel()))
+        if found[0] is None or found[1] is None:
+            return None
+        (obj, obj_spread, obj_error), (bg, bg_spread, bg_error) = found
+        return Levels(obj, bg, obj_spread, bg_spread, object_error=obj_error, background_error=bg_error)
+
+    def _flat_field(self, band: np.ndarray, weights: _Weights, threshold: float) -> FlatField | None:
+        """The flat field of this frame's window: from the background frame, or fitted to the background
+        pixels at least two pixels from any pixel of the object's class (blurred edges stay out of the fit)."""
+        if self.background_band is not None:
+            return flat_field(band, weights.roi, background_band=self.background_band[weights.window])
+        background = band > threshold if self.classifier.object == "dark" else band <= threshold
+        background = cv2.erode(background.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        return flat_field(band, weights.roi, background)
 
     @staticmethod
     def _mask_area(mask: np.ndarray, weights: _Weights, factor: float) -> tuple[float, int]:
@@ -486,9 +554,11 @@ def _edge_terms(roi_area: np.ndarray, roi_count: np.ndarray, levels: Levels | No
     the term is the larger of |Af counted - Af sub-pixel| and the random part. Where no band value tells edge
     pixels apart, L is taken as a disc's perimeter for the counted area (the least any shape has) and the
     errors as alike along two halves of it: w L / sqrt(24).
-    Sub-pixel mode: each level moved by its spread (Af's sensitivity to the levels), per-pixel noise of the
+    Sub-pixel mode: each level moved by its error (Af's sensitivity to the levels: the level's standard error
+    and the light's unevenness left, or its whole spread where that is not known), per-pixel noise of the
     background's spread over the contrast, and the pure zones: an edge pixel whose fraction lies within a zone
-    is counted 0 or 1, error up to the zone (sd per pixel sqrt((eps_o³ + eps_b³) / 3), alike along an edge)."""
+    is counted 0 or 1, error up to the zone (sd per pixel sqrt((eps_o³ + eps_b³) / 3) at random phases; along
+    the grid the change of Af when the zones are twice as wide)."""
     mixed = levels.mixed() if levels is not None else np.zeros(256, bool)
     mixed_count = float(roi_count[mixed].sum())
     if mixed_count == 0:  # no value tells edge pixels apart (uneven levels): the least boundary the object has
@@ -504,12 +574,20 @@ def _edge_terms(roi_area: np.ndarray, roi_count: np.ndarray, levels: Levels | No
         systematic = abs(counted_area - subpixel_area(levels))
         return _EdgeTerms(discretisation=max(systematic, weight * float(np.sqrt(length / 12))), length_px=length)
     sensitivity = []
-    for name, spread in (("object", levels.object_spread), ("background", levels.background_spread)):
-        moved = [subpixel_area(Levels(**{**levels.to_dict(), name: getattr(levels, name) + sign * spread}))
+    for name in ("object", "background"):
+        shift = levels.error(name)
+        moved = [subpixel_area(Levels(**{**levels.to_dict(), name: getattr(levels, name) + sign * shift}))
                  for sign in (1, -1)]
         sensitivity.append((moved[0] - moved[1]) / 2)
     noise = weight * np.sqrt(mixed_count) * levels.background_spread / levels.contrast
-    zones = weight * length * np.sqrt((eps_object**3 + eps_background**3) / 3)
+    # the pure zones: an edge pixel within one is counted 0 or 1. Where the edge crosses the grid at random
+    # phases the errors are independent; where it follows the grid they repeat along it, and what they add up
+    # to shows as the change of Af when both zones are made twice as wide (an error growing with the zones'
+    # width, linearly or faster, is bounded by that change)
+    random_zones = weight * np.sqrt(length * (eps_object**3 + eps_background**3) / 3)
+    wider = Levels(**{**levels.to_dict(), "object_spread": 2 * levels.object_spread,
+                      "background_spread": 2 * levels.background_spread})
+    zones = max(random_zones, abs(subpixel_area(wider) - subpixel_area(levels)))
     return _EdgeTerms(levels=float(np.sqrt(sensitivity[0] ** 2 + sensitivity[1] ** 2 + noise**2 + zones**2)),
                       length_px=length)
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import bisect
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -28,6 +28,8 @@ PURE_ZONE_SPREADS = 4.0  # band values within this many spreads of a level are t
 MIN_SPREAD_DN = 0.5  # the spread of a level is at least the band's quantisation
 BAND_VALUES = np.arange(256, dtype=float)
 MAX_PURE_ZONES = 0.5  # both pure zones together may cover at most this share of the contrast
+MIN_PURE_PIXELS = 50  # a class's interior must hold this many pixels to give its level
+LEVEL_ERROR_FLOOR = 0.15  # an estimated level may be off by this share of its spread however many pixels it has
 CHANNELS = ("grey", "blue", "green", "red")
 EXCESS_GREEN = np.array([[-0.5, 1.0, -0.5, 128.0]])  # B, G, R, offset -> (2G - R - B) / 2 + 128, saturated
 
@@ -96,6 +98,20 @@ class Levels:
     object_spread: float = MIN_SPREAD_DN
     background_spread: float = MIN_SPREAD_DN
     estimated: bool = True  # from the frame's ROI, or given by the user
+    # how far each level itself may be off (DN, 1 std): its pure pixels' standard error and the light's
+    # unevenness that is left; None: not known, the spread is taken (a level may then be off by a whole spread)
+    object_error: float | None = None
+    background_error: float | None = None
+
+    def error(self, name: str) -> float:
+        """How far the object's or the background's level may be off (DN): its error, else its spread."""
+        known = getattr(self, f"{name}_error")
+        return getattr(self, f"{name}_spread") if known is None else known
+
+    def with_unevenness(self, relative: float) -> Levels:
+        """These levels with a relative unevenness of the light left over the image added to their errors."""
+        return replace(self, object_error=math.hypot(self.error("object"), relative * self.object),
+                       background_error=math.hypot(self.error("background"), relative * self.background))
 
     @property
     def contrast(self) -> float:
@@ -131,7 +147,8 @@ class Levels:
 
     def to_dict(self) -> dict:
         return {"object": self.object, "background": self.background, "object_spread": self.object_spread,
-                "background_spread": self.background_spread, "estimated": self.estimated}
+                "background_spread": self.background_spread, "estimated": self.estimated,
+                "object_error": self.object_error, "background_error": self.background_error}
 
 
 @functools.lru_cache(maxsize=64)
@@ -166,7 +183,7 @@ class LevelEstimator:
         goal = cumulative[first] + share * (cumulative[last + 1] - cumulative[first])
         return min(max(bisect.bisect_left(cumulative, goal) - 1, first), last)
 
-    def _class(self, first: int, last: int, far_side: int, background: bool) -> tuple[float, float] | None:
+    def _class(self, first: int, last: int, far_side: int, background: bool) -> tuple[float, float, float] | None:
         if last < first or self._sum(0, first, last) == 0:
             return None
         mode = first + int(self.counts[first:last + 1].argmax())
@@ -177,7 +194,11 @@ class LevelEstimator:
             spread = max(spread, abs(mode - self._quantile(first, last, 0.16 if far_side > 0 else 0.84)))
         reach = math.floor(2 * spread + 0.5)
         near = (max(first, mode - reach), min(last, mode + reach))
-        return self._sum(1, *near) / self._sum(0, *near), spread
+        pure = self._sum(0, *near)
+        # the centroid's standard error, and a floor for what a histogram's mode cannot tell (quantisation, the
+        # skew the mixed pixels on the near side give it)
+        error = math.hypot(spread / math.sqrt(pure), LEVEL_ERROR_FLOOR * spread, MIN_SPREAD_DN / 2)
+        return self._sum(1, *near) / pure, spread, error
 
     def at(self, threshold: float) -> Levels | None:
         """The levels with the classes split at `threshold` (low class: band <= threshold); None when either
@@ -187,8 +208,27 @@ class LevelEstimator:
         high = self._class(split + 1, 255, +1, background=not self.object_is_high)
         if low is None or high is None:
             return None
-        (obj, obj_spread), (bg, bg_spread) = (high, low) if self.object_is_high else (low, high)
-        return Levels(obj, bg, obj_spread, bg_spread)
+        (obj, obj_spread, obj_error), (bg, bg_spread, bg_error) = (high, low) if self.object_is_high else (low, high)
+        return Levels(obj, bg, obj_spread, bg_spread, object_error=obj_error, background_error=bg_error)
+
+
+def pure_level(counts: np.ndarray) -> tuple[float, float, float] | None:
+    """The level, spread and standard error (DN) of pixels known to be pure (a class's interior, away from any
+    edge), from their 256-bin histogram: the mean within three robust sd of the median (symmetric noise and
+    texture average out; nothing mixed skews it). None for fewer than MIN_PURE_PIXELS."""
+    counts = np.asarray(counts, float)
+    total = counts.sum()
+    if total < MIN_PURE_PIXELS:
+        return None
+    cumulative = np.cumsum(counts)
+    median = float(np.searchsorted(cumulative, total / 2))
+    low, high = np.searchsorted(cumulative, total * 0.25), np.searchsorted(cumulative, total * 0.75)
+    sd = max(float(high - low) / 1.349, MIN_SPREAD_DN)
+    window = np.abs(BAND_VALUES - median) <= 3 * sd
+    n = counts[window].sum()
+    level = float(counts[window] @ BAND_VALUES[window] / n)
+    spread = max(float(np.sqrt(counts[window] @ (BAND_VALUES[window] - level) ** 2 / n)), MIN_SPREAD_DN)
+    return level, spread, math.hypot(spread / math.sqrt(n), MIN_SPREAD_DN / 2)
 
 
 def check_levels(levels) -> tuple[float, float] | None:

@@ -170,14 +170,17 @@ def board_views(
 
 
 def degrade(image: np.ndarray, rng: np.random.Generator, noise_sigma: float = 1.0, blur_sigma_px: float = 0.0,
-            light_gradient: float = 0.0) -> np.ndarray:
+            light_gradient: float = 0.0, light_direction_deg: float = 45.0, gain: float = 1.0) -> np.ndarray:
     """What a flume adds to a clean render: uneven light (brightness falling by `light_gradient` across the
-    image, diagonally, plus vignetting of the same strength), turbidity blur and sensor noise. uint8 out."""
-    out = image.astype(np.float32)
+    image towards `light_direction_deg` (0: to the right, 90: down; 45, the default, diagonally), plus
+    vignetting of the same strength), turbidity blur, sensor noise, and an exposure `gain` (over 1 clips the
+    whites). uint8 out."""
+    out = image.astype(np.float32) * np.float32(gain)
     if light_gradient:
         h, w = out.shape[:2]
         y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-        ramp = 1 + light_gradient * (0.5 - (x / w + y / h) / 2)
+        cos, sin = np.cos(np.radians(light_direction_deg)), np.sin(np.radians(light_direction_deg))
+        ramp = 1 - light_gradient * ((x / w - 0.5) * cos + (y / h - 0.5) * sin) / (abs(cos) + abs(sin))
         vignette = 1 - light_gradient * (((x - w / 2) / w) ** 2 + ((y - h / 2) / h) ** 2)
         out *= ramp * vignette
     if blur_sigma_px:
@@ -312,6 +315,17 @@ def bush_scene(seed: int = 7, marker_size: float = 0.05, pixels_per_metre: float
     return _compose_scene(coverage, pixels_per_metre, marker_size, background, object_level)
 
 
+def empty_scene(scene: Scene) -> Scene:
+    """The same board and markers without the object: what a background frame of the empty flume shows."""
+    texture = scene.texture.copy()
+    if scene.marker_mask is not None:
+        texture[~scene.marker_mask] = scene.background
+    else:
+        texture[:] = scene.background
+    return Scene(texture, scene.extent, 0.0, scene.markers, scene.dictionary, np.zeros_like(texture, float),
+                 scene.marker_mask, scene.background, scene.object_level)
+
+
 def twig_scene(widths_m: tuple[float, ...] = (0.0015, 0.0025, 0.004), length: float = 0.16, seed: int = 3,
                marker_size: float = 0.05, pixels_per_metre: float = 2000.0, background: int = 200,
                object_level: int = 40, oversample: int = 8) -> Scene:
@@ -336,7 +350,8 @@ def twig_scene(widths_m: tuple[float, ...] = (0.0015, 0.0025, 0.004), length: fl
 def render_scene(camera: BrownCamera, scene: Scene, distance: float = DISTANCE_M, port: FlatPort | None = None,
                  tilt_deg: float = 0.0, roll_deg: float = 4.0, noise_sigma: float = 1.0, seed: int = 0,
                  blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3,
-                 centre: tuple[float, float] = (0.0, 0.0), object_offset: float = 0.0) -> np.ndarray:
+                 centre: tuple[float, float] = (0.0, 0.0), object_offset: float = 0.0,
+                 light_direction_deg: float = 45.0, gain: float = 1.0) -> np.ndarray:
     """The scene plane facing the camera at `distance` (its origin at `centre`, metres in camera x, y), tilted
     about its vertical axis by `tilt_deg` and rolled about the optical axis by `roll_deg` (4° by default, as
     the older tests were written; 0 puts edges along the pixel rows). With `object_offset` the object lies on
@@ -348,7 +363,8 @@ def render_scene(camera: BrownCamera, scene: Scene, distance: float = DISTANCE_M
     else:
         fine = _render_layers(camera, scene, rvec, tvec, object_offset, port, supersample)
     image = cv2.resize(fine, camera.image_size, interpolation=cv2.INTER_AREA)
-    grey = degrade(image, np.random.default_rng(seed), noise_sigma, blur_sigma_px, light_gradient)
+    grey = degrade(image, np.random.default_rng(seed), noise_sigma, blur_sigma_px, light_gradient,
+                   light_direction_deg, gain)
     return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
 
 
