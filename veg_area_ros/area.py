@@ -47,6 +47,13 @@ from .markers import DetectedMarker, detect_markers, marker_centre, track_marker
 from .scale import PlaneScale, marker_layout_problem
 from .targets import TargetsError, TargetsSpec
 
+CLIP_HIGH, CLIP_LOW = 250, 5  # band values a sensor or JPEG has clipped: whites burnt out, shadows crushed
+CLIP_REACH_PX = 2  # blooming and the lens's blur carry a clipped pixel's light this far into its neighbours
+CLIP_EDGE_SHARE = 0.10  # clipping next to this share of the object's edge pixels matters (real photos: 17 %, Af -1.2 %)
+BORDER_TOUCH_SHARE = 0.01  # object pixels on the ROI's border, as a share of the object's: the area is cut
+SWEEP_UNSETTLED = 0.02  # Af moving this much (relative) per sweep step around the threshold: no stable edge
+DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
+LIGHT_REFRESH_FRAMES = 10  # a steady camera's light and levels are found afresh this often (and on a drift)
 INTERIOR_PX = 3  # a class's interior: this far inside it, a blurred edge (1 px sd) adds under 0.1 % of the contrast
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
 WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per frame
@@ -83,6 +90,9 @@ class AreaResult:
     count_area_m2: float = 0.0  # Af of the whole-pixel count (equals area_m2 in count mode)
     subpixel_applied: bool = False  # sub-pixel mode used the shares (else it counted whole pixels)
     flat_field: FlatField | None = field(default=None, repr=False)  # the uneven light evened before the shares
+    exposure: dict | None = None  # clipped highlights or crushed shadows near the object's edges, when there are
+    exposure_std_m2: float = 0.0  # what clipping may do to Af, where it matters (in area_std_m2)
+    warnings: list[str] = field(default_factory=list)  # everything that makes this number less trustworthy
 
     def summary(self) -> dict:
         return {
@@ -104,6 +114,8 @@ class AreaResult:
             "light": None if self.flat_field is None else {
                 "evened_by": self.flat_field.source, "variation": self.flat_field.variation,
                 "misfit": self.flat_field.misfit},
+            "exposure": self.exposure, "exposure_std_m2": self.exposure_std_m2,
+            "warnings": list(self.warnings),
         }
 
 
@@ -134,6 +146,14 @@ class _Weights:
     centre: np.ndarray  # ROI centroid (idealized px)
     relative_scale_std: float
     relative_offset_std: float  # relative std of Af from the object plane offset's uncertainty
+    _border: np.ndarray | None = None
+
+    def border(self) -> np.ndarray:
+        """The ROI's one-pixel border ring (its outline and the markers' holes), once per layout."""
+        if self._border is None:
+            inner = cv2.erode(self.roi, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+            self._border = cv2.subtract(self.roi, inner)  # the window's edge is the ROI's edge too
+        return self._border
 
 
 def _centroid(mask: np.ndarray) -> np.ndarray:
@@ -147,11 +167,12 @@ class AreaMeasurer:
     def __init__(self, camera: BrownCamera | None, targets: TargetsSpec, classifier: Classifier,
                  roi: np.ndarray | None = None, threshold_delta: float = 5.0, area_mode: str = "subpixel",
                  levels: tuple[float, float] | None = None, background: np.ndarray | None = None,
-                 even_light: bool = True):
+                 even_light: bool = True, calibration_conditions: dict | None = None):
         if area_mode not in AREA_MODES:
             raise ClassifyError(f"area mode must be one of {', '.join(AREA_MODES)}, got {area_mode!r}")
         self.area_mode = area_mode
         self.given_levels = check_levels(levels)
+        self.calibration_conditions = calibration_conditions  # the calibration file's medium and distance
         # sub-pixel shares under uneven light: the band evened by the background's surface (a frame of the empty
         # scene, else fitted per frame); not for the excess-green index, which is no brightness
         self.even_light = even_light and area_mode == "subpixel" and classifier.object != "green"
@@ -178,6 +199,8 @@ class AreaMeasurer:
         self.rebuilds = 0  # how often the weights were (re)built: once for a steady camera
         self._unevenness: float | None = None  # this frame's light left uneven (relative), None: not known
         self._pure_levels: Levels | None = None  # this frame's levels from the classes' interiors
+        # [weights, frames carried, flat field, interior levels, the histogram's levels then]
+        self._light: list | None = None
 
     def _idealize_points(self, raw_pixels: np.ndarray) -> np.ndarray:
         """Raw-frame pixels -> the idealized image."""
@@ -373,21 +396,11 @@ class AreaMeasurer:
             check_background_frame(self.background_band, frame.shape)
         located = self._locate(frame)
         weights, factor, carried = self._weights_for(frame, located)
-        band = self.classifier.index_image(frame[weights.window])
-        threshold = self.classifier.resolve_threshold(band, weights.roi)
-        light = self._flat_field(band, weights, threshold) if self.even_light else None
-        # the light's unevenness left for the levels' errors; unknown (None) without a surface: a level may then
-        # be off by its whole spread
-        self._unevenness = None if light is None else light.unevenness
-        if light is not None and light.needed:
-            band = light.apply(band)
-            threshold = self.classifier.resolve_threshold(band, weights.roi)
-        else:
-            light = None
-        self._pure_levels = self._interior_levels(band, weights.roi, threshold) if self.even_light else None
+        raw_band = self.classifier.index_image(frame[weights.window])
+        band, threshold, light, histogram = self._evened(raw_band, weights, fresh=False)
+        if self._light_drifted(histogram.sum(axis=1), threshold):  # the light changed since it was fitted
+            band, threshold, light, histogram = self._evened(raw_band, weights, fresh=True)
         # area (m²) and number of the ROI's pixels at every band value, from one 2-D histogram
-        histogram = cv2.calcHist([band, weights.levels], [0, 1], weights.roi, [256, WEIGHT_LEVELS],
-                                 [0, 256, 0, WEIGHT_LEVELS]).astype(np.float64)
         roi_area = histogram @ weights.level_area * factor
         roi_count = histogram.sum(axis=1)
         morphology = self.classifier.open_px or self.classifier.close_px
@@ -463,13 +476,154 @@ class AreaMeasurer:
             subpixel_applied=applied,
             discretisation_std_m2=edge.discretisation, levels_std_m2=edge.levels, plane_offset_std_m2=offset_std,
             edge_length_px=edge.length_px, count_area_m2=counted, flat_field=light)
+        mask = self.classifier.mask(band, weights.roi, threshold)
+        result.exposure = self._exposure(raw_band, mask, weights, factor)
+        if result.exposure is not None and result.exposure["matters"]:
+            # each edge pixel next to the clipping may be off by up to half a pixel, all the same way
+            result.exposure_std_m2 = result.exposure["affected_area_m2"] * 0.5 / np.sqrt(3)
+            result.area_std_m2 = float(np.hypot(result.area_std_m2, result.exposure_std_m2))
+        result.warnings = self._warnings(result, mask, weights, located)
         if keep_images:
             raw_mask = np.zeros(frame.shape[:2], np.uint8)
-            raw_mask[weights.window] = self.classifier.mask(band, weights.roi, threshold)
+            raw_mask[weights.window] = mask
             result.mask = self.idealizer(raw_mask, cv2.INTER_NEAREST) if self.idealizer is not None else raw_mask
             result.image = self.idealizer(frame) if self.idealizer is not None else frame
             result.roi = weights.roi_ideal
         return result
+
+    def _exposure(self, raw_band: np.ndarray, mask: np.ndarray, weights: _Weights, factor: float) -> dict | None:
+        """Clipped highlights or crushed shadows where they matter: next to the object's edge pixels (within
+        CLIP_REACH_PX: blooming and blur carry the lost light there) and among the pure pixels a level is read
+        from. None when nothing in the ROI is clipped (one min/max over the ROI: no cost on a good exposure)."""
+        low, high, _, _ = cv2.minMaxLoc(raw_band, weights.roi)
+        if high < CLIP_HIGH and low > CLIP_LOW:
+            return None
+        kernel = np.ones((3, 3), np.uint8)
+        edge = cv2.morphologyEx(mask, cv2.MORPH_GRADIENT, kernel) & weights.roi  # both sides of the boundary
+        edges = max(cv2.countNonZero(edge), 1)
+        reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * CLIP_REACH_PX + 1,) * 2)
+        interior = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * INTERIOR_PX + 1,) * 2)
+        object_is_bright = self.classifier.object != "dark"
+        found = {"matters": False, "affected_area_m2": 0.0}
+        for side, clipped in (("highlights", raw_band >= CLIP_HIGH), ("shadows", raw_band <= CLIP_LOW)):
+            clipped = clipped.astype(np.uint8) * 255
+            if not cv2.countNonZero(clipped & weights.roi):
+                continue
+            touched = edge & cv2.dilate(clipped, reach)
+            share = cv2.countNonZero(touched) / edges
+            # the class on the clipped side: the background for a dark object's highlights
+            clipped_is_object = object_is_bright == (side == "highlights")
+            members = mask if clipped_is_object else cv2.subtract(weights.roi, mask)
+            pure = cv2.erode(members, interior)
+            level_share = cv2.countNonZero(pure & clipped) / max(cv2.countNonZero(pure), 1)
+            area = self._mask_area(touched, weights, factor)[0]
+            matters = share >= CLIP_EDGE_SHARE
+            found[side] = {"edge_share": share, "level_share": level_share, "affected_area_m2": area,
+                           "clipped_class": "object" if clipped_is_object else "background",
+                           "reads": "high" if clipped_is_object else "low", "matters": matters}
+            if matters:
+                found["matters"] = True
+                found["affected_area_m2"] += area
+        return found if len(found) > 2 else None
+
+    def _warnings(self, result: AreaResult, mask: np.ndarray, weights: _Weights, located: _Located) -> list[str]:
+        """Everything that makes this Af less trustworthy, one line each, said in the result itself."""
+        said = []
+        for side in ("highlights", "shadows"):
+            clip = (result.exposure or {}).get(side)
+            if clip and clip["matters"]:
+                said.append(f"clipped {side}: {100 * clip['edge_share']:.0f} % of the object's edge pixels lie "
+                            f"next to {'burnt-out' if side == 'highlights' else 'crushed'} pixels "
+                            f"({100 * clip['level_share']:.1f} % of the {clip['clipped_class']}'s pure pixels are "
+                            f"clipped): Af reads {clip['reads']} (1.5-5 % on real photos); the std has "
+                            f"{100 * result.exposure_std_m2 / max(result.area_m2, 1e-300):.1f} % for it; "
+                            f"{'shorten the exposure' if side == 'highlights' else 'lengthen the exposure'}")
+        if self.area_mode == "subpixel" and not result.subpixel_applied:
+            said.append("counted whole pixels: the object's and the background's levels could not be told apart "
+                        "well enough for sub-pixel shares (uneven light or texture); the std is the count's")
+        if located.missing:
+            said.append(f"targets missing: marker(s) {located.missing} not found; the scale comes from the others "
+                        "and the ROI places the missing ones by their fit")
+        border = weights.border()
+        touching = cv2.countNonZero(mask & border)
+        if touching >= max(5, BORDER_TOUCH_SHARE * max(result.pixel_count, 1)):
+            said.append(f"object touches the ROI's border: {touching} of its pixels lie on it, so Af is cut there "
+                        "(widen the ROI, or move the targets)")
+        if result.area_m2 > 0 and result.threshold_std_m2 / result.area_m2 > SWEEP_UNSETTLED:
+            said.append(f"threshold sweep does not settle: Af changes by "
+                        f"{100 * result.threshold_std_m2 / result.area_m2:.1f} % per {self.threshold_delta:g} grey "
+                        "levels around the threshold (no clear edge there)")
+        said.extend(self._condition_warnings(located))
+        return said
+
+    def _condition_warnings(self, located: _Located) -> list[str]:
+        """A calibration used outside its conditions (the calibration file's metadata): another distance of the
+        targets' plane, or no medium recorded. A plumb_bob calibration absorbs refraction at one distance only."""
+        conditions = self.calibration_conditions
+        if not conditions or self.camera is None:
+            return []
+        said = []
+        if conditions.get("medium") == "unspecified":
+            said.append("calibration medium unspecified: a calibration holds only in the medium it was made in "
+                        "(recalibrate with --medium air|water)")
+        calibrated_at = conditions.get("calibration_distance_m")
+        if calibrated_at and located.scale.kind != "distance":
+            focal = float(self.idealizer.ideal.camera_matrix[0, 0])
+            distance = located.scale.metres_per_pixel * focal
+            if abs(distance / calibrated_at - 1) > DISTANCE_TOLERANCE:
+                said.append(f"calibrated at {calibrated_at:g} m, measuring at about {distance:.2f} m"
+                            f"{' in ' + conditions['medium'] if conditions.get('medium') == 'water' else ''}: "
+                            "refraction is absorbed at the calibration's distance only (errors of a few percent); "
+                            "calibrate at this distance or use the flat-port model")
+        return said
+
+    def _evened(self, raw_band: np.ndarray, weights: _Weights, fresh: bool
+                ) -> tuple[np.ndarray, float, FlatField | None, np.ndarray]:
+        """The band to read the shares from (evened where the light is uneven), its threshold, the flat field
+        applied, and its 2-D histogram (band value x weight level) over the ROI. The flat field and the levels
+        from the classes' interiors are found afresh every LIGHT_REFRESH_FRAMES frames, when the weights were
+        rebuilt, or when `fresh` (the light drifted); in between they are carried, as a steady camera's light is."""
+        threshold = self.classifier.resolve_threshold(raw_band, weights.roi)
+        band, light = raw_band, None
+        if self.even_light:
+            state = self._light
+            if fresh or state is None or state[0] is not weights or state[1] >= LIGHT_REFRESH_FRAMES:
+                found = self._flat_field(raw_band, weights, threshold)
+                # the light's unevenness left for the levels' errors; unknown (None) without a surface: a level
+                # may then be off by its whole spread
+                self._unevenness = None if found is None else found.unevenness
+                state = [weights, 0, found if found is not None and found.needed else None, None, None]
+                if state[2] is not None:
+                    band = state[2].apply(raw_band)
+                    threshold = self.classifier.resolve_threshold(band, weights.roi)
+                state[3] = self._interior_levels(band, weights.roi, threshold)
+                self._light = state
+            else:
+                state[1] += 1
+                if state[2] is not None:
+                    band = state[2].apply(raw_band)
+                    threshold = self.classifier.resolve_threshold(band, weights.roi)
+            light, self._pure_levels = state[2], state[3]
+        histogram = cv2.calcHist([band, weights.levels], [0, 1], weights.roi, [256, WEIGHT_LEVELS],
+                                 [0, 256, 0, WEIGHT_LEVELS]).astype(np.float64)
+        return band, threshold, light, histogram
+
+    def _light_drifted(self, counts: np.ndarray, threshold: float) -> bool:
+        """Whether the carried flat field and levels no longer fit this frame: its background's level and spread
+        as the histogram gives them (cheap) moved by more than 2 DN (or three level errors), or the spread grew
+        by half (the light's shape changed), against the same figures of the frame they were found in."""
+        state = self._light
+        if state is None or self._pure_levels is None:
+            return False
+        now = LevelEstimator(counts, self.classifier.object != "dark").at(threshold)
+        if state[1] == 0:  # found in this very frame: what later frames are held to
+            state[4] = now
+            return False
+        then = state[4]
+        if now is None or then is None:
+            return now is not then
+        return (abs(now.background - then.background) > max(2.0, 3 * self._pure_levels.error("background"))
+                or now.background_spread > 1.5 * then.background_spread + 1.0)
 
     def _interior_levels(self, band: np.ndarray, roi: np.ndarray, threshold: float) -> Levels | None:
         """Both levels from the pixels at least two pixels inside their class (and the ROI): no edge pixel,

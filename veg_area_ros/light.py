@@ -11,6 +11,7 @@ coarse grid that hold background only (away from the object's edges, where the s
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -52,57 +53,66 @@ class FlatField:
         return cv2.convertScaleAbs(cv2.multiply(band, self.gain, dtype=cv2.CV_32F))
 
 
-def _powers(values: np.ndarray, degree: int) -> np.ndarray:
-    return np.vander(values, degree + 1, increasing=True)
+@functools.lru_cache(maxsize=8)
+def _grid_terms(height: int, width: int, cell: int, degree: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For a window and its coarse grid: every cell's polynomial terms (rows*cols, terms), and the powers of x
+    over the columns and of y over the rows that evaluate the surface at every pixel; once per window size."""
+    scale = max(width, height)
+    rows, cols = height // cell, width // cell
+    v, u = np.mgrid[0:rows, 0:cols].reshape(2, -1)
+    x = ((u + 0.5) * cell - 0.5 - width / 2) / scale
+    y = ((v + 0.5) * cell - 0.5 - height / 2) / scale
+    terms = np.column_stack([x ** (total - j) * y ** j for total in range(degree + 1) for j in range(total + 1)])
+    x_powers = np.vander((np.arange(width) - width / 2) / scale, degree + 1, increasing=True)
+    y_powers = np.vander((np.arange(height) - height / 2) / scale, degree + 1, increasing=True)
+    for array in (terms, x_powers, y_powers):
+        array.setflags(write=False)
+    return terms, x_powers, y_powers
 
 
-def _surface(coefficients: np.ndarray, shape: tuple[int, int], degree: int) -> np.ndarray:
+def _surface(coefficients: np.ndarray, shape: tuple[int, int], degree: int, cell: int) -> np.ndarray:
     """The polynomial surface over a window of `shape`: (rows' powers) @ (per-power row polynomials), one
     matrix product instead of a pass per term."""
-    height, width = shape
-    x = _powers((np.arange(width) - width / 2) / max(width, height), degree)
-    y = _powers((np.arange(height) - height / 2) / max(width, height), degree)
+    _, x_powers, y_powers = _grid_terms(*shape, cell, degree)
     table = np.zeros((degree + 1, degree + 1))  # table[j, i]: coefficient of x^i y^j
     k = 0
     for total in range(degree + 1):
         for j in range(total + 1):
             table[j, total - j] = coefficients[k]
             k += 1
-    return (y @ (table @ x.T)).astype(np.float32)
+    return (y_powers @ (table @ x_powers.T)).astype(np.float32)
 
 
 def fit_background_surface(band: np.ndarray, background: np.ndarray, degree: int = SURFACE_DEGREE,
-                           cell: int = CELL_PX) -> tuple[np.ndarray, float] | None:
+                           cell: int = CELL_PX) -> tuple[np.ndarray, float, np.ndarray] | None:
     """The background's brightness over the window (float32), fitted to the cells of a coarse grid that hold
-    only background pixels (`background`: bool, the window's shape), and the relative RMS misfit beyond the
-    cells' noise; None when too few cells are background to pin the surface."""
+    only background pixels (`background`: bool, the window's shape), the relative RMS misfit on those cells,
+    and the fitted surface's values at them; None when too few cells are background to pin the surface."""
     height, width = band.shape
     rows, cols = height // cell, width // cell
     if rows < 2 or cols < 2:
         return None
     crop = (slice(0, rows * cell), slice(0, cols * cell))
-    values = cv2.resize(band[crop].astype(np.float32), (cols, rows), interpolation=cv2.INTER_AREA)
-    full = cv2.resize(background[crop].astype(np.float32), (cols, rows), interpolation=cv2.INTER_AREA) >= 1.0
+    values = cv2.resize(band[crop], (cols, rows), interpolation=cv2.INTER_AREA).astype(float).ravel()
+    # a cell is background when every one of its pixels is (255 on average: one pixel short makes it 253)
+    marks = background[crop].astype(np.uint8) * np.uint8(255)
+    full = (cv2.resize(marks, (cols, rows), interpolation=cv2.INTER_AREA) == 255).ravel()
     if int(full.sum()) < MIN_CELLS:
         return None
-    v, u = np.nonzero(full)
-    scale = max(width, height)
-    x = ((u + 0.5) * cell - 0.5 - width / 2) / scale
-    y = ((v + 0.5) * cell - 0.5 - height / 2) / scale
-    terms = np.column_stack([x ** (total - j) * y ** j for total in range(degree + 1) for j in range(total + 1)])
-    target = values[v, u].astype(float)
+    terms, target = _grid_terms(height, width, cell, degree)[0][full], values[full]
     keep = np.ones(len(target), bool)
     for _ in range(2):  # once more without the cells the first fit calls outliers (a leaf, a bubble)
-        coefficients = np.linalg.lstsq(terms[keep], target[keep], rcond=None)[0]
-        residual = target - terms @ coefficients
+        used = terms[keep]
+        coefficients = np.linalg.solve(used.T @ used + 1e-9 * np.eye(used.shape[1]), used.T @ target[keep])
+        fitted = terms @ coefficients
+        residual = target - fitted
         spread = 1.4826 * float(np.median(np.abs(residual[keep]))) + 1e-6
         keep = np.abs(residual) <= 4 * spread
         if keep.sum() < MIN_CELLS:
             return None
-    surface = _surface(coefficients, (height, width), degree)
-    level = float(np.median(target[keep]))
-    misfit = float(np.sqrt(np.mean(residual[keep] ** 2))) / max(level, 1.0)
-    return surface, misfit
+    surface = _surface(coefficients, (height, width), degree, cell)
+    misfit = float(np.sqrt(np.mean(residual[keep] ** 2))) / max(float(np.median(target[keep])), 1.0)
+    return surface, misfit, fitted[keep]
 
 
 def flat_field(band: np.ndarray, region: np.ndarray, background: np.ndarray | None = None,
@@ -110,22 +120,25 @@ def flat_field(band: np.ndarray, region: np.ndarray, background: np.ndarray | No
     """The flat field of one window of the band: from a background frame's band (`background_band`, the same
     window of the empty scene), or fitted to the frame's background pixels (`background`, bool); None when
     it cannot be had. `needed` says whether the light varies by EVEN_SHARE or more over the region (uint8)."""
-    inside = region > 0
     if background_band is not None:
         surface = cv2.GaussianBlur(background_band.astype(np.float32), (0, 0), BACKGROUND_BLUR_PX)
+        values = surface[region > 0]
         source, misfit = "background frame", 0.0
+        reference, low, high = float(np.median(values)), float(values.min()), float(values.max())
     else:
-        fitted = fit_background_surface(band, background & inside)
+        fitted = fit_background_surface(band, background & (region > 0))
         if fitted is None:
             return None
-        (surface, misfit), source = fitted, "fitted"
-    values = surface[inside]
-    reference = float(np.median(values))
-    if reference < 8 or values.min() <= 1:
+        surface, misfit, at_cells = fitted
+        source = "fitted"
+        # over the region: the surface's extremes lie on the region's outline or at the fitted cells
+        _, high, _, _ = cv2.minMaxLoc(surface, region)
+        low = float(cv2.minMaxLoc(surface, region)[0])
+        reference = float(np.median(at_cells))
+    if reference < 8 or low <= 1:
         return None  # a black or unlit background holds no light to even
-    variation = float((values.max() - values.min()) / reference)
-    gain = reference / np.maximum(surface, 1.0)
-    return FlatField(gain.astype(np.float32), reference, variation, source, misfit)
+    gain = cv2.divide(reference, np.maximum(surface, np.float32(1.0)))
+    return FlatField(gain.astype(np.float32, copy=False), reference, (high - low) / reference, source, misfit)
 
 
 def check_background_frame(background: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:

@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from .area import AreaMeasurer, PortAreaMeasurer
 from .camera_model import BrownCamera
 from .classify import AREA_MODES, Classifier, ClassifyError, check_levels, check_polygon
@@ -79,12 +81,16 @@ class MeasurementSettings:
         return Classifier(threshold=self.threshold, object=self.object, channel=self.channel,
                           open_px=int(self.open_px), close_px=int(self.close_px))
 
-    def measurer(self, camera: BrownCamera | None, targets: TargetsSpec,
-                 port_camera: FlatPortCamera | None = None) -> AreaMeasurer | PortAreaMeasurer:
+    def measurer(self, camera: BrownCamera | None, targets: TargetsSpec, port_camera: FlatPortCamera | None = None,
+                 background: np.ndarray | None = None,
+                 calibration_conditions: dict | None = None) -> AreaMeasurer | PortAreaMeasurer:
         """The measurer for frames of `camera` (None: uncalibrated); with `port_camera`, the exact flat-port model
-        of that camera's calibration file. Raises ClassifyError or TargetsError with the reason."""
+        of that camera's calibration file. `background`: a frame of the empty scene to even the light with;
+        `calibration_conditions`: the calibration file's metadata (medium, distance), said when the frames
+        leave them. Raises ClassifyError or TargetsError with the reason."""
         options = dict(roi=None if self.roi is None else list(self.roi), threshold_delta=self.sweep_step,
-                       area_mode=self.area_mode, levels=self.levels)
-        if port_camera is not None:
+                       area_mode=self.area_mode, levels=self.levels, background=background)
+        if port_camera is not None:  # the port model holds at any distance: no calibration conditions to leave
             return PortAreaMeasurer(port_camera, targets, self.classifier(), **options)
-        return AreaMeasurer(camera, targets, self.classifier(), **options)
+        return AreaMeasurer(camera, targets, self.classifier(), calibration_conditions=calibration_conditions,
+                            **options)

@@ -19,7 +19,7 @@ from pathlib import Path
 from .common import EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, progress, write_csv
 from .measure_job import MeasureJob, measure
 
-BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "std_area_m2", "csv", "error")
+BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "std_area_m2", "warnings", "csv", "error")
 PROGRESS_EVERY_S = 2.0
 
 
@@ -38,8 +38,17 @@ def _ignore_ctrl_c() -> None:
 
 def _summary(source: str, csv_path: str, error: str = "") -> dict:
     """One input's row of batch_summary.csv before anything was measured."""
-    return {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "std_area_m2": "", "csv": csv_path,
-            "error": error}
+    return {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "std_area_m2": "", "warnings": "",
+            "csv": csv_path, "error": error}
+
+
+def warning_counts(rows: list[dict]) -> str:
+    """How many frames carried each kind of warning ('clipped highlights: 12 frames | ...')."""
+    kinds: dict[str, int] = {}
+    for row in rows:
+        for kind in {w.split(":", 1)[0] for w in row.get("warnings", [])}:
+            kinds[kind] = kinds.get(kind, 0) + 1
+    return " | ".join(f"{kind}: {count} frame{'s' if count > 1 else ''}" for kind, count in sorted(kinds.items()))
 
 
 def _measure_one(job: MeasureJob, position: int, progress_queue, stopping) -> dict:
@@ -55,7 +64,7 @@ def _measure_one(job: MeasureJob, position: int, progress_queue, stopping) -> di
     if code == EXIT_INTERRUPTED:
         summary["error"] = f"interrupted after {len(rows)} frames"
     areas = [r["area_m2"] for r in rows if not r["error"] and "area_m2" in r]
-    summary.update(frames=len(rows), measured=len(areas))
+    summary.update(frames=len(rows), measured=len(areas), warnings=warning_counts(rows))
     if areas:
         summary["mean_area_m2"] = statistics.fmean(areas)
         summary["std_area_m2"] = statistics.stdev(areas) if len(areas) > 1 else 0.0

@@ -77,6 +77,9 @@ def add_parser(sub) -> None:
                      help="sub-pixel mode: the object's and background's grey levels (default: from each frame)")
     mea.add_argument("--open", type=int, default=DEFAULTS.open_px, metavar="PX", help="morphological opening radius")
     mea.add_argument("--close", type=int, default=DEFAULTS.close_px, metavar="PX", help="morphological closing radius")
+    mea.add_argument("--background", metavar="IMAGE",
+                     help="sub-pixel mode: a frame of the empty scene (the flume before the plant goes in), same "
+                          "camera and settings, to even the light with (default: the light is fitted per frame)")
     mea.add_argument("--sweep-step", type=positive_float, default=DEFAULTS.sweep_step,
                      help="threshold step of the sweep and of the threshold uncertainty (grey levels)")
     mea.add_argument("--json", action="store_true", help="one JSON object per frame on stdout (a batch: per input)")

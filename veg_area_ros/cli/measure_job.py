@@ -17,7 +17,7 @@ from .common import EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, progress, u
 CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "area_mode",
                "subpixel_applied", "pixel_count", "count_area_m2", "threshold", "scale_std_m2", "threshold_std_m2",
                "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2", "object_plane_offset_m",
-               "scale_m_per_px", "scale_kind", "calibrated", "missing_targets", "error")
+               "exposure_std_m2", "scale_m_per_px", "scale_kind", "calibrated", "missing_targets", "warnings", "error")
 
 @dataclass(frozen=True)
 class MeasureJob:
@@ -37,6 +37,7 @@ class MeasureJob:
     idealized: str | None = None
     json: bool = False
     quiet: bool = False
+    background: str | None = None  # an image of the empty scene: evens the light for sub-pixel shares
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> MeasureJob:
@@ -81,10 +82,11 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         video_frame_count,
     )
     from ..idealize import FrameSizeError
+    from ..light import LightError
     from ..targets import TargetsError, TargetsSpec
 
     say = progress(job.quiet)
-    camera = port_camera = file_camera = None
+    camera = port_camera = file_camera = conditions = None
     from_bag = job.calibration.lower() == "bag"  # each frame with the camera_info recorded before it
     if job.calibration.lower() not in ("none", "bag"):
         try:
@@ -92,7 +94,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         except CalibrationFileError as exc:
             raise CliError(str(exc)) from exc
         camera, port_camera = calibration.camera, calibration.port_camera()
-        file_camera = camera
+        file_camera, conditions = camera, calibration.metadata
     try:
         targets = TargetsSpec.load(job.targets)
     except TargetsError as exc:
@@ -127,10 +129,19 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     if targets.object_plane_offset_m is not None and camera is None and not from_bag:
         raise CliError(NO_CALIBRATION_FOR_OFFSET)
 
+    background = None
+    if job.background:
+        from ..frames import read_image
+
+        background, problem = read_image(Path(job.background))
+        if background is None:
+            raise CliError(f"--background {job.background}: {problem}", EXIT_USAGE)
+
     def new_measurer(camera):
         try:  # the exact port model for frames of the port file's camera, not its plumb_bob stand-in
-            return job.settings.measurer(camera, targets, port_camera if camera is file_camera else None)
-        except ClassifyError as exc:
+            return job.settings.measurer(camera, targets, port_camera if camera is file_camera else None,
+                                         background, conditions if camera is file_camera else None)
+        except (ClassifyError, LightError) as exc:
             raise CliError(str(exc), EXIT_USAGE) from exc
         except TargetsError as exc:
             raise CliError(str(exc)) from exc
@@ -141,6 +152,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
                           {"idealized_from": str(Path(job.calibration).resolve())})
     rows: list[dict] = []
+    warned: dict[str, int] = {}
     interrupted = False
     try:
         for index, frame in enumerate(iter_frames(files, job.video_step, job.image_topic), 1):
@@ -165,8 +177,11 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                 say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
             else:
                 row.update(result.summary())
-                if result.missing_targets:
-                    say(f"[{index}/{total}] {frame.name}: targets not found: markers {result.missing_targets}")
+                for warning in result.warnings:  # each kind in full once; how often, at the end
+                    kind = warning.split(":", 1)[0]
+                    if kind not in warned:
+                        say(f"[{index}/{total}] {frame.name}: warning: {warning}")
+                    warned[kind] = warned.get(kind, 0) + 1
                 if on_frame is None and (not job.json or index % 25 == 0 or index == total):
                     line = (f"[{index}/{total}] {frame.name}: Af = {result.area_m2:.6g} ± {result.area_std_m2:.2g} m² "
                             f"({result.pixel_count} px, threshold {result.threshold:g}, {result.scale.kind} scale"
@@ -190,6 +205,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         interrupted = True
     # counted from the rows: the frame in hand when Ctrl-C came is left out of both
     measured = sum(1 for row in rows if not row["error"])
+    if warned and measured > 1:
+        say("warnings: " + "; ".join(f"{kind} on {count} of {measured} frames" for kind, count in warned.items()))
 
     if csv_path is not None and measured == 0 and csv_path.exists():  # an error-only table must not replace one
         say(f"time series not written: no frame was measured (the existing {csv_path} is kept)")
@@ -223,4 +240,5 @@ def _plot_series(rows: list[dict], csv_path: Path) -> Path:
 
 def write_area_csv(path: Path, rows: list[dict]) -> None:
     write_csv(path, CSV_COLUMNS,
-              [{**row, "missing_targets": " ".join(map(str, row.get("missing_targets", [])))} for row in rows])
+              [{**row, "missing_targets": " ".join(map(str, row.get("missing_targets", []))),
+                "warnings": " | ".join(row.get("warnings", []))} for row in rows])

@@ -14,7 +14,9 @@ import contextlib
 import json
 import time
 from collections import deque
+from pathlib import Path
 
+import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
@@ -28,8 +30,10 @@ from ..calib_io import read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, decode_image, stamp_ns, unstamped
 from ..classify import AREA_MODES, CHANNELS, OBJECTS, ClassifyError
+from ..frames import read_image
 from ..idealize import FrameSizeError
 from ..latest import FrameTally
+from ..light import LightError
 from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, MeasurementSettings
 from ..sources import default_targets
 from ..targets import TargetsError, TargetsSpec
@@ -43,7 +47,7 @@ BUSY_GAP_NS = 1_000_000  # callbacks closer than 1 ms: the node never waited for
 DEFAULTS = MeasurementSettings()
 # the parameters that are MeasurementSettings, tunable at run time (`ros2 param set`), and targets_file
 SETTINGS = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "area_mode", "levels")
-TUNABLE = (*SETTINGS, "targets_file")
+TUNABLE = (*SETTINGS, "targets_file", "background_file")
 
 
 class AreaNode(Node):
@@ -66,6 +70,8 @@ class AreaNode(Node):
                 "its grey level; 'count': whole pixels, as in the paper.", choices=AREA_MODES)
         declare(self, "levels", list(NO_LEVELS), "Sub-pixel mode: [object, background] grey levels; [0.0] = "
                 "from each frame.")
+        declare(self, "background_file", "", "Sub-pixel mode: an image of the empty scene (the flume before the "
+                "plant goes in), same camera and settings, to even the light with; '' = fitted in each frame.")
         self.uncalibrated = declare(self, "uncalibrated_frames", "drop",
                                     "Frames before any calibration: 'drop' (throttled warning) or 'measure' "
                                     "(as an uncalibrated camera, flagged calibrated=false).",
@@ -86,12 +92,13 @@ class AreaNode(Node):
         self.overlay_pub = self.create_publisher(Image, "overlay", IMAGE_QOS)
         self.warn = CountedWarnings(self.get_logger())
         self.file_camera = None
+        self.file_conditions = None  # calibration_file's medium and distance, said when frames leave them
         self.port_camera = None  # a flat port's exact model from calibration_file, for frames of its camera
         calibration = read_start_file(self, "calibration_file", lambda: read_calibration(calibration_file),
                                       "waiting for camera_info instead") if calibration_file else None
         if calibration is not None:
             self.camera, self.port_camera = calibration.camera, calibration.port_camera()
-            self.file_camera = calibration.camera
+            self.file_camera, self.file_conditions = calibration.camera, calibration.metadata
             port = " (lens and flat port: the exact refraction model)" if self.port_camera else ""
             self.get_logger().info(f"calibration from {calibration_file}{port}")
         self.settings = self._settings({})  # a value out of range or choices at start: the node does not start
@@ -99,7 +106,10 @@ class AreaNode(Node):
         targets_file = self.get_parameter("targets_file").value
         self.targets = read_start_file(self, "targets_file", lambda: self._load_targets(targets_file),
                                        "no frame is measured until targets_file is set to a readable file")
-        self.measurer = self._build(self.settings, self.camera, self.targets)
+        background_file = self.get_parameter("background_file").value
+        self.background = read_start_file(self, "background_file", lambda: self._load_background(background_file),
+                                          "the light is fitted in each frame instead") if background_file else None
+        self.measurer = self._build_or_log(self.settings, self.camera, self.targets)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._info_seen = b""  # the last camera_info without its stamp
@@ -119,6 +129,27 @@ class AreaNode(Node):
     def _load_targets(path: str) -> TargetsSpec:
         return TargetsSpec.load(path) if path else default_targets()
 
+    @staticmethod
+    def _load_background(path: str) -> np.ndarray | None:
+        """The empty scene's image ('' = none); ValueError with the reason."""
+        if not path:
+            return None
+        image, problem = read_image(Path(path))
+        if image is None:
+            raise ValueError(f"{path}: {problem}")
+        return image
+
+    def _build_or_log(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None):
+        """`_build` at start: a background frame that does not fit these settings is logged and left out."""
+        try:
+            return self._build(settings, camera, targets)
+        except ValueError as exc:
+            if self.background is None:
+                raise
+            self.get_logger().error(f"parameter background_file: {exc}; the light is fitted in each frame instead")
+            self.background = None
+            return self._build(settings, camera, targets)
+
     def _settings(self, changed: dict) -> MeasurementSettings:
         """The measurement settings from the parameters, with `changed` (name -> value) over them; raises
         ValueError (ClassifyError) with the reason."""
@@ -128,12 +159,15 @@ class AreaNode(Node):
                                    area_mode=value["area_mode"], levels=value["levels"],
                                    ).with_threshold(value["threshold_mode"], value["threshold"])
 
-    def _build(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None):
+    def _build(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None,
+               background: np.ndarray | str | None = "current"):
         """A measurer for these settings (None without targets); raises ValueError with the reason."""
         if targets is None:
             return None
-        port_camera = self.port_camera if camera == self.file_camera else None  # not a camera_info that replaced it
-        return settings.measurer(camera, targets, port_camera)
+        background = self.background if isinstance(background, str) else background
+        from_file = camera is not None and camera == self.file_camera  # not a camera_info that replaced it
+        return settings.measurer(camera, targets, self.port_camera if from_file else None, background,
+                                 self.file_conditions if from_file else None)
 
     def _check_parameters(self, parameters) -> SetParametersResult:
         """A run-time change is accepted only if it builds a measurer (nothing is changed here)."""
@@ -143,7 +177,9 @@ class AreaNode(Node):
         try:
             settings = self._settings({k: v for k, v in changed.items() if k in SETTINGS})
             targets = self._load_targets(changed["targets_file"]) if "targets_file" in changed else self.targets
-            self._build(settings, self.camera, targets)
+            background = (self._load_background(changed["background_file"]) if "background_file" in changed
+                          else "current")
+            self._build(settings, self.camera, targets, background)
         except (ValueError, OSError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
@@ -157,6 +193,8 @@ class AreaNode(Node):
         try:
             if "targets_file" in names:
                 self.targets = self._load_targets(self.get_parameter("targets_file").value)
+            if "background_file" in names:
+                self.background = self._load_background(self.get_parameter("background_file").value)
             self.settings = self._settings({})
             self.measurer = self._build(self.settings, self.camera, self.targets)
         except (ValueError, OSError) as exc:  # the file changed between the check and now
@@ -281,10 +319,13 @@ class AreaNode(Node):
         except FrameSizeError as exc:
             self.warn("frame refused", str(exc))
             return
-        except (TargetsError, ClassifyError) as exc:
+        except (TargetsError, ClassifyError, LightError) as exc:
             self.warn("frame not measured", str(exc))
             return
         self.frames_measured += 1
+        for warning in result.warnings:  # in the result itself (info); the log says each kind, throttled
+            kind = warning.split(":", 1)[0]
+            self.warn("Af less trustworthy", warning, like=kind)
         stamp = Time(sec=header.sec, nanosec=header.nanosec)
         area = Vector3Stamped()
         area.header.stamp, area.header.frame_id = stamp, header.frame_id

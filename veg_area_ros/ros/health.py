@@ -23,9 +23,10 @@ class CountedWarnings:
         self._hidden: dict[tuple[str, str], int] = {}
         self._last: dict[tuple[str, str], float] = {}
 
-    def __call__(self, kind: str, detail: str, level: str = "warning") -> None:
+    def __call__(self, kind: str, detail: str, level: str = "warning", like: str | None = None) -> None:
+        """`like`: what makes two lines alike for the throttle, when the detail's numbers change every time."""
         self._total[kind] = self._total.get(kind, 0) + 1
-        key, now = (kind, detail), self._clock()
+        key, now = (kind, detail if like is None else like), self._clock()
         if key in self._last and now - self._last[key] < self._period:
             self._hidden[key] = self._hidden.get(key, 0) + 1
             return
