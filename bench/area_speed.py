@@ -81,6 +81,8 @@ def main() -> int:
               f"{subpixel_ms / core_ms:.2f}x count)")
         print(f"  weights built {measurer.rebuilds} and {subpixel.rebuilds} time(s) for {repeats + 1} frames each")
         noisy_cores(camera, targets, repeats)
+        if camera is ENDOSCOPE:
+            light_cases(targets, repeats)
     if args.video_frames:
         video_case(targets, args.video_frames)
     return 0
@@ -109,6 +111,24 @@ def noisy_cores(camera, targets: TargetsSpec, repeats: int) -> None:
         base = base or core_ms
         print(f"  noise {sigma:g} DN: sub-pixel core {core_ms:8.3f} ms ({core_ms / base:.2f}x noise-free), weights "
               f"rebuilt {measurer.rebuilds - 1} of {repeats + 1} frames")
+
+
+def light_cases(targets: TargetsSpec, repeats: int) -> None:
+    """The sub-pixel core with the light evened (flat field fitted, levels from the classes' interiors, both
+    carried on a steady camera) against the same core without (`even_light=False`, the sub-pixel core before
+    light was evened), on even frames and on the flume's (30 % gradient, vignetting, 4 DN, 1 px blur), each
+    with fresh noise per frame, measured in this run."""
+    for name, degrade in (("even light, 4 DN", dict(noise_sigma=4.0)),
+                          ("flume light", dict(noise_sigma=4.0, blur_sigma_px=1.0, light_gradient=0.3))):
+        frames = [render_scene(ENDOSCOPE, cube_scene(), 0.7, FlatPort(), seed=seed, **degrade) for seed in range(8)]
+        cost = {}
+        for even in (False, True):
+            measurer = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), even_light=even)
+            measurer.measure(frames[0])
+            stream = itertools.cycle(frames)
+            cost[even] = 1000 * median_seconds(lambda m=measurer, s=stream: m.measure(next(s)), repeats)
+        print(f"  {name}: sub-pixel, light evened {cost[True]:8.3f} ms ({cost[True] / cost[False]:.2f}x the "
+              f"sub-pixel core without evening, {cost[False]:.3f} ms)")
 
 
 def video_case(targets: TargetsSpec, count: int) -> None:

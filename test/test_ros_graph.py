@@ -259,7 +259,11 @@ def test_a_file_a_node_cannot_read_at_start_is_logged_and_the_node_runs_on(tmp_p
     assert any("frame not measured: no targets" in line for line in area), area
     assert result["measured_without_targets"] == 0
     assert all(result["alive_before_fix"].values()), result["alive_before_fix"]
+    assert any(line.startswith("parameter background_file:") and "fitted in each frame" in line for line in area)
     assert result["targets_file_set"] is True and result["measured_after_fix"] is True
+    # a warning is in the result itself (projected_area/info) and in the node's log
+    assert any(w.startswith("targets missing") and "[7]" in w for w in result["warnings"]), result["warnings"]
+    assert any("Af less trustworthy: targets missing" in line for line in result["logs"]["area_node"])
     assert all(result["alive_at_end"].values()), result["alive_at_end"]
 
 BUSY_NODE = """

@@ -55,6 +55,7 @@ SWEEP_UNSETTLED = 0.02  # Af moving this much (relative) per sweep step around t
 DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
 LIGHT_REFRESH_FRAMES = 10  # a steady camera's light and levels are found afresh this often (and on a drift)
 INTERIOR_PX = 3  # a class's interior: this far inside it, a blurred edge (1 px sd) adds under 0.1 % of the contrast
+MAX_INTERIOR_PX = 30  # ... or as far as its edges are wide (a DSLR's turbid water: 7 px sd), up to this
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
 WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per frame
 ROI_TOLERANCE_PX = 0.5  # targets moved further than this (idealized px) since the weights were built: rebuild
@@ -588,15 +589,22 @@ class AreaMeasurer:
         if self.even_light:
             state = self._light
             if fresh or state is None or state[0] is not weights or state[1] >= LIGHT_REFRESH_FRAMES:
-                found = self._flat_field(raw_band, weights, threshold)
-                # the light's unevenness left for the levels' errors; unknown (None) without a surface: a level
-                # may then be off by its whole spread
-                self._unevenness = None if found is None else found.unevenness
-                state = [weights, 0, found if found is not None and found.needed else None, None, None]
-                if state[2] is not None:
-                    band = state[2].apply(raw_band)
-                    threshold = self.classifier.resolve_threshold(band, weights.roi)
-                state[3] = self._interior_levels(band, weights.roi, threshold)
+                raw_threshold, reach = threshold, INTERIOR_PX
+                for _ in range(2):  # again with a wider interior where the edges are wider (blur, turbidity)
+                    found = self._flat_field(raw_band, weights, raw_threshold, reach)
+                    # the light's unevenness left for the levels' errors; unknown (None) without a surface: a
+                    # level may then be off by its whole spread
+                    self._unevenness = None if found is None else found.unevenness
+                    state = [weights, 0, found if found is not None and found.needed else None, None, None]
+                    band, threshold = raw_band, raw_threshold
+                    if state[2] is not None:
+                        band = state[2].apply(raw_band)
+                        threshold = self.classifier.resolve_threshold(band, weights.roi)
+                    state[3] = self._interior_levels(band, weights.roi, threshold, reach)
+                    wider = self._edge_reach(band, weights.roi, threshold, state[3])
+                    if wider <= reach:
+                        break
+                    reach = wider
                 self._light = state
             else:
                 state[1] += 1
@@ -625,14 +633,29 @@ class AreaMeasurer:
         return (abs(now.background - then.background) > max(2.0, 3 * self._pure_levels.error("background"))
                 or now.background_spread > 1.5 * then.background_spread + 1.0)
 
-    def _interior_levels(self, band: np.ndarray, roi: np.ndarray, threshold: float) -> Levels | None:
+    def _edge_reach(self, band: np.ndarray, roi: np.ndarray, threshold: float, levels: Levels | None) -> int:
+        """How far inside its class a pixel must lie to be pure: the edges' width (mixed pixels per pixel of
+        the class's outline) plus a pixel, at least INTERIOR_PX, at most MAX_INTERIOR_PX."""
+        if levels is None:
+            return INTERIOR_PX
+        kind = ((band <= threshold) if self.classifier.object == "dark" else (band > threshold)).astype(np.uint8)
+        kind &= roi
+        outline = cv2.countNonZero(cv2.subtract(kind, cv2.erode(kind, np.ones((3, 3), np.uint8))))
+        counts = cv2.calcHist([band], [0], roi, [256], [0, 256]).ravel()
+        mixed = float(counts[levels.mixed()].sum())
+        width = mixed / max(outline, 1)
+        return int(min(max(INTERIOR_PX, np.ceil(width) + 1), MAX_INTERIOR_PX))
+
+    def _interior_levels(self, band: np.ndarray, roi: np.ndarray, threshold: float,
+                         reach: int = 3) -> Levels | None:
         """Both levels from the pixels at least two pixels inside their class (and the ROI): no edge pixel,
         blurred or not, pulls them towards each other, as it pulls a histogram's modes where an object is
         mostly edge (a bush's twigs under blur and noise: its level 2.4 DN off, Af +0.9 %). None where a
         class has too small an interior (twigs 1-3 px wide): the histogram's modes are used."""
         kind = band <= threshold if self.classifier.object == "dark" else band > threshold
         inside = roi > 0
-        kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * INTERIOR_PX + 1, 2 * INTERIOR_PX + 1))
+        kernel = cv2.getStructuringElement(cv2.MORPH_RECT if reach > INTERIOR_PX else cv2.MORPH_ELLIPSE,
+                                           (2 * reach + 1, 2 * reach + 1))
         found = []
         for members in (kind & inside, ~kind & inside):
             interior = cv2.erode(members.astype(np.uint8), kernel)
@@ -642,13 +665,15 @@ class AreaMeasurer:
         (obj, obj_spread, obj_error), (bg, bg_spread, bg_error) = found
         return Levels(obj, bg, obj_spread, bg_spread, object_error=obj_error, background_error=bg_error)
 
-    def _flat_field(self, band: np.ndarray, weights: _Weights, threshold: float) -> FlatField | None:
+    def _flat_field(self, band: np.ndarray, weights: _Weights, threshold: float,
+                    reach: int = 3) -> FlatField | None:
         """The flat field of this frame's window: from the background frame, or fitted to the background
         pixels at least two pixels from any pixel of the object's class (blurred edges stay out of the fit)."""
         if self.background_band is not None:
             return flat_field(band, weights.roi, background_band=self.background_band[weights.window])
         background = band > threshold if self.classifier.object == "dark" else band <= threshold
-        background = cv2.erode(background.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        size = 2 * (reach - 1) + 1
+        background = cv2.erode(background.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
         return flat_field(band, weights.roi, background)
 
     @staticmethod
