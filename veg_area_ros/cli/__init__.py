@@ -15,7 +15,9 @@ replace a better calibration, 130 interrupted (what was done so far is kept).
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 from collections.abc import Sequence
 
 from .. import __version__
@@ -36,8 +38,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _terminate_as_interrupt(number, frame) -> None:
+    """SIGTERM (timeout, Slurm, docker stop) ends a run as Ctrl-C does: what was measured is kept."""
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _terminate_as_interrupt)
     try:
         return args.func(args)
     except CliError as exc:

@@ -16,7 +16,7 @@ from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecu
 from dataclasses import replace
 from pathlib import Path
 
-from .common import EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, progress, write_csv
+from .common import EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, check_outputs, progress, write_csv
 from .measure_job import MeasureJob, measure
 
 BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "std_area_m2", "warnings", "csv", "error")
@@ -90,8 +90,12 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
         raise CliError("--idealized is for one input at a time (frames of several inputs would mix)", EXIT_USAGE)
     if job.overlay and Path(job.overlay).suffix.lower() in (".png", ".jpg", ".jpeg"):
         raise CliError(f"--overlay {job.overlay} names one image; give a folder for a batch", EXIT_USAGE)
-    folder.mkdir(parents=True, exist_ok=True)
     inputs = list(job.inputs)
+    sources = [*inputs, job.calibration if job.calibration.lower() not in ("none", "bag") else None, job.targets,
+               job.background]
+    check_outputs([("--output-dir", str(folder)), ("--overlay", job.overlay)], sources, "measured")
+    check_outputs([("--output-dir", str(path)) for path in batch_csv_paths(inputs, folder)], sources, "measured")
+    folder.mkdir(parents=True, exist_ok=True)
     workers = min(jobs or os.cpu_count() or 1, len(inputs))
     context = multiprocessing.get_context("spawn")  # workers start clean (OpenCV threads, no forked state)
     csv_paths = [str(path) for path in batch_csv_paths(inputs, folder)]  # by position: an input may come twice

@@ -9,7 +9,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .common import EXIT_REFUSED, EXIT_USAGE, CliError, positive_float, progress, unwritable
+from .common import EXIT_REFUSED, EXIT_USAGE, CliError, check_outputs, positive_float, progress, unwritable
 
 VIEWS_PER_VIDEO = 60  # consecutive frames add little but time
 
@@ -124,6 +124,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     say = progress(args.quiet)
     output = Path(args.output)
+    check_outputs([("-o", args.output), ("--report", args.report)], [*args.inputs, args.lens], "calibrated")
     problem = unwritable(output, folder=False)
     if problem:
         raise CliError(f"-o {output}: {problem}; nothing was calibrated", EXIT_USAGE)

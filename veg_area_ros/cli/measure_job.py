@@ -6,13 +6,23 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 from ..settings import MeasurementSettings
-from .common import EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, progress, unwritable, write_csv
+from .common import (
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_USAGE,
+    CliError,
+    check_outputs,
+    progress,
+    unwritable,
+    write_csv,
+)
 
 CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "area_mode",
                "subpixel_applied", "pixel_count", "count_area_m2", "threshold", "scale_std_m2", "threshold_std_m2",
@@ -115,6 +125,10 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
              + len(files) - len(videos) - len(bags))
     series = videos + bags
     csv_path = Path(job.csv) if job.csv else (Path(f"{series[0].stem}_area.csv") if series else None)
+    check_outputs([("--csv", str(csv_path) if csv_path else None), ("--overlay", job.overlay),
+                   ("--idealized", job.idealized)],
+                  [*job.inputs, job.calibration if job.calibration.lower() not in ("none", "bag") else None,
+                   job.targets, job.background], "measured")
     single_overlay = job.overlay and Path(job.overlay).suffix.lower() in IMAGE_SUFFIXES
     for option, value, folder in (("--overlay", job.overlay, not single_overlay), ("--csv", job.csv, False),
                                   ("--idealized", job.idealized, True)):
@@ -201,7 +215,10 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                 on_frame(index, total)
             if stop is not None and stop():
                 raise KeyboardInterrupt
-    except KeyboardInterrupt:  # Ctrl-C on a long video or bag: what was measured is kept (CSV, plot)
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM on a long video or bag: what was measured is kept (CSV, plot)
+        interrupted = True
+    except BrokenPipeError:  # stdout closed (`... --json | head -n 1`): stop quietly, the CSV keeps what was done
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
         interrupted = True
     # counted from the rows: the frame in hand when Ctrl-C came is left out of both
     measured = sum(1 for row in rows if not row["error"])

@@ -1,0 +1,111 @@
+"""A user's files and measured rows survive: an output that is (by inode) or lies inside an input is refused
+before any work, SIGTERM ends a run as Ctrl-C does (rows kept), and a closed stdout stops it quietly."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import pytest
+import yaml
+from helpers import REPO
+
+from veg_area_ros.calib_io import write_calibration
+from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets_content
+
+
+@pytest.fixture(scope="module")
+def workspace(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("kept")
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7, roll_deg=0.0)
+    cv2.imwrite(str(folder / "scene.png"), frame)
+    (folder / "frames").mkdir()
+    for k in range(3):
+        cv2.imwrite(str(folder / "frames" / f"f{k}.png"), frame)
+    writer = cv2.VideoWriter(str(folder / "run.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 30, ENDOSCOPE.image_size)
+    for _ in range(1500):
+        writer.write(frame)
+    writer.release()
+    write_calibration(folder / "cal.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
+    (folder / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    return folder
+
+
+def veg_area(folder: Path, *args: str, **popen) -> subprocess.CompletedProcess | subprocess.Popen:
+    command = [sys.executable, "-m", "veg_area_ros.cli", *args]
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    if popen:
+        return subprocess.Popen(command, cwd=folder, env=env, text=True, **popen)
+    return subprocess.run(command, cwd=folder, env=env, capture_output=True, text=True, timeout=300)
+
+
+MEASURE = ("measure", "--calibration", "cal.yaml", "--targets", "targets.yaml")
+
+
+@pytest.mark.parametrize("option, value, input_", [
+    ("--overlay", "scene.png", "scene.png"),
+    ("--csv", "run.avi", "run.avi"),
+    ("--csv", "cal.yaml", "scene.png"),
+    ("--csv", "targets.yaml", "scene.png"),
+    ("--idealized", "frames", "frames"),
+    ("--overlay", "frames/overlay.png", "frames"),
+    ("--csv", "link.csv", "scene.png"),  # a symlink to the input: the same file by inode
+])
+def test_an_output_over_an_input_is_refused_before_any_work(workspace, option, value, input_):
+    link = workspace / "link.csv"
+    if not link.is_symlink():
+        link.symlink_to(workspace / "scene.png")
+    before = {p: p.read_bytes() for p in workspace.rglob("*") if p.is_file() and not p.is_symlink()}
+    started = time.monotonic()
+    done = veg_area(workspace, *MEASURE, input_, option, value)
+    assert done.returncode == 2, done.stderr
+    assert "would be written over; nothing was measured" in done.stderr and "Traceback" not in done.stderr
+    assert time.monotonic() - started < 30
+    after = {p: p.read_bytes() for p in workspace.rglob("*") if p.is_file() and not p.is_symlink()}
+    assert after == before
+
+
+def test_calibrate_refuses_to_write_over_its_lens_or_an_image(workspace):
+    lens = workspace / "lens.yaml"
+    lens.write_bytes((workspace / "cal.yaml").read_bytes())
+    kept = lens.read_bytes()
+    done = veg_area(workspace, "calibrate", "--port", "flat:0.02:0.006:1.49", "--lens", "lens.yaml", "-o", "lens.yaml")
+    assert done.returncode == 2 and "is the input lens.yaml" in done.stderr and lens.read_bytes() == kept
+    done = veg_area(workspace, "calibrate", "frames", "--board", "chessboard:9x6:0.03", "-o", "frames/cal.yaml")
+    assert done.returncode == 2 and "inside the input folder frames" in done.stderr
+
+
+def test_a_batch_output_folder_inside_an_input_folder_is_refused(workspace):
+    done = veg_area(workspace, *MEASURE, "frames", "scene.png", "--jobs", "2", "--output-dir", "frames/results")
+    assert done.returncode == 2 and "inside the input folder frames" in done.stderr
+    assert not (workspace / "frames" / "results").exists()
+
+
+def test_sigterm_keeps_the_rows_measured_so_far(workspace):
+    process = veg_area(workspace, *MEASURE, "run.avi", "--csv", "term.csv", stdout=subprocess.PIPE,
+                       stderr=subprocess.PIPE)
+    lines = 0
+    while lines < 30 and process.poll() is None:  # the 30th frame's line: well into the run
+        lines += process.stdout.readline().startswith("[")
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert "interrupted after" in err and "Traceback" not in err
+    rows = list(csv.DictReader((workspace / "term.csv").open()))
+    assert 29 <= len(rows) < 1500 and all(r["area_m2"] for r in rows)  # the frame in hand is left out
+
+
+def test_a_closed_stdout_stops_the_run_quietly_and_keeps_the_csv(workspace):
+    done = subprocess.run(f"{sys.executable} -m veg_area_ros.cli {' '.join(MEASURE)} run.avi --json --csv pipe.csv"
+                          " | head -n 1", shell=True, cwd=workspace, capture_output=True, text=True, timeout=300,
+                          env=dict(os.environ, PYTHONPATH=str(REPO)))
+    assert done.stdout.count("\n") == 1 and '"area_m2"' in done.stdout
+    assert "Traceback" not in done.stderr and "BrokenPipeError" not in done.stderr, done.stderr
+    rows = list(csv.DictReader((workspace / "pipe.csv").open()))
+    assert 1 <= len(rows) < 1500 and all(r["area_m2"] for r in rows)
