@@ -176,11 +176,12 @@ def test_paper_reproduction_endoscope():
     assert {(r.condition, r.object) for r in rows} == {(c, o) for c in ("air", "water tank", "flume")
                                                        for o in ("cube", "bush")}
     for row in rows:
-        limit = 0.3 if row.condition == "air" else 0.5
+        limit = 0.3 if row.condition in ("air", "flume") else 0.5
         if row.object == "cube":
             assert abs(row.calibrated_error_pct) <= limit, row
-        else:  # the bush's thin branches are harder: held to its own reported uncertainty
+        else:  # the bush's thin branches are harder: held to its own reported uncertainty, and 0.6 % in the flume
             assert abs(row.calibrated_error_pct) <= row.calibrated_std_pct, row
+            assert row.condition != "flume" or abs(row.calibrated_error_pct) <= 0.6, row
         assert abs(row.raw_error_pct) > 4 * abs(row.calibrated_error_pct) and abs(row.raw_error_pct) > 2, row
 
 

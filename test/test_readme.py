@@ -145,6 +145,13 @@ def demo(checkout, home) -> subprocess.CompletedProcess:
         remove_new_shm(before)
 
 
+def last_digit(number: str) -> float:
+    """The value of one unit in a printed number's last digit: 0.01 for "3.14", 1e-06 for "1.5e-05"."""
+    mantissa, _, exponent = number.lower().partition("e")
+    decimals = len(mantissa.split(".")[1]) if "." in mantissa else 0
+    return 10.0 ** (int(exponent or 0) - decimals)
+
+
 def shows(shown: str, output: str) -> bool:
     """Whether a line the README shows is in the output (see the module's docstring)."""
     pattern = ""
@@ -156,14 +163,13 @@ def shows(shown: str, output: str) -> bool:
         else:
             pattern += re.escape(piece)
     wanted = [float(n) for n in re.findall(NUMBER, shown.replace("…", " "))]
-    places = [len(n.split(".")[1].split("e")[0].split("E")[0]) if "." in n else 0
-              for n in re.findall(NUMBER, shown.replace("…", " "))]
+    places = [last_digit(n) for n in re.findall(NUMBER, shown.replace("…", " "))]
     for line in output.splitlines():
         match = re.search(pattern, " ".join(line.split()))
         if not match:
             continue
         got = [float(g) for g in match.groups()]
-        close = (math.isclose(g, w, rel_tol=1e-3, abs_tol=10.0**-p * (1 + 1e-9))
+        close = (math.isclose(g, w, rel_tol=1e-3, abs_tol=p * (1 + 1e-9))
                  for g, w, p in zip(got, wanted, places, strict=True))
         if all(close):
             return True
@@ -194,6 +200,8 @@ def test_the_shown_line_matcher_can_fail():
     assert shows("Af = 0.01055 ± … m² (… px)", "[1/1] x: Af = 0.0105488 ± 1.5e-05 m² (10160 px)")
     assert not shows("Af = 0.01055 ± … m² (… px)", "[1/1] x: Af = 0.0112 ± 1.5e-05 m² (10160 px)")
     assert not shows("threshold 120, homography scale", "threshold 120, affine scale")
+    assert not shows("± 1.5e-05 m²", "± 1.9e-05 m²") and shows("± 1.5e-05 m²", "± 1.5e-05 m²")
+    assert last_digit("1.5e-05") == pytest.approx(1e-6) and last_digit("0.1812") == pytest.approx(1e-4)
 
 
 def test_make_demo_as_printed_runs_in_a_newcomers_shell(demo, checkout):

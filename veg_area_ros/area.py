@@ -53,7 +53,7 @@ CLIP_EDGE_SHARE = 0.10  # clipping next to this share of the object's edge pixel
 BORDER_TOUCH_SHARE = 0.01  # object pixels on the ROI's border, as a share of the object's: the area is cut
 SWEEP_UNSETTLED = 0.02  # Af moving this much (relative) per sweep step around the threshold: no stable edge
 DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
-LIGHT_REFRESH_FRAMES = 10  # a steady camera's light and levels are found afresh this often (and on a drift)
+LIGHT_REFRESH_FRAMES = 20  # a steady camera's light and levels are found afresh this often (and on a drift)
 INTERIOR_PX = 3  # a class's interior: this far inside it, a blurred edge (1 px sd) adds under 0.1 % of the contrast
 MAX_INTERIOR_PX = 30  # ... or as far as its edges are wide (a DSLR's turbid water: 7 px sd), up to this
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
@@ -398,15 +398,18 @@ class AreaMeasurer:
         located = self._locate(frame)
         weights, factor, carried = self._weights_for(frame, located)
         raw_band = self.classifier.index_image(frame[weights.window])
+        object_is_high = self.classifier.object != "dark"
         band, threshold, light, histogram = self._evened(raw_band, weights, fresh=False)
-        if self._light_drifted(histogram.sum(axis=1), threshold):  # the light changed since it was fitted
+        roi_count = histogram.sum(axis=1)
+        estimator = LevelEstimator(roi_count, object_is_high)
+        if self._light_drifted(estimator, threshold):  # the light changed since it was fitted
             band, threshold, light, histogram = self._evened(raw_band, weights, fresh=True)
+            roi_count = histogram.sum(axis=1)
+            estimator = LevelEstimator(roi_count, object_is_high)
         # area (m²) and number of the ROI's pixels at every band value, from one 2-D histogram
         roi_area = histogram @ weights.level_area * factor
-        roi_count = histogram.sum(axis=1)
         morphology = self.classifier.open_px or self.classifier.close_px
         subpixel = self.area_mode == "subpixel"
-        estimator = LevelEstimator(roi_count, self.classifier.object != "dark")
         cumulative_area, cumulative_count = np.cumsum(roi_area), np.cumsum(roi_count)
         outcomes: dict[float, tuple[float, float, int, Levels | None]] = {}
 
@@ -616,14 +619,14 @@ class AreaMeasurer:
                                  [0, 256, 0, WEIGHT_LEVELS]).astype(np.float64)
         return band, threshold, light, histogram
 
-    def _light_drifted(self, counts: np.ndarray, threshold: float) -> bool:
+    def _light_drifted(self, estimator: LevelEstimator, threshold: float) -> bool:
         """Whether the carried flat field and levels no longer fit this frame: its background's level and spread
         as the histogram gives them (cheap) moved by more than 2 DN (or three level errors), or the spread grew
         by half (the light's shape changed), against the same figures of the frame they were found in."""
         state = self._light
         if state is None or self._pure_levels is None:
             return False
-        now = LevelEstimator(counts, self.classifier.object != "dark").at(threshold)
+        now = estimator.at(threshold)
         if state[1] == 0:  # found in this very frame: what later frames are held to
             state[4] = now
             return False
