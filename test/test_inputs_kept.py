@@ -77,8 +77,20 @@ def test_calibrate_refuses_to_write_over_its_lens_or_an_image(workspace):
     kept = lens.read_bytes()
     done = veg_area(workspace, "calibrate", "--port", "flat:0.02:0.006:1.49", "--lens", "lens.yaml", "-o", "lens.yaml")
     assert done.returncode == 2 and "is the input lens.yaml" in done.stderr and lens.read_bytes() == kept
-    done = veg_area(workspace, "calibrate", "frames", "--board", "chessboard:9x6:0.03", "-o", "frames/cal.yaml")
+    done = veg_area(workspace, "calibrate", "frames", "--board", "chessboard:9x6:0.03", "-o", "cal2.yaml",
+                    "--report", "frames/report")  # its plots would be read as board photos next time
     assert done.returncode == 2 and "inside the input folder frames" in done.stderr
+    assert not (workspace / "frames" / "report").exists() and not (workspace / "cal2.yaml").exists()
+
+
+def test_a_calibration_beside_its_photos_is_fine_a_table_with_its_plot_is_not(workspace):
+    done = veg_area(workspace, *MEASURE, "frames", "--csv", "frames/areas.csv")  # areas.png would be a frame
+    assert done.returncode == 2 and "inside the input folder frames" in done.stderr
+    assert not (workspace / "frames" / "areas.csv").exists()
+    from veg_area_ros.cli.common import overwrites_input
+
+    assert overwrites_input(workspace / "frames" / "cal.yaml", ["frames"]) is None  # a YAML is no frame
+    assert overwrites_input(workspace / "frames" / "cal.yaml", [str(workspace / "frames")]) is None
 
 
 def test_a_batch_output_folder_inside_an_input_folder_is_refused(workspace):

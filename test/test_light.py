@@ -308,3 +308,19 @@ def test_warnings_reach_the_json_the_csv_and_the_batch_summary(tmp_path):
     summary = {r["input"]: r for r in csv.DictReader((tmp_path / "batch" / "batch_summary.csv").open())}
     assert summary["clipped.png"]["warnings"] == "clipped highlights: 1 frame"
     assert summary["fine.png"]["warnings"] == ""
+
+
+def test_edges_blurred_more_than_the_markers_are_said(clean):
+    """A plant moving in the current blurs only itself: the cube smeared over 15 px (a line kernel over its
+    region) against the same frame, and the flume's blur, which widens the markers' edges alike, silent."""
+    scene, frame = clean
+    moved = frame.copy()
+    height, width = frame.shape[:2]
+    box = (slice(height // 2 - 90, height // 2 + 90), slice(width // 2 - 90, width // 2 + 90))
+    moved[box] = cv2.filter2D(frame[box], -1, np.ones((1, 15), np.float32) / 15)
+    result = AreaMeasurer(ENDOSCOPE, targets_for(scene), Classifier()).measure(moved)
+    assert len(warned(result, "edges wider than the markers'")) == 1
+    assert result.edge_widths["object_px"] > 3 * result.edge_widths["markers_px"]
+    turbid = render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, **FLUME)
+    flume = AreaMeasurer(calibrated_camera("endoscope", "water"), targets_for(scene), Classifier()).measure(turbid)
+    assert not warned(flume, "edges wider") and flume.edge_widths["object_px"] > 1.5  # blurred, markers alike

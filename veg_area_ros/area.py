@@ -29,6 +29,7 @@ import numpy as np
 from .camera_model import BrownCamera
 from .classify import (
     AREA_MODES,
+    BAND_VALUES,
     MIN_SPREAD_DN,
     Classifier,
     ClassifyError,
@@ -52,6 +53,8 @@ CLIP_REACH_PX = 2  # blooming and the lens's blur carry a clipped pixel's light 
 CLIP_EDGE_SHARE = 0.10  # clipping next to this share of the object's edge pixels matters (real photos: 17 %, Af -1.2 %)
 BORDER_TOUCH_SHARE = 0.01  # object pixels on the ROI's border, as a share of the object's: the area is cut
 SWEEP_UNSETTLED = 0.02  # Af moving this much (relative) per sweep step around the threshold: no stable edge
+EDGE_ZONE = 0.15  # an edge's pixels: between the two levels' outer 15 % (noise stays out at any contrast)
+BLUR_RATIO = 2.0  # the object's edges this much (and a pixel) wider than the markers': blurred on its own
 DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
 LIGHT_REFRESH_FRAMES = 20  # a steady camera's light and levels are found afresh this often (and on a drift)
 INTERIOR_PX = 3  # a class's interior: this far inside it, a blurred edge (1 px sd) adds under 0.1 % of the contrast
@@ -93,6 +96,7 @@ class AreaResult:
     flat_field: FlatField | None = field(default=None, repr=False)  # the uneven light evened before the shares
     exposure: dict | None = None  # clipped highlights or crushed shadows near the object's edges, when there are
     exposure_std_m2: float = 0.0  # what clipping may do to Af, where it matters (in area_std_m2)
+    edge_widths: dict | None = None  # the object's and the printed markers' edge width, px (blur)
     warnings: list[str] = field(default_factory=list)  # everything that makes this number less trustworthy
 
     def summary(self) -> dict:
@@ -115,7 +119,7 @@ class AreaResult:
             "light": None if self.flat_field is None else {
                 "evened_by": self.flat_field.source, "variation": self.flat_field.variation,
                 "misfit": self.flat_field.misfit},
-            "exposure": self.exposure, "exposure_std_m2": self.exposure_std_m2,
+            "exposure": self.exposure, "exposure_std_m2": self.exposure_std_m2, "edge_widths": self.edge_widths,
             "warnings": list(self.warnings),
         }
 
@@ -148,6 +152,8 @@ class _Weights:
     relative_scale_std: float
     relative_offset_std: float  # relative std of Af from the object plane offset's uncertainty
     _border: np.ndarray | None = None
+    marker_edge_px: float | None = None  # the printed markers' edge width in this layout (px)
+    marker_edge_found: bool = False
 
     def border(self) -> np.ndarray:
         """The ROI's one-pixel border ring (its outline and the markers' holes), once per layout."""
@@ -155,6 +161,31 @@ class _Weights:
             inner = cv2.erode(self.roi, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
             self._border = cv2.subtract(self.roi, inner)  # the window's edge is the ROI's edge too
         return self._border
+
+
+def _marker_edge_width(frame: np.ndarray, markers) -> float | None:
+    """The printed markers' edge width in px (median over the markers): in each marker's box, the pixels
+    between its black's and white's outer 15 % per pixel of the outline at their midpoint."""
+    widths = []
+    height, width = frame.shape[:2]
+    for marker in markers:
+        (x0, y0), (x1, y1) = marker.corners.min(axis=0), marker.corners.max(axis=0)
+        grow = 0.2 * max(x1 - x0, y1 - y0)  # the white quiet zone around the black square
+        left, top = max(int(x0 - grow), 0), max(int(y0 - grow), 0)
+        right, bottom = min(int(np.ceil(x1 + grow)), width), min(int(np.ceil(y1 + grow)), height)
+        patch = frame[top:bottom, left:right]
+        if patch.size == 0:
+            continue
+        grey = patch if patch.ndim == 2 else cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)
+        low, high = np.percentile(grey, (5, 95))
+        if high - low < 20:
+            continue
+        dark = (grey <= (low + high) / 2).astype(np.uint8)
+        outline = cv2.countNonZero(cv2.subtract(dark, cv2.erode(dark, np.ones((3, 3), np.uint8))))
+        mixed = np.count_nonzero(np.abs(grey - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low))
+        if outline:
+            widths.append(mixed / outline)
+    return float(np.median(widths)) if widths else None
 
 
 def _centroid(mask: np.ndarray) -> np.ndarray:
@@ -486,6 +517,7 @@ class AreaMeasurer:
             # each edge pixel next to the clipping may be off by up to half a pixel, all the same way
             result.exposure_std_m2 = result.exposure["affected_area_m2"] * 0.5 / np.sqrt(3)
             result.area_std_m2 = float(np.hypot(result.area_std_m2, result.exposure_std_m2))
+        result.edge_widths = self._edge_widths(frame, mask, histogram.sum(axis=1), levels)
         result.warnings = self._warnings(result, mask, weights, located)
         if keep_images:
             raw_mask = np.zeros(frame.shape[:2], np.uint8)
@@ -557,8 +589,36 @@ class AreaMeasurer:
             said.append(f"threshold sweep does not settle: Af changes by "
                         f"{100 * result.threshold_std_m2 / result.area_m2:.1f} % per {self.threshold_delta:g} grey "
                         "levels around the threshold (no clear edge there)")
+        widths = result.edge_widths
+        if widths and widths["object_px"] > BLUR_RATIO * widths["markers_px"] + 1.0:
+            said.append(f"edges wider than the markers': the object's edges are {widths['object_px']:.1f} px wide, "
+                        f"the printed markers' {widths['markers_px']:.1f} px (a plant moving in the current, or "
+                        "out of focus): its edge shares are blurred together and Af is less certain")
         said.extend(self._condition_warnings(located))
         return said
+
+    def _edge_widths(self, frame: np.ndarray, mask: np.ndarray, counts: np.ndarray,
+                     levels: Levels | None) -> dict | None:
+        """How wide (px) the object's edges are, against the printed markers' in the same frame, each as the
+        pixels between the two levels' outer 15 % per pixel of outline. Blur of the water or the lens widens
+        both alike; a plant moving in the current (or out of focus) widens only its own. The markers' width is
+        found once per target layout."""
+        if levels is None or not self._markers:
+            return None
+        low, high = sorted((levels.object, levels.background))
+        if high - low < 20:
+            return None
+        inside = np.abs(BAND_VALUES - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low)
+        outline = cv2.countNonZero(cv2.subtract(mask, cv2.erode(mask, np.ones((3, 3), np.uint8))))
+        if outline == 0:
+            return None
+        if not self._weights.marker_edge_found:  # printed edges: once per target layout
+            self._weights.marker_edge_px = _marker_edge_width(frame, self._markers.values())
+            self._weights.marker_edge_found = True
+        markers = self._weights.marker_edge_px
+        if markers is None:
+            return None
+        return {"object_px": float(counts[inside].sum()) / outline, "markers_px": markers}
 
     def _condition_warnings(self, located: _Located) -> list[str]:
         """A calibration used outside its conditions (the calibration file's metadata): another distance of the

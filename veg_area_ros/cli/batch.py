@@ -93,8 +93,10 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
     inputs = list(job.inputs)
     sources = [*inputs, job.calibration if job.calibration.lower() not in ("none", "bag") else None, job.targets,
                job.background]
-    check_outputs([("--output-dir", str(folder)), ("--overlay", job.overlay)], sources, "measured")
-    check_outputs([("--output-dir", str(path)) for path in batch_csv_paths(inputs, folder)], sources, "measured")
+    # the folder gets each input's plot (PNG) and CSV; the overlay folder images
+    check_outputs([("--output-dir", str(folder), True), ("--overlay", job.overlay, True)], sources, "measured")
+    check_outputs([("--output-dir", str(path), True) for path in batch_csv_paths(inputs, folder)], sources,
+                  "measured")
     folder.mkdir(parents=True, exist_ok=True)
     workers = min(jobs or os.cpu_count() or 1, len(inputs))
     context = multiprocessing.get_context("spawn")  # workers start clean (OpenCV threads, no forked state)

@@ -124,7 +124,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     say = progress(args.quiet)
     output = Path(args.output)
-    check_outputs([("-o", args.output), ("--report", args.report)], [*args.inputs, args.lens], "calibrated")
+    check_outputs([("-o", args.output, False), ("--report", args.report, True)], [*args.inputs, args.lens],
+                  "calibrated")
     problem = unwritable(output, folder=False)
     if problem:
         raise CliError(f"-o {output}: {problem}; nothing was calibrated", EXIT_USAGE)

@@ -64,31 +64,36 @@ def unwritable(path: Path, folder: bool) -> str | None:
     return None
 
 
-def overwrites_input(output: Path, inputs: Sequence[str | Path]) -> str | None:
-    """Why writing `output` would destroy an input of the same command, or None: it is that file (the same
-    inode, whatever the name or symlink says), or lies inside an input folder (whose later reads would find
-    it, or which it would fill)."""
+def overwrites_input(output: Path, inputs: Sequence[str | Path], writes_images: bool = False) -> str | None:
+    """Why writing `output` would destroy or pollute an input of the same command, or None: it is that file
+    (the same inode, whatever the name or symlink says), or it puts images or videos (an image file, a CSV with
+    its plot beside it, a folder of overlays, plots or idealized frames: `writes_images`) inside an input
+    folder, whose next reading would take them as frames. A calibration YAML beside its photos is fine."""
+    from ..frames import IMAGE_SUFFIXES, VIDEO_SUFFIXES
+
     try:
         target = output.resolve()
     except OSError:
         return None
+    media = writes_images or output.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES
     for given in inputs:
         source = Path(given)
         try:
             if output.exists() and source.exists() and output.samefile(source):
                 return f"is the input {given}" + (f" (through {output} -> {target})" if output.is_symlink() else "")
-            if source.is_dir() and target.is_relative_to(source.resolve()):
+            if media and source.is_dir() and target.is_relative_to(source.resolve()):
                 return f"lies inside the input folder {given}"
         except OSError:
             continue
     return None
 
 
-def check_outputs(outputs: Sequence[tuple[str, str | None]], inputs: Sequence[str | Path], what: str) -> None:
-    """Refuse (exit 2, before any work, nothing written) an output (option, path) that is or lies inside an input."""
-    for option, value in outputs:
+def check_outputs(outputs: Sequence[tuple[str, str | None, bool]], inputs: Sequence[str | Path], what: str) -> None:
+    """Refuse (exit 2, before any work, nothing written) an output (option, path, writes images) that is an
+    input or would put images inside an input folder (`overwrites_input`)."""
+    for option, value, writes_images in outputs:
         if value:
-            problem = overwrites_input(Path(value), [i for i in inputs if i])
+            problem = overwrites_input(Path(value), [i for i in inputs if i], writes_images)
             if problem:
                 raise CliError(f"{option} {value} {problem}: it would be written over; nothing was {what}",
                                EXIT_USAGE)

@@ -125,8 +125,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
              + len(files) - len(videos) - len(bags))
     series = videos + bags
     csv_path = Path(job.csv) if job.csv else (Path(f"{series[0].stem}_area.csv") if series else None)
-    check_outputs([("--csv", str(csv_path) if csv_path else None), ("--overlay", job.overlay),
-                   ("--idealized", job.idealized)],
+    check_outputs([("--csv", str(csv_path) if csv_path else None, True),  # its plot goes beside it
+                   ("--overlay", job.overlay, True), ("--idealized", job.idealized, True)],
                   [*job.inputs, job.calibration if job.calibration.lower() not in ("none", "bag") else None,
                    job.targets, job.background], "measured")
     single_overlay = job.overlay and Path(job.overlay).suffix.lower() in IMAGE_SUFFIXES
