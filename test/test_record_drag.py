@@ -52,7 +52,7 @@ def test_recorded_bag_is_complete_and_valid(recorded):
 
 def test_frames_the_area_node_skipped_are_counted(recorded):
     """camera_node publishes camera_info with every frame: every frame recorded from the area node's first to
-    its last is either taken by it or counted skipped."""
+    its last is taken by it, counted skipped, or counted lost in transport."""
     folder, _ = recorded
     image_stamps, infos = [], []
     store = get_typestore(Stores.ROS2_KILTED)
@@ -71,13 +71,15 @@ def test_frames_the_area_node_skipped_are_counted(recorded):
     first = next((i for i in infos if stamp(i) > image_stamps[0] and i["frames_dropped"] is not None), None)
     assert first is not None, (image_stamps[:3], seen)
     last = infos[-1]
-    counted = {k: last[k] - first[k] for k in ("frames_received", "frames_measured", "frames_dropped")}
+    counted = {k: (last[k] or 0) - (first[k] or 0)
+               for k in ("frames_received", "frames_measured", "frames_dropped", "frames_lost")}
     # none refused in the window (a frame that beat the latched calibration to a starting node is not measured)
     assert counted["frames_measured"] == counted["frames_received"], seen
     span = [s for s in image_stamps if stamp(first) < s <= stamp(last)]
     assert len(span) >= 20
-    assert counted["frames_received"] + counted["frames_dropped"] == len(span), (counted, len(span), image_stamps,
-                                                                                  seen)
+    # a frame the transport lost on a loaded machine is counted too, as lost rather than skipped
+    total = counted["frames_received"] + counted["frames_dropped"] + counted["frames_lost"]
+    assert total == len(span), (counted, len(span), image_stamps, seen)
 
 
 def test_the_bag_keeps_each_topics_offered_qos_and_the_distro(recorded):
