@@ -148,13 +148,13 @@ def test_a_steady_cameras_light_is_carried_and_found_again_when_it_changes():
         frame = render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, seed=k, light_direction_deg=30.0,
                              **FLUME)
         errors.append(measurer.measure(frame).area_m2 / scene.true_area_m2 - 1)
-        ages.append(measurer._light[1])
+        ages.append(measurer._light.age)
     assert max(ages) >= 2 and ages[-1] > 0, ages  # carried from frame to frame
     rebuilds = measurer.rebuilds
     darker = render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, seed=4, light_direction_deg=30.0,
                           gain=0.8, **FLUME)  # a cloud over the flume: the same scene 20 % darker
     errors.append(measurer.measure(darker).area_m2 / scene.true_area_m2 - 1)
-    assert measurer.rebuilds == rebuilds and measurer._light[1] == 0  # the light changed: found afresh
+    assert measurer.rebuilds == rebuilds and measurer._light.age == 0  # the light changed: found afresh
     assert max(abs(e) for e in errors) <= 0.003, errors
 
 

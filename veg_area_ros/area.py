@@ -163,6 +163,22 @@ class _Weights:
         return self._border
 
 
+@dataclass
+class _Light:
+    """What a steady camera's frames share about the light, found in one frame and carried to the next."""
+    weights: _Weights  # the layout it was found for
+    unevenness: float | None  # relative, left for the levels' errors; None: no surface, a level may be off by a spread
+    flat: FlatField | None = None  # applied to every frame (None: the light is even, or could not be fitted)
+    levels: Levels | None = None  # from the classes' interiors
+    seen_levels: Levels | None = None  # the histogram's levels in the frame it was found in: what drift is held to
+    age: int = 0  # frames carried since
+
+
+def _outline(mask: np.ndarray) -> int:
+    """The pixels of a class (uint8 mask) that touch the other class: its one-pixel outline."""
+    return cv2.countNonZero(cv2.subtract(mask, cv2.erode(mask, np.ones((3, 3), np.uint8))))
+
+
 def _marker_edge_width(frame: np.ndarray, markers) -> float | None:
     """The printed markers' edge width in px (median over the markers): in each marker's box, the pixels
     between its black's and white's outer 15 % per pixel of the outline at their midpoint."""
@@ -180,8 +196,7 @@ def _marker_edge_width(frame: np.ndarray, markers) -> float | None:
         low, high = np.percentile(grey, (5, 95))
         if high - low < 20:
             continue
-        dark = (grey <= (low + high) / 2).astype(np.uint8)
-        outline = cv2.countNonZero(cv2.subtract(dark, cv2.erode(dark, np.ones((3, 3), np.uint8))))
+        outline = _outline((grey <= (low + high) / 2).astype(np.uint8))
         mixed = np.count_nonzero(np.abs(grey - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low))
         if outline:
             widths.append(mixed / outline)
@@ -229,10 +244,7 @@ class AreaMeasurer:
         self._weights: _Weights | None = None
         self._last_scale: PlaneScale | None = None  # the last frame's fit: where a hidden marker should be
         self.rebuilds = 0  # how often the weights were (re)built: once for a steady camera
-        self._unevenness: float | None = None  # this frame's light left uneven (relative), None: not known
-        self._pure_levels: Levels | None = None  # this frame's levels from the classes' interiors
-        # [weights, frames carried, flat field, interior levels, the histogram's levels then]
-        self._light: list | None = None
+        self._light: _Light | None = None  # the light and levels found and carried (sub-pixel mode)
 
     def _idealize_points(self, raw_pixels: np.ndarray) -> np.ndarray:
         """Raw-frame pixels -> the idealized image."""
@@ -401,17 +413,20 @@ class AreaMeasurer:
     def _levels(self, estimator: LevelEstimator, threshold: float) -> Levels | None:
         """The object/background levels at this threshold: estimated from the ROI's band histogram, or the
         user's with the spreads the histogram shows around them."""
-        if self._pure_levels is not None and self.given_levels is None:
-            pure = self._pure_levels
-            if self._unevenness is None:  # global means of a light that may vary: off by up to a spread
-                pure = replace(pure, object_error=None, background_error=None)
-            else:
-                pure = pure.with_unevenness(self._unevenness)
+        light = self._light
+        unevenness = None if light is None else light.unevenness
+
+        def with_light(levels: Levels) -> Levels:
+            # without a surface the light may vary: a level may be off by up to its spread
+            return (replace(levels, object_error=None, background_error=None) if unevenness is None
+                    else levels.with_unevenness(unevenness))
+
+        if light is not None and light.levels is not None and self.given_levels is None:
+            pure = with_light(light.levels)
             return pure if pure.resolvable() else None
         estimated = estimator.at(threshold)
         if estimated is not None:
-            estimated = (replace(estimated, object_error=None, background_error=None) if self._unevenness is None
-                         else estimated.with_unevenness(self._unevenness))
+            estimated = with_light(estimated)
         if self.given_levels is None:
             return estimated if estimated is not None and estimated.resolvable() else None
         object_level, background_level = self.given_levels
@@ -517,7 +532,7 @@ class AreaMeasurer:
             # each edge pixel next to the clipping may be off by up to half a pixel, all the same way
             result.exposure_std_m2 = result.exposure["affected_area_m2"] * 0.5 / np.sqrt(3)
             result.area_std_m2 = float(np.hypot(result.area_std_m2, result.exposure_std_m2))
-        result.edge_widths = self._edge_widths(frame, mask, histogram.sum(axis=1), levels)
+        result.edge_widths = self._edge_widths(frame, mask, roi_count, weights, levels)
         result.warnings = self._warnings(result, mask, weights, located)
         if keep_images:
             raw_mask = np.zeros(frame.shape[:2], np.uint8)
@@ -597,7 +612,7 @@ class AreaMeasurer:
         said.extend(self._condition_warnings(located))
         return said
 
-    def _edge_widths(self, frame: np.ndarray, mask: np.ndarray, counts: np.ndarray,
+    def _edge_widths(self, frame: np.ndarray, mask: np.ndarray, counts: np.ndarray, weights: _Weights,
                      levels: Levels | None) -> dict | None:
         """How wide (px) the object's edges are, against the printed markers' in the same frame, each as the
         pixels between the two levels' outer 15 % per pixel of outline. Blur of the water or the lens widens
@@ -609,13 +624,13 @@ class AreaMeasurer:
         if high - low < 20:
             return None
         inside = np.abs(BAND_VALUES - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low)
-        outline = cv2.countNonZero(cv2.subtract(mask, cv2.erode(mask, np.ones((3, 3), np.uint8))))
+        outline = _outline(mask)
         if outline == 0:
             return None
-        if not self._weights.marker_edge_found:  # printed edges: once per target layout
-            self._weights.marker_edge_px = _marker_edge_width(frame, self._markers.values())
-            self._weights.marker_edge_found = True
-        markers = self._weights.marker_edge_px
+        if not weights.marker_edge_found:  # printed edges: once per target layout
+            weights.marker_edge_px = _marker_edge_width(frame, self._markers.values())
+            weights.marker_edge_found = True
+        markers = weights.marker_edge_px
         if markers is None:
             return None
         return {"object_px": float(counts[inside].sum()) / outline, "markers_px": markers}
@@ -648,52 +663,48 @@ class AreaMeasurer:
         from the classes' interiors are found afresh every LIGHT_REFRESH_FRAMES frames, when the weights were
         rebuilt, or when `fresh` (the light drifted); in between they are carried, as a steady camera's light is."""
         threshold = self.classifier.resolve_threshold(raw_band, weights.roi)
-        band, light = raw_band, None
+        band, light = raw_band, self._light
         if self.even_light:
-            state = self._light
-            if fresh or state is None or state[0] is not weights or state[1] >= LIGHT_REFRESH_FRAMES:
+            if fresh or light is None or light.weights is not weights or light.age >= LIGHT_REFRESH_FRAMES:
                 raw_threshold, reach = threshold, INTERIOR_PX
                 for _ in range(2):  # again with a wider interior where the edges are wider (blur, turbidity)
                     found = self._flat_field(raw_band, weights, raw_threshold, reach)
-                    # the light's unevenness left for the levels' errors; unknown (None) without a surface: a
-                    # level may then be off by its whole spread
-                    self._unevenness = None if found is None else found.unevenness
-                    state = [weights, 0, found if found is not None and found.needed else None, None, None]
+                    light = _Light(weights, None if found is None else found.unevenness,
+                                   found if found is not None and found.needed else None)
                     band, threshold = raw_band, raw_threshold
-                    if state[2] is not None:
-                        band = state[2].apply(raw_band)
+                    if light.flat is not None:
+                        band = light.flat.apply(raw_band)
                         threshold = self.classifier.resolve_threshold(band, weights.roi)
-                    state[3] = self._interior_levels(band, weights.roi, threshold, reach)
-                    wider = self._edge_reach(band, weights.roi, threshold, state[3])
+                    light.levels = self._interior_levels(band, weights.roi, threshold, reach)
+                    wider = self._edge_reach(band, weights.roi, threshold, light.levels)
                     if wider <= reach:
                         break
                     reach = wider
-                self._light = state
+                self._light = light
             else:
-                state[1] += 1
-                if state[2] is not None:
-                    band = state[2].apply(raw_band)
+                light.age += 1
+                if light.flat is not None:
+                    band = light.flat.apply(raw_band)
                     threshold = self.classifier.resolve_threshold(band, weights.roi)
-            light, self._pure_levels = state[2], state[3]
         histogram = cv2.calcHist([band, weights.levels], [0, 1], weights.roi, [256, WEIGHT_LEVELS],
                                  [0, 256, 0, WEIGHT_LEVELS]).astype(np.float64)
-        return band, threshold, light, histogram
+        return band, threshold, light.flat if self.even_light else None, histogram
 
     def _light_drifted(self, estimator: LevelEstimator, threshold: float) -> bool:
         """Whether the carried flat field and levels no longer fit this frame: its background's level and spread
         as the histogram gives them (cheap) moved by more than 2 DN (or three level errors), or the spread grew
         by half (the light's shape changed), against the same figures of the frame they were found in."""
-        state = self._light
-        if state is None or self._pure_levels is None:
+        light = self._light
+        if light is None or light.levels is None:
             return False
         now = estimator.at(threshold)
-        if state[1] == 0:  # found in this very frame: what later frames are held to
-            state[4] = now
+        if light.age == 0:  # found in this very frame: what later frames are held to
+            light.seen_levels = now
             return False
-        then = state[4]
+        then = light.seen_levels
         if now is None or then is None:
             return now is not then
-        return (abs(now.background - then.background) > max(2.0, 3 * self._pure_levels.error("background"))
+        return (abs(now.background - then.background) > max(2.0, 3 * light.levels.error("background"))
                 or now.background_spread > 1.5 * then.background_spread + 1.0)
 
     def _edge_reach(self, band: np.ndarray, roi: np.ndarray, threshold: float, levels: Levels | None) -> int:
@@ -701,21 +712,19 @@ class AreaMeasurer:
         the class's outline) plus a pixel, at least INTERIOR_PX, at most MAX_INTERIOR_PX."""
         if levels is None:
             return INTERIOR_PX
-        kind = ((band <= threshold) if self.classifier.object == "dark" else (band > threshold)).astype(np.uint8)
-        kind &= roi
-        outline = cv2.countNonZero(cv2.subtract(kind, cv2.erode(kind, np.ones((3, 3), np.uint8))))
+        outline = _outline(self.classifier.object_side(band, threshold).astype(np.uint8) & roi)
         counts = cv2.calcHist([band], [0], roi, [256], [0, 256]).ravel()
         mixed = float(counts[levels.mixed()].sum())
         width = mixed / max(outline, 1)
         return int(min(max(INTERIOR_PX, np.ceil(width) + 1), MAX_INTERIOR_PX))
 
     def _interior_levels(self, band: np.ndarray, roi: np.ndarray, threshold: float,
-                         reach: int = 3) -> Levels | None:
-        """Both levels from the pixels at least two pixels inside their class (and the ROI): no edge pixel,
+                         reach: int = INTERIOR_PX) -> Levels | None:
+        """Both levels from the pixels at least `reach` pixels inside their class (and the ROI): no edge pixel,
         blurred or not, pulls them towards each other, as it pulls a histogram's modes where an object is
         mostly edge (a bush's twigs under blur and noise: its level 2.4 DN off, Af +0.9 %). None where a
         class has too small an interior (twigs 1-3 px wide): the histogram's modes are used."""
-        kind = band <= threshold if self.classifier.object == "dark" else band > threshold
+        kind = self.classifier.object_side(band, threshold)
         inside = roi > 0
         kernel = cv2.getStructuringElement(cv2.MORPH_RECT if reach > INTERIOR_PX else cv2.MORPH_ELLIPSE,
                                            (2 * reach + 1, 2 * reach + 1))
@@ -729,12 +738,12 @@ class AreaMeasurer:
         return Levels(obj, bg, obj_spread, bg_spread, object_error=obj_error, background_error=bg_error)
 
     def _flat_field(self, band: np.ndarray, weights: _Weights, threshold: float,
-                    reach: int = 3) -> FlatField | None:
+                    reach: int = INTERIOR_PX) -> FlatField | None:
         """The flat field of this frame's window: from the background frame, or fitted to the background
-        pixels at least two pixels from any pixel of the object's class (blurred edges stay out of the fit)."""
+        pixels at least `reach` - 1 pixels from any pixel of the object's class (blurred edges stay out)."""
         if self.background_band is not None:
             return flat_field(band, weights.roi, background_band=self.background_band[weights.window])
-        background = band > threshold if self.classifier.object == "dark" else band <= threshold
+        background = ~self.classifier.object_side(band, threshold)
         size = 2 * (reach - 1) + 1
         background = cv2.erode(background.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
         return flat_field(band, weights.roi, background)

@@ -77,10 +77,13 @@ class Classifier:
             return float(self.threshold)
         return otsu_level(np.bincount(band[roi > 0], minlength=256))
 
+    def object_side(self, band: np.ndarray, threshold: float) -> np.ndarray:
+        """Where the band lies on the object's side of the threshold (bool, anywhere in the band)."""
+        return band <= threshold if self.object == "dark" else band > threshold
+
     def mask(self, band: np.ndarray, roi: np.ndarray, threshold: float) -> np.ndarray:
         """Object pixels (uint8 0/255) inside the ROI for a given threshold on the band."""
-        mask = band <= threshold if self.object == "dark" else band > threshold
-        mask = (mask & (roi > 0)).astype(np.uint8) * 255
+        mask = (self.object_side(band, threshold) & (roi > 0)).astype(np.uint8) * 255
         for radius, op in ((self.open_px, cv2.MORPH_OPEN), (self.close_px, cv2.MORPH_CLOSE)):
             if radius:
                 kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))

@@ -16,7 +16,15 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from .transport import PROFILES, SOCKET_BUFFER_BYTES, buffer_warning, choose_transport, config_locations
+from .transport import (
+    INDEX_MARKER,
+    PROFILES,
+    SOCKET_BUFFER_BYTES,
+    ament_prefix,
+    choose_transport,
+    config_locations,
+    low_socket_buffers,
+)
 
 SHM_MIN_BYTES = 256 * 2**20  # three nodes' segments at 3872x2592 took 134 MB; docker's default is 64 MB
 DISCOVERY_RANGES = ("SUBNET", "LOCALHOST", "OFF", "SYSTEM_DEFAULT")
@@ -68,10 +76,11 @@ def check_transport(environ: dict, sysctl_dir: Path) -> list[Finding]:
         findings.append(Finding("transport", False, transport.description, "unset VEG_AREA_TRANSPORT"))
     else:
         findings.append(Finding("transport", True, transport.description))
-    warning = buffer_warning(transport, sysctl_dir)
-    if warning:
-        findings.append(Finding("socket buffers", False, warning.split(": camera-sized")[0]
-                                + ": camera-sized images to other PCs may be lost",
+    low = low_socket_buffers(sysctl_dir) if transport.name == "auto" else {}
+    if low:
+        now = ", ".join(f"{k} {v}" for k, v in low.items())
+        findings.append(Finding("socket buffers", False, f"net.core {now} caps the UDP socket buffers below "
+                                f"{SOCKET_BUFFER_BYTES}: camera-sized images to other PCs may be lost",
                                 f"sudo sysctl -w net.core.rmem_max={SOCKET_BUFFER_BYTES} "
                                 f"net.core.wmem_max={SOCKET_BUFFER_BYTES} (and in /etc/sysctl.d/ to keep it)"))
     elif transport.name == "auto":
@@ -159,12 +168,10 @@ def check_ros_environment(environ: dict) -> list[Finding]:
 
 def check_ament_index(environ: dict, python_prefix: Path = Path(sys.prefix)) -> list[Finding]:
     """Whether `ros2 run veg_area_ros <node>` finds the package (the ament index on AMENT_PREFIX_PATH)."""
-    marker = Path("share", "ament_index", "resource_index", "packages", "veg_area_ros")
-    prefixes = [Path(p) for p in environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-    found = next((p for p in prefixes if (p / marker).is_file()), None)
+    found = ament_prefix(environ)
     if found:
         return [Finding("ament index", True, f"ros2 run finds veg_area_ros in {found}")]
-    here = python_prefix if (python_prefix / marker).is_file() else None
+    here = python_prefix if (python_prefix / INDEX_MARKER).is_file() else None
     node = f"{here}/lib/veg_area_ros/<node>" if here else "lib/veg_area_ros/<node> of its install"
     if shutil.which("ros2", path=environ.get("PATH")):
         source = f"source {here}/setup.bash" if here and (here / "setup.bash").is_file() else \

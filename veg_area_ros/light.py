@@ -131,9 +131,7 @@ def flat_field(band: np.ndarray, region: np.ndarray, background: np.ndarray | No
             return None
         surface, misfit, at_cells = fitted
         source = "fitted"
-        # over the region: the surface's extremes lie on the region's outline or at the fitted cells
-        _, high, _, _ = cv2.minMaxLoc(surface, region)
-        low = float(cv2.minMaxLoc(surface, region)[0])
+        low, high, _, _ = cv2.minMaxLoc(surface, region)
         reference = float(np.median(at_cells))
     if reference < 8 or low <= 1:
         return None  # a black or unlit background holds no light to even

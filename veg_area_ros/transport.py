@@ -20,6 +20,7 @@ from pathlib import Path
 
 PROFILES = {"auto": "fastdds.xml", "local": "fastdds_local.xml", "default": None}
 SOCKET_BUFFER_BYTES = 33554432  # what config/fastdds.xml asks the kernel for
+INDEX_MARKER = Path("share", "ament_index", "resource_index", "packages", "veg_area_ros")
 
 
 @dataclass(frozen=True)
@@ -34,18 +35,23 @@ class Transport:
             environ["FASTDDS_DEFAULT_PROFILES_FILE"] = self.profile
 
 
+def ament_prefix(environ: dict) -> Path | None:
+    """The first AMENT_PREFIX_PATH prefix that holds this package: the ament index's rule (its marker under
+    share/ament_index/resource_index/packages), read without importing ament_index_python, which raises when
+    no ament environment is set; None when none does."""
+    prefixes = (Path(p) for p in environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p)
+    return next((p for p in prefixes if (p / INDEX_MARKER).is_file()), None)
+
+
 def config_locations(name: str, environ: dict | None = None) -> list[tuple[Path, str]]:
     """Where a file of the package's config/ may be, best first, each with how it was found: the ament index
     (a sourced ROS 2 or colcon install), beside the running interpreter's prefix (an unsourced `.venv`, where
     colcon installed into the venv itself), then the source tree. No ament environment is a normal state, not
     an error: the index is then skipped."""
-    environ = os.environ if environ is None else environ
     found: list[tuple[Path, str]] = []
-    for prefix in filter(None, environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)):
-        # the ament index's rule (share/ament_index/resource_index/packages/<name>) without importing it
-        if (Path(prefix) / "share" / "ament_index" / "resource_index" / "packages" / "veg_area_ros").is_file():
-            found.append((Path(prefix) / "share" / "veg_area_ros" / "config" / name, "ament index"))
-            break
+    prefix = ament_prefix(os.environ if environ is None else environ)
+    if prefix is not None:
+        found.append((prefix / "share" / "veg_area_ros" / "config" / name, "ament index"))
     found.append((Path(sys.prefix) / "share" / "veg_area_ros" / "config" / name, "this interpreter's prefix"))
     found.append((Path(__file__).resolve().parents[1] / "config" / name, "the source tree"))
     return found
@@ -88,11 +94,8 @@ def choose_transport(environ: dict) -> Transport:
     return Transport(wanted, profile, f"veg_area_ros '{wanted}' ({reach}): {profile} (found via {how})")
 
 
-def buffer_warning(transport: Transport, proc: Path = Path("/proc/sys/net/core")) -> str | None:
-    """Why images to other machines may be lost with this transport (socket buffers capped below what the
-    profile asks for), or None."""
-    if transport.name != "auto":
-        return None
+def low_socket_buffers(proc: Path = Path("/proc/sys/net/core")) -> dict[str, int]:
+    """net.core's rmem_max and wmem_max where they are below what the profile asks for (unreadable: left out)."""
     low = {}
     for key in ("rmem_max", "wmem_max"):
         try:
@@ -101,6 +104,13 @@ def buffer_warning(transport: Transport, proc: Path = Path("/proc/sys/net/core")
             continue
         if value < SOCKET_BUFFER_BYTES:
             low[key] = value
+    return low
+
+
+def buffer_warning(transport: Transport, proc: Path = Path("/proc/sys/net/core")) -> str | None:
+    """Why images to other machines may be lost with this transport (socket buffers capped below what the
+    profile asks for), or None."""
+    low = low_socket_buffers(proc) if transport.name == "auto" else {}
     if not low:
         return None
     now = ", ".join(f"{k} {v}" for k, v in low.items())

@@ -93,9 +93,9 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
     inputs = list(job.inputs)
     sources = [*inputs, job.calibration if job.calibration.lower() not in ("none", "bag") else None, job.targets,
                job.background]
-    # the folder gets each input's plot (PNG) and CSV; the overlay folder images
-    check_outputs([("--output-dir", str(folder), True), ("--overlay", job.overlay, True)], sources, "measured")
-    check_outputs([("--output-dir", str(path), True) for path in batch_csv_paths(inputs, folder)], sources,
+    # the folder gets each input's CSV and its plot (PNG); the overlay folder images
+    check_outputs([("--output-dir", str(folder), True), ("--overlay", job.overlay, True),
+                   *(("--output-dir", str(path), True) for path in batch_csv_paths(inputs, folder))], sources,
                   "measured")
     folder.mkdir(parents=True, exist_ok=True)
     workers = min(jobs or os.cpu_count() or 1, len(inputs))

@@ -142,13 +142,13 @@ class AreaNode(Node):
     def _build_or_log(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None):
         """`_build` at start: a background frame that does not fit these settings is logged and left out."""
         try:
-            return self._build(settings, camera, targets)
+            return self._build(settings, camera, targets, self.background)
         except ValueError as exc:
             if self.background is None:
                 raise
             self.get_logger().error(f"parameter background_file: {exc}; the light is fitted in each frame instead")
             self.background = None
-            return self._build(settings, camera, targets)
+            return self._build(settings, camera, targets, None)
 
     def _settings(self, changed: dict) -> MeasurementSettings:
         """The measurement settings from the parameters, with `changed` (name -> value) over them; raises
@@ -160,11 +160,10 @@ class AreaNode(Node):
                                    ).with_threshold(value["threshold_mode"], value["threshold"])
 
     def _build(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None,
-               background: np.ndarray | str | None = "current"):
+               background: np.ndarray | None):
         """A measurer for these settings (None without targets); raises ValueError with the reason."""
         if targets is None:
             return None
-        background = self.background if isinstance(background, str) else background
         from_file = camera is not None and camera == self.file_camera  # not a camera_info that replaced it
         return settings.measurer(camera, targets, self.port_camera if from_file else None, background,
                                  self.file_conditions if from_file else None)
@@ -178,7 +177,7 @@ class AreaNode(Node):
             settings = self._settings({k: v for k, v in changed.items() if k in SETTINGS})
             targets = self._load_targets(changed["targets_file"]) if "targets_file" in changed else self.targets
             background = (self._load_background(changed["background_file"]) if "background_file" in changed
-                          else "current")
+                          else self.background)
             self._build(settings, self.camera, targets, background)
         except (ValueError, OSError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
@@ -196,7 +195,7 @@ class AreaNode(Node):
             if "background_file" in names:
                 self.background = self._load_background(self.get_parameter("background_file").value)
             self.settings = self._settings({})
-            self.measurer = self._build(self.settings, self.camera, self.targets)
+            self.measurer = self._build(self.settings, self.camera, self.targets, self.background)
         except (ValueError, OSError) as exc:  # the file changed between the check and now
             self.get_logger().error(f"parameters set but not applied ({exc}); measuring as before")
             return
@@ -243,7 +242,7 @@ class AreaNode(Node):
         if camera == self.camera:
             return
         try:
-            measurer = self._build(self.settings, camera, self.targets)
+            measurer = self._build(self.settings, camera, self.targets, self.background)
         except Exception as exc:  # e.g. no memory for its pixel maps: the node goes on with what it had
             self.get_logger().error(f"calibration received but not applied ({exc.__class__.__name__}: {exc}); "
                                     "frames are measured with the previous one", throttle_duration_sec=10.0)
