@@ -183,6 +183,9 @@ def test_the_readme_is_short_and_its_set_up_is_two_commands():
     assert len(lines) <= 150, len(lines)
     first, _ = readme_steps()[0]
     assert first == ["make demo", "make test"]
+    ci = [line.strip() for line in (REPO / ".ci" / "run").read_text().splitlines()
+          if line.strip() and not line.startswith("#")]
+    assert ci[-1] == "make test"  # CI runs the README's test command, nothing else
     assert "Status" not in {line.lstrip("# ").strip() for line in lines if line.startswith("#")}
     assert not re.search(r"issue #\d+|\(#\d+\)", README.read_text())
 
