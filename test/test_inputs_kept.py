@@ -121,3 +121,71 @@ def test_a_closed_stdout_stops_the_run_quietly_and_keeps_the_csv(workspace):
     assert "Traceback" not in done.stderr and "BrokenPipeError" not in done.stderr, done.stderr
     rows = list(csv.DictReader((workspace / "pipe.csv").open()))
     assert 1 <= len(rows) < 5000 and all(r["area_m2"] for r in rows)
+
+
+def test_sigkill_keeps_every_row_shown_and_the_csv_stays_valid(workspace):
+    """SIGKILL runs no handler: the rows must already be on disk. A frame's line is printed after its row
+    reached the file, so every frame shown is in the CSV, and the last row is whole."""
+    process = veg_area(workspace, *MEASURE, "run.avi", "--csv", "kill.csv", stdout=subprocess.PIPE,
+                       stderr=subprocess.DEVNULL)
+    shown = 0
+    while shown < 30 and process.poll() is None:
+        shown += process.stdout.readline().startswith("[")
+    process.kill()
+    process.wait(timeout=60)
+    text = (workspace / "kill.csv").read_bytes().decode()
+    assert text.endswith("\r\n")  # no half row
+    rows = list(csv.DictReader(text.splitlines()))
+    assert 30 <= len(rows) < 5000
+    assert all(r["area_m2"] and r["area_mode"] == "subpixel" and None not in r for r in rows)
+    assert [r["frame"] for r in rows] == [f"run.avi#{k}" for k in range(len(rows))]
+
+
+def test_a_run_that_measures_nothing_keeps_an_earlier_table(workspace):
+    (workspace / "earlier.csv").write_bytes(b"frame,area_m2\r\nold,1\r\n")
+    (workspace / "blank.png").write_bytes(cv2.imencode(".png", 200 + 0 * cv2.imread(
+        str(workspace / "scene.png")))[1].tobytes())
+    done = veg_area(workspace, *MEASURE, "blank.png", "--csv", "earlier.csv")
+    assert done.returncode == 1 and "is kept" in done.stderr
+    assert (workspace / "earlier.csv").read_bytes() == b"frame,area_m2\r\nold,1\r\n"
+
+
+def _descendants(pid: int) -> set[int]:
+    children = set()
+    for status in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = status.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid:
+            child = int(status.parent.name)
+            children |= {child} | _descendants(child)
+    return children
+
+
+def test_sigterm_on_a_batch_leaves_no_worker_running(workspace):
+    (workspace / "run2.avi").unlink(missing_ok=True)
+    (workspace / "run2.avi").symlink_to(workspace / "run.avi")
+    process = veg_area(workspace, *MEASURE, "run.avi", "run2.avi", "--jobs", "2", "--output-dir", "termbatch",
+                       stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    workers: set[int] = set()
+    while time.monotonic() < deadline and process.poll() is None:
+        workers = _descendants(process.pid)
+        csvs = list((workspace / "termbatch").glob("*_area.csv"))
+        if len(csvs) == 2 and all(len(p.read_text().splitlines()) > 5 for p in csvs):
+            break
+        time.sleep(0.2)
+    assert process.poll() is None and workers, "the batch ended before it could be interrupted"
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    time.sleep(0.5)
+    alive = {pid for pid in workers if Path(f"/proc/{pid}").exists()
+             and Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"}
+    assert not alive, f"workers still running after the batch's SIGTERM: {alive}"
+    summary = list(csv.DictReader((workspace / "termbatch" / "batch_summary.csv").open()))
+    assert [int(r["measured"]) > 5 for r in summary] == [True, True]
+    for path in (workspace / "termbatch").glob("*_area.csv"):
+        rows = list(csv.DictReader(path.open()))
+        assert len(rows) >= 5 and all(r["area_m2"] for r in rows)

@@ -7,8 +7,10 @@ import argparse
 import csv
 import io
 import math
+import os
 import sys
 import tempfile
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -105,3 +107,49 @@ def write_csv(path: Path, columns: Sequence[str], rows: list[dict]) -> None:
     writer.writeheader()
     writer.writerows(rows)
     write_atomic(path, buffer.getvalue())
+
+
+class RowLog:
+    """A CSV table written as its rows come: each row reaches the file (flushed to the kernel, synced to disk
+    at most once a second) before the next frame is measured, so the table is valid after every row and a
+    run killed by any signal (SIGKILL included) keeps every row measured. The file is begun only at the
+    first row that `worth_keeping` accepts (a measured frame), the rows before it held back: a run that
+    measures nothing never replaces an earlier table."""
+
+    def __init__(self, path: Path, columns: Sequence[str], worth_keeping: Callable[[dict], bool]):
+        self.path, self.columns, self.worth_keeping = path, columns, worth_keeping
+        self.held: list[dict] = []
+        self._handle = None
+        self._writer: csv.DictWriter | None = None
+        self._synced = 0.0
+
+    @property
+    def begun(self) -> bool:
+        return self._handle is not None
+
+    def add(self, row: dict) -> None:
+        if self._handle is None:
+            if not self.worth_keeping(row):
+                self.held.append(row)
+                return
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._handle = open(self.path, "w", newline="", encoding="utf-8")  # noqa: SIM115 (closed by close())
+            self._writer = csv.DictWriter(self._handle, self.columns, extrasaction="ignore")
+            self._writer.writeheader()
+            self._writer.writerows(self.held)
+            self.held = []
+        self._writer.writerow(row)
+        self._handle.flush()
+        if time.monotonic() - self._synced > 1.0:
+            os.fsync(self._handle.fileno())
+            self._synced = time.monotonic()
+
+    def close(self, write_held: bool = False) -> None:
+        """Finish the table; a table never begun is written with its held rows when `write_held`."""
+        if self._handle is not None:
+            self._handle.flush()
+            os.fsync(self._handle.fileno())
+            self._handle.close()
+            self._handle = None
+        elif write_held and self.held:
+            write_csv(self.path, self.columns, self.held)

@@ -18,10 +18,10 @@ from .common import (
     EXIT_OK,
     EXIT_USAGE,
     CliError,
+    RowLog,
     check_outputs,
     progress,
     unwritable,
-    write_csv,
 )
 
 CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "area_mode",
@@ -166,11 +166,15 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
                           {"idealized_from": str(Path(job.calibration).resolve())})
     rows: list[dict] = []
+    # each row on disk before the next frame; begun at the first measured frame (an error-only run keeps an
+    # earlier table)
+    log = RowLog(csv_path, CSV_COLUMNS, lambda row: not row["error"]) if csv_path is not None else None
     warned: dict[str, int] = {}
     interrupted = False
     try:
         for index, frame in enumerate(iter_frames(files, job.video_step, job.image_topic), 1):
             row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
+            line = ""
             if frame.stamp is not None:
                 row["stamp_sec"], row["stamp_nanosec"] = frame.stamp
                 if not (job.start_time <= frame.time_s <= job.end_time):
@@ -200,7 +204,6 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                     line = (f"[{index}/{total}] {frame.name}: Af = {result.area_m2:.6g} ± {result.area_std_m2:.2g} m² "
                             f"({result.pixel_count} px, threshold {result.threshold:g}, {result.scale.kind} scale"
                             f"{'' if result.calibrated else ', UNCALIBRATED'})")
-                    print(line, file=sys.stderr if job.json else sys.stdout, flush=True)
                 if job.overlay:
                     target = Path(job.overlay) if single_overlay else Path(job.overlay) / frame_file_name(frame.name)
                     target.parent.mkdir(parents=True, exist_ok=True)
@@ -208,9 +211,13 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                         say(f"[{index}/{total}] {frame.name}: overlay {target} could not be written")
                 if job.idealized and camera is not None:
                     cv2.imwrite(str(Path(job.idealized) / frame_file_name(frame.name)), result.image)
+            rows.append(row)
+            if log is not None:  # on disk before it is shown
+                log.add(csv_row(row))
+            if line:
+                print(line, file=sys.stderr if job.json else sys.stdout, flush=True)
             if job.json:
                 print(json.dumps({k: v for k, v in row.items() if k != "error" or v}), flush=True)
-            rows.append(row)
             if on_frame is not None:
                 on_frame(index, total)
             if stop is not None and stop():
@@ -225,10 +232,10 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     if warned and measured > 1:
         say("warnings: " + "; ".join(f"{kind} on {count} of {measured} frames" for kind, count in warned.items()))
 
-    if csv_path is not None and measured == 0 and csv_path.exists():  # an error-only table must not replace one
+    if log is not None and measured == 0 and csv_path.exists():  # an error-only table must not replace one
         say(f"time series not written: no frame was measured (the existing {csv_path} is kept)")
-    elif csv_path is not None and rows:  # a new file lists every frame, with its error where there is one
-        write_area_csv(csv_path, rows)
+    elif log is not None and rows:  # a new file lists every frame, with its error where there is one
+        log.close(write_held=True)
         say(f"time series: {csv_path}")
         if len(rows) > 1:
             say(f"plot: {_plot_series(rows, csv_path)}")
@@ -255,7 +262,8 @@ def _plot_series(rows: list[dict], csv_path: Path) -> Path:
                             time_label="time [s]" if timed else "frame")
 
 
-def write_area_csv(path: Path, rows: list[dict]) -> None:
-    write_csv(path, CSV_COLUMNS,
-              [{**row, "missing_targets": " ".join(map(str, row.get("missing_targets", []))),
-                "warnings": " | ".join(row.get("warnings", []))} for row in rows])
+def csv_row(row: dict) -> dict:
+    """A measured row as the CSV holds it: lists joined into one cell."""
+    return {**row, "missing_targets": " ".join(map(str, row.get("missing_targets", []))),
+            "warnings": " | ".join(row.get("warnings", []))}
+
