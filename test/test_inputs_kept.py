@@ -189,3 +189,62 @@ def test_sigterm_on_a_batch_leaves_no_worker_running(workspace):
     for path in (workspace / "termbatch").glob("*_area.csv"):
         rows = list(csv.DictReader(path.open()))
         assert len(rows) >= 5 and all(r["area_m2"] for r in rows)
+
+
+def _cut_video(workspace: Path, name: str, frames: int, keep: float) -> None:
+    """An MJPG video of `frames` frames whose file is cut to `keep` of its length (a copy that stopped, a full
+    card): the header still declares every frame."""
+    frame = cv2.imread(str(workspace / "scene.png"))
+    whole = workspace / f"whole_{name}"
+    writer = cv2.VideoWriter(str(whole), cv2.VideoWriter_fourcc(*"MJPG"), 30, ENDOSCOPE.image_size)
+    for _ in range(frames):
+        writer.write(frame)
+    writer.release()
+    data = whole.read_bytes()
+    (workspace / name).write_bytes(data[:int(len(data) * keep)])
+    whole.unlink()
+
+
+def test_a_damaged_video_says_how_many_frames_were_read_and_exits_1(workspace):
+    _cut_video(workspace, "cut.avi", 40, 0.5)
+    done = veg_area(workspace, *MEASURE, "cut.avi", "--csv", "cut.csv")
+    assert done.returncode == 1, done.stderr
+    assert "Traceback" not in done.stderr
+    read = int(done.stderr.split(" of 40 frames read")[0].rsplit("(", 1)[1])
+    assert 10 <= read < 40
+    assert f"{40 - read} of 40 frames could not be read" in done.stderr and "damaged or cut short" in done.stderr
+    rows = list(csv.DictReader((workspace / "cut.csv").open()))
+    assert len(rows) == read + 1 and all(r["area_m2"] for r in rows[:-1])  # every frame read is kept
+    assert rows[-1]["frame"] == f"cut.avi#{read}" and "could not be decoded" in rows[-1]["error"]
+
+
+def test_a_whole_video_and_a_stepped_read_lose_nothing(workspace):
+    _cut_video(workspace, "whole.avi", 12, 1.0)
+    done = veg_area(workspace, *MEASURE, "whole.avi", "--csv", "whole.csv", "--video-step", "5")
+    assert done.returncode == 0, done.stderr
+    assert [r["frame"] for r in csv.DictReader((workspace / "whole.csv").open())] == [
+        "whole.avi#0", "whole.avi#5", "whole.avi#10"]
+
+
+def test_a_folder_with_an_unreadable_image_keeps_the_others_and_exits_1(workspace):
+    folder = workspace / "some_bad"
+    folder.mkdir()
+    frame = (workspace / "scene.png").read_bytes()
+    (folder / "a.png").write_bytes(frame)
+    (folder / "b.png").write_bytes(frame[:len(frame) // 3])
+    (folder / "c.png").write_bytes(frame)
+    done = veg_area(workspace, *MEASURE, "some_bad", "--csv", "some_bad.csv")
+    assert done.returncode == 1 and "1 of 3 frames could not be read (b.png:" in done.stderr, done.stderr
+    rows = list(csv.DictReader((workspace / "some_bad.csv").open()))
+    assert [bool(r["area_m2"]) for r in rows] == [True, False, True]
+
+
+def test_a_batch_names_the_damaged_input_and_finishes_the_others(workspace):
+    _cut_video(workspace, "cut_b.avi", 30, 0.5)
+    _cut_video(workspace, "fine_b.avi", 6, 1.0)
+    done = veg_area(workspace, *MEASURE, "cut_b.avi", "fine_b.avi", "--jobs", "2", "--output-dir", "damaged")
+    assert done.returncode == 1 and "1 of 2 inputs lost frames" in done.stderr, done.stderr
+    summary = {r["input"]: r for r in csv.DictReader((workspace / "damaged" / "batch_summary.csv").open())}
+    assert "of 30 frames could not be read" in summary["cut_b.avi"]["error"]
+    assert int(summary["cut_b.avi"]["measured"]) >= 5
+    assert summary["fine_b.avi"]["error"] == "" and summary["fine_b.avi"]["measured"] == "6"

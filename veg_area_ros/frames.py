@@ -36,6 +36,11 @@ class Frame:
     time_s: float | None = None  # position in a video, seconds; a bag frame's header stamp
     stamp: tuple[int, int] | None = None  # a bag frame's header stamp (sec, nanosec)
     camera_info: object | None = None  # a bag frame's latest recorded CameraInfoFields
+    lost: int = 0  # frames of the input this entry stands for that could not be read (damage); 1 for any unreadable
+
+    def __post_init__(self) -> None:
+        if self.image is None and self.lost == 0:
+            object.__setattr__(self, "lost", 1)
 
 
 def is_bag(path: Path) -> bool:
@@ -206,6 +211,7 @@ def iter_video(path: Path, step: int = 1) -> Iterator[Frame]:
         yield Frame(path.name, None, "is not a video OpenCV can open")
         return
     fps = capture.get(cv2.CAP_PROP_FPS)
+    declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
     try:
         index = 0
         while True:
@@ -219,6 +225,11 @@ def iter_video(path: Path, step: int = 1) -> Iterator[Frame]:
             index += 1
     finally:
         capture.release()
+    if index < declared:  # OpenCV cannot read past a frame it cannot decode: the rest of the video is lost
+        lost = len(range(index + (-index % step), declared, step))
+        if lost:
+            yield Frame(f"{path.name}#{index}", None, f"frames {index} to {declared - 1} could not be decoded: the "
+                        f"video is damaged or cut short ({index} of {declared} frames read)", lost=lost)
 
 
 def iter_bag(path: Path, image_topic: str | None = None) -> Iterator[Frame]:

@@ -16,8 +16,8 @@ from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecu
 from dataclasses import replace
 from pathlib import Path
 
-from .common import EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, check_outputs, progress, write_csv
-from .measure_job import MeasureJob, measure
+from .common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, check_outputs, progress, write_csv
+from .measure_job import MeasureJob, frames_lost, measure
 
 BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "std_area_m2", "warnings", "csv", "error")
 PROGRESS_EVERY_S = 2.0
@@ -63,6 +63,8 @@ def _measure_one(job: MeasureJob, position: int, progress_queue, stopping) -> di
         return summary
     if code == EXIT_INTERRUPTED:
         summary["error"] = f"interrupted after {len(rows)} frames"
+    elif code == EXIT_FAILED:
+        summary["error"] = frames_lost(rows)
     areas = [r["area_m2"] for r in rows if not r["error"] and "area_m2" in r]
     summary.update(frames=len(rows), measured=len(areas), warnings=warning_counts(rows))
     if areas:
@@ -157,4 +159,8 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
     failed = [row["input"] for row in rows if not row["measured"]]
     if failed:
         raise CliError(f"{len(failed)} of {len(rows)} inputs gave no measurement: {', '.join(failed)}")
+    damaged = [row["input"] for row in rows if row["error"]]
+    if damaged:
+        raise CliError(f"{len(damaged)} of {len(rows)} inputs lost frames they could not read: {', '.join(damaged)} "
+                       "(see batch_summary.csv)")
     return EXIT_OK

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from ..settings import MeasurementSettings
 from .common import (
+    EXIT_FAILED,
     EXIT_INTERRUPTED,
     EXIT_OK,
     EXIT_USAGE,
@@ -181,6 +182,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                     continue
             try:
                 if frame.image is None:
+                    row["lost"] = frame.lost  # not a CSV column: counted at the end
                     raise InputError(f"skipped: {frame.problem}")
                 if from_bag:  # as the live area node: the latest camera_info, a new measurer when it changes
                     if frame.camera_info is None:
@@ -217,7 +219,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
             if line:
                 print(line, file=sys.stderr if job.json else sys.stdout, flush=True)
             if job.json:
-                print(json.dumps({k: v for k, v in row.items() if k != "error" or v}), flush=True)
+                print(json.dumps({k: v for k, v in row.items() if (k != "error" or v) and k != "lost"}), flush=True)
             if on_frame is not None:
                 on_frame(index, total)
             if stop is not None and stop():
@@ -248,7 +250,24 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError(f"no frame measured: {'; '.join(reasons)[:500]}")
     if measured < len(rows):
         say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
+    problem = frames_lost(rows, total)
+    if problem:  # said even when quiet: the series has holes
+        print(f"veg-area measure: {problem}; the {measured} frames measured are kept"
+              + (f" in {csv_path}" if csv_path is not None else ""), file=sys.stderr, flush=True)
+        return EXIT_FAILED, rows
     return EXIT_OK, rows
+
+
+def frames_lost(rows: list[dict], total: int | None = None) -> str:
+    """What was lost to damaged or unreadable input ('' when nothing): a run that lost frames exits 1. `total`:
+    the frames the inputs declare (default: the rows, a lost stretch counted by its length)."""
+    lost = sum(row.get("lost", 0) for row in rows)
+    if not lost:
+        return ""
+    if total is None:
+        total = sum(1 for row in rows if not row.get("lost")) + lost
+    where = "; ".join(f"{row['frame']}: {row['error'].removeprefix('skipped: ')}" for row in rows if row.get("lost"))
+    return f"{lost} of {total} frames could not be read ({where[:400]})"
 
 
 def _plot_series(rows: list[dict], csv_path: Path) -> Path:
