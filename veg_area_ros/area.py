@@ -68,6 +68,11 @@ SCALE_TOLERANCE = 2e-4  # the scale changed unevenly by more than this (relative
 CARRY_SHARE = 1.0  # ...unless that is within Af's relative scale std: sensor noise jitters the fit by about that
 
 
+# warnings about an object's edges, levels or extent: void where no object was found
+OBJECT_WARNINGS = ("counted whole pixels", "object touches the ROI's border", "threshold sweep does not settle",
+                   "edges wider than the markers'")
+
+
 @dataclass
 class AreaResult:
     area_m2: float
@@ -219,6 +224,13 @@ class AreaMeasurer:
             raise ClassifyError(f"area mode must be one of {', '.join(AREA_MODES)}, got {area_mode!r}")
         self.area_mode = area_mode
         self.given_levels = check_levels(levels)
+        if self.given_levels is not None:  # reversed levels turned Af inside out (+906 %)
+            object_level, background_level = self.given_levels
+            if (object_level > background_level) != (classifier.object != "dark"):
+                raise ClassifyError(f"levels {object_level:g},{background_level:g} are reversed for a "
+                                    f"{classifier.object} object: its level must lie "
+                                    f"{'below' if classifier.object == 'dark' else 'above'} the background's "
+                                    "(give OBJECT,BACKGROUND)")
         self.calibration_conditions = calibration_conditions  # the calibration file's medium and distance
         # sub-pixel shares under uneven light: the band evened by the background's surface (a frame of the empty
         # scene, else fitted per frame); not for the excess-green index, which is no brightness
@@ -324,6 +336,8 @@ class AreaMeasurer:
 
     def _roi_ideal(self, shape: tuple[int, ...], located: _Located) -> tuple[np.ndarray, np.ndarray]:
         polygon, holes = self._roi_polygon(located)
+        if self.roi_polygon is not None:  # the user's: said to lie outside the frame, not found empty
+            check_roi_in_image(polygon, shape[1], shape[0])
         roi = polygon_roi(shape, polygon, holes)
         if self.idealizer is not None:
             roi &= self.idealizer.valid_mask()  # never count the black border the remap leaves
@@ -534,6 +548,13 @@ class AreaMeasurer:
             result.area_std_m2 = float(np.hypot(result.area_std_m2, result.exposure_std_m2))
         result.edge_widths = self._edge_widths(frame, mask, roi_count, weights, levels)
         result.warnings = self._warnings(result, mask, weights, located)
+        absent = estimator.no_object(threshold)
+        if absent is not None:  # never a large number from the background's noise or texture
+            mask = np.zeros_like(mask)
+            result.area_m2 = result.count_area_m2 = result.area_std_m2 = 0.0
+            result.pixel_count, result.subpixel_applied = 0, False
+            result.warnings = [f"no object found: {absent}; Af is 0"] + [
+                w for w in result.warnings if w.split(":", 1)[0] not in OBJECT_WARNINGS]
         if keep_images:
             raw_mask = np.zeros(frame.shape[:2], np.uint8)
             raw_mask[weights.window] = mask

@@ -26,6 +26,7 @@ from .camera_model import PARAM_NAMES, BrownCamera, distort
 N_INTRINSIC = len(PARAM_NAMES)
 MIN_VIEWS = 3  # below this the nine camera parameters cannot be separated from the poses at all
 RECOMMENDED_VIEWS = 12
+SAME_VIEW_PX = 0.1  # views whose corners lie this close (mean) repeat one another: sensor noise moves them ~0.02
 CORRELATION_WARNING = 0.95
 ROTATION_WARNING_DEG = 45.0
 # rings of distance from the principal point, as fractions of the half-diagonal: where the mean radial residual
@@ -461,6 +462,30 @@ def _uncertainty_warnings(std: dict[str, float], views: list[ViewReport], width:
     return warnings
 
 
+def distinct_views(views: Sequence[View]) -> tuple[list[View], dict[str, str]]:
+    """The views with repeats of an earlier view left out, and why each was: the same board points detected
+    within SAME_VIEW_PX (mean) of where an earlier view has them. A photograph given twice, or a still board
+    in a video, adds no information but would shrink the std as if it did (15 copies of one photo: fx +77 %
+    with a std of 21 px)."""
+    kept: list[View] = []
+    repeated: dict[str, str] = {}
+    for view in views:
+        ids, pixels = np.asarray(view.detection.ids).ravel(), view.detection.image_points.reshape(-1, 2)
+        for earlier in kept:
+            shared, mine, theirs = np.intersect1d(ids, np.asarray(earlier.detection.ids).ravel(),
+                                                  return_indices=True)
+            if len(shared) < 0.9 * max(len(ids), len(earlier.detection.ids)):
+                continue
+            moved = float(np.mean(np.hypot(*(pixels[mine] - earlier.detection.image_points.reshape(-1, 2)[theirs]).T)))
+            if moved < SAME_VIEW_PX:
+                repeated[view.name] = (f"the same view as {earlier.name} (its corners {moved:.3f} px apart on "
+                                       "average): counted once")
+                break
+        else:
+            kept.append(view)
+    return kept, repeated
+
+
 def calibrate(
     views: Sequence[View],
     image_size: tuple[int, int],
@@ -477,9 +502,12 @@ def calibrate(
     say = progress or (lambda _msg: None)
     width, height = image_size
     views = [v for v in views if len(v.detection) >= 4]
+    views, repeated = distinct_views(views)
     if len(views) < MIN_VIEWS:
         raise CalibrationError(f"{len(views)} usable views; at least {MIN_VIEWS} are needed "
-                               f"({RECOMMENDED_VIEWS}+ recommended)")
+                               f"({RECOMMENDED_VIEWS}+ recommended)"
+                               + (f"; {len(repeated)} more repeat a view already counted ({next(iter(repeated))}: "
+                                  f"{next(iter(repeated.values()))})" if repeated else ""))
     object_points = [v.detection.object_points.astype(np.float64) for v in views]
     image_points = [v.detection.image_points.astype(np.float64) for v in views]
     # OpenCV's estimate from at most INIT_VIEWS views spread over the set (its cost grows with the views; the
@@ -509,7 +537,7 @@ def calibrate(
         return slice(N_INTRINSIC + 6 * v, N_INTRINSIC + 6 * v + 6)
 
     keep = [np.ones(len(p), bool) for p in object_points]
-    rejected_views: dict[str, str] = {}
+    rejected_views: dict[str, str] = dict(repeated)
     active = list(range(len(views)))
     iterations = 0
 
@@ -623,6 +651,9 @@ def calibrate(
                             f"({halves['worst']}): some views are not like the others (moved board, refocus, "
                             "another distance); check the per-view residuals")
     warnings += _uncertainty_warnings(honest, reports, width, height)
+    if repeated:
+        warnings.append(f"{len(repeated)} view(s) repeat a view already counted (the same photograph, or a still "
+                        f"board filmed frame after frame) and were counted once: {len(active)} distinct views")
     if unconverged:
         warnings.append(f"{unconverged} of the bundle adjustments stopped at the iteration limit before converging")
     say(f"done: RMS {np.sqrt(np.mean(err**2)):.4f} px over {len(active)} views")

@@ -21,6 +21,8 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
+from .files import MAX_IMAGE_SIDE
+
 OBJECTS = ("dark", "bright", "green")
 AREA_MODES = ("subpixel", "count")  # object fraction of each pixel, or the paper's whole-pixel count
 MAX_MORPHOLOGY_PX = 100  # an opening or closing radius; specks and pin-holes are a few pixels
@@ -36,6 +38,10 @@ EXCESS_GREEN = np.array([[-0.5, 1.0, -0.5, 128.0]])  # B, G, R, offset -> (2G - 
 
 class ClassifyError(ValueError):
     """Settings or a region that cannot classify a frame."""
+
+
+MAX_ROI_COORDINATE = 2 * MAX_IMAGE_SIDE  # a corner may lie outside the image, not kilometres outside
+MIN_GREEN_RANGE = 8  # excess-green levels a colour image spans at least (a grey one: 0, JPEG's chroma noise: 2-4)
 
 
 @dataclass(frozen=True)
@@ -67,7 +73,12 @@ class Classifier:
                 raise ClassifyError("the excess-green index needs a colour (BGR) image")
             return image
         if self.object == "green":  # ExG = 2G - R - B, halved and centred on 128 (neutral grey), in one pass
-            return cv2.transform(image, EXCESS_GREEN)
+            index = cv2.transform(image, EXCESS_GREEN)
+            low, high, _, _ = cv2.minMaxLoc(index)
+            if high - low < MIN_GREEN_RANGE:  # a grey photo stored in colour: 128 everywhere, any threshold wrong
+                raise ClassifyError(f"the image has no colour (its excess-green index spans only {high - low:g} "
+                                    "levels: a grey image stored as colour); measure a dark or bright object")
+            return index
         if self.channel == "grey":
             return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
         return np.ascontiguousarray(image[..., CHANNELS.index(self.channel) - 1])
@@ -161,6 +172,9 @@ def _fractions_of_every_value(levels: Levels) -> np.ndarray:
     return fractions
 
 
+ONE_CLASS_SPREADS = 3  # class peaks closer than this many background spreads: one class, no object
+
+
 class LevelEstimator:
     """Object and background levels of a 256-bin band histogram of the ROI, split at a threshold: each class's
     mode, its spread (the one-sided RMS deviation from the mode on the side away from the other class, where
@@ -213,6 +227,28 @@ class LevelEstimator:
             return None
         (obj, obj_spread, obj_error), (bg, bg_spread, bg_error) = (high, low) if self.object_is_high else (low, high)
         return Levels(obj, bg, obj_spread, bg_spread, object_error=obj_error, background_error=bg_error)
+
+
+    def no_object(self, threshold: float) -> str | None:
+        """Why the ROI holds no object at this threshold, or None: no pixel on the object's side, or the two
+        sides peak within ONE_CLASS_SPREADS of the background's spread of each other (one class of grey levels,
+        noise or texture cut in two: Otsu's threshold on an empty scene), where Af would be a large number
+        of background pixels."""
+        split = min(max(math.floor(threshold), -1), 255)
+        low, high = self._sum(0, 0, split), self._sum(0, split + 1, 255)
+        if (high if self.object_is_high else low) == 0:
+            return f"no pixel of the region of interest lies on the object's side of the threshold {threshold:g}"
+        if (low if self.object_is_high else high) == 0:
+            return None  # all object: the ROI lies inside it (said as the object touching the ROI's border)
+        levels = self.at(threshold)
+        if levels is None:
+            return None
+        apart = abs(levels.background - levels.object)
+        if apart < ONE_CLASS_SPREADS * levels.background_spread:
+            return (f"the region of interest's grey levels form one class: the two sides of the threshold "
+                    f"{threshold:g} peak {apart:.1f} DN apart, within {ONE_CLASS_SPREADS} times the background's "
+                    f"spread ({levels.background_spread:.1f} DN)")
+        return None
 
 
 def pure_level(counts: np.ndarray) -> tuple[float, float, float] | None:
@@ -275,6 +311,9 @@ def check_polygon(polygon) -> np.ndarray:
     polygon = np.asarray(polygon, float).reshape(-1, 2)
     if len(polygon) < 3:
         raise ClassifyError(f"a region of interest needs at least 3 corners, got {len(polygon)}")
+    if np.all(np.isfinite(polygon)) and np.max(np.abs(polygon)) > MAX_ROI_COORDINATE:
+        raise ClassifyError(f"a region of interest corner at {np.max(np.abs(polygon)):.3g} px lies beyond any image "
+                            f"(pixel coordinates up to {MAX_IMAGE_SIDE})")
     if not np.all(np.isfinite(polygon)) or cv2.contourArea(polygon.astype(np.float32)) < 1.0:
         raise ClassifyError("the region of interest is empty (its corners enclose no area)")
     return polygon

@@ -185,13 +185,16 @@ def read_runs(path: str | Path, density: float = WATER_DENSITY) -> tuple[np.ndar
     """Experiment table (CSV with columns velocity_m_s, force_n, area_m2; one row per run) -> (U, Cd·Af)."""
     path = Path(path)
     try:
-        with path.open(newline="", encoding="utf-8") as handle:
+        with path.open(newline="", encoding="utf-8-sig") as handle:
             rows = list(csv.DictReader(handle))
     except OSError as exc:
         raise DragError(f"{path}: cannot read ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:  # a spreadsheet's "CSV" in a legacy code page
+        raise DragError(f"{path}: not UTF-8 text (byte {exc.start}); save it as 'CSV UTF-8'") from exc
     needed = {"velocity_m_s", "force_n", "area_m2"}
     if not rows or not needed <= set(rows[0]):
-        raise DragError(f"{path}: needs columns {', '.join(sorted(needed))}")
+        has = f"it has {', '.join(repr(c) for c in rows[0])}" if rows else "it has no data row"
+        raise DragError(f"{path}: needs columns {', '.join(sorted(needed))}; {has}")
     return runs_to_vogel(rows, density, str(path))
 
 

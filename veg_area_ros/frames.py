@@ -192,6 +192,10 @@ def expand_inputs(paths: Sequence[str | Path]) -> list[Path]:
             files.extend(inside)
         elif path.is_file():
             files.append(path)
+        elif path.exists():  # a FIFO, socket or device (or a symlink to one): nothing to read frames from
+            raise InputError(f"{path}: not a regular file or folder (a pipe, socket or device)")
+        elif path.is_symlink():
+            raise InputError(f"{path}: a symlink to {os.readlink(path)}, which does not exist")
         else:
             raise InputError(f"{path}: no such file or folder")
     return files

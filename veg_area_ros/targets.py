@@ -26,6 +26,11 @@ import yaml
 
 from .strict_yaml import StrictYamlError, load_text, read_text
 
+# the targets' extent in their plane: a flume's or river's scene is centimetres to metres across; outside this
+# range the coordinates are in the wrong unit (millimetres as metres gave Af of 1e24 m²)
+MIN_TARGET_SPAN_M = 0.002
+MAX_TARGET_SPAN_M = 50.0
+
 
 class TargetsError(ValueError):
     """A targets file or a frame's targets that cannot give a scale; the message says why."""
@@ -102,6 +107,12 @@ class TargetsSpec:
             raise TargetsError(f"{len(planes)} target(s) given; at least 2 are needed for a scale")
         if len(set(planes)) != len(planes):
             raise TargetsError("two targets share the same plane position")
+        span = float(np.max(np.ptp(np.array(planes, float), axis=0)))
+        if not MIN_TARGET_SPAN_M <= span <= MAX_TARGET_SPAN_M:
+            raise TargetsError(f"the targets span {span:.3g} m in their plane; plane positions are in metres "
+                               f"({MIN_TARGET_SPAN_M * 1000:g} mm to {MAX_TARGET_SPAN_M:g} m for a scene a camera "
+                               "sees whole): " + ("millimetres given as metres?" if span > MAX_TARGET_SPAN_M
+                                                  else "metres given as kilometres?"))
         if "object_plane_offset_m" in content:
             offset = content["object_plane_offset_m"]
             if not _is_number(offset) or abs(offset) > 10:

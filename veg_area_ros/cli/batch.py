@@ -64,7 +64,7 @@ def _measure_one(job: MeasureJob, position: int, progress_queue, stopping) -> di
     if code == EXIT_INTERRUPTED:
         summary["error"] = f"interrupted after {len(rows)} frames"
     elif code == EXIT_FAILED:
-        summary["error"] = frames_lost(rows)
+        summary["error"] = frames_lost(rows) or "no object found in any frame"
     areas = [r["area_m2"] for r in rows if not r["error"] and "area_m2" in r]
     summary.update(frames=len(rows), measured=len(areas), warnings=warning_counts(rows))
     if areas:

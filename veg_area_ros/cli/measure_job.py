@@ -56,6 +56,12 @@ class MeasureJob:
 
         if args.video_step < 1:
             raise CliError("--video-step must be 1 or more", EXIT_USAGE)
+        for option, value in (("--start-time", args.start_time), ("--end-time", args.end_time)):
+            if math.isnan(value):
+                raise CliError(f"{option} must be a time in seconds, got nan", EXIT_USAGE)
+        if args.start_time > args.end_time:
+            raise CliError(f"--start-time {args.start_time:g} s lies after --end-time {args.end_time:g} s: no frame "
+                           "could be measured", EXIT_USAGE)
         try:
             settings = MeasurementSettings(threshold=args.threshold, object=args.object, channel=args.channel,
                                            roi=args.roi, open_px=args.open, close_px=args.close,
@@ -116,6 +122,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError(str(exc)) from exc
     videos = [f for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
     bags = [f for f in files if is_bag(f)]
+    if (math.isfinite(job.start_time) or math.isfinite(job.end_time)) and not bags:
+        raise CliError("--start-time and --end-time pick bag frames by their header stamp; the inputs hold no bag",
+                       EXIT_USAGE)
     if from_bag and len(bags) != len(files):
         raise CliError("--calibration bag needs rosbag2 inputs (their recorded camera_info)", EXIT_USAGE)
     try:
@@ -171,6 +180,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     # earlier table)
     log = RowLog(csv_path, CSV_COLUMNS, lambda row: not row["error"]) if csv_path is not None else None
     warned: dict[str, int] = {}
+    stamps: list[float] = []  # of the frames left out by the time range
     interrupted = False
     try:
         for index, frame in enumerate(iter_frames(files, job.video_step, job.image_topic), 1):
@@ -179,6 +189,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
             if frame.stamp is not None:
                 row["stamp_sec"], row["stamp_nanosec"] = frame.stamp
                 if not (job.start_time <= frame.time_s <= job.end_time):
+                    stamps.append(frame.time_s)
                     continue
             try:
                 if frame.image is None:
@@ -247,9 +258,19 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         return EXIT_INTERRUPTED, rows
     if measured == 0:
         reasons = sorted({r["error"] for r in rows})
-        raise CliError(f"no frame measured: {'; '.join(reasons)[:500]}")
+        if not rows and stamps:  # every frame fell outside the time range
+            raise CliError(f"no frame measured: no frame is stamped between --start-time {job.start_time:g} s and "
+                           f"--end-time {job.end_time:g} s (the frames are stamped {min(stamps):.3f} to "
+                           f"{max(stamps):.3f} s)")
+        raise CliError(f"no frame measured: {'; '.join(reasons)[:500] or 'the inputs hold no frame'}")
     if measured < len(rows):
         say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
+    empty = sum(1 for row in rows if any(w.startswith("no object found") for w in row.get("warnings", [])))
+    if measured and empty == measured:  # Af 0 everywhere: the settings or the scene are wrong, not the plant gone
+        where = "the frame" if measured == 1 else f"any of the {measured} frames"
+        print(f"veg-area measure: no object found in {where} measured (see the warnings); check the threshold, "
+              "--object and the ROI", file=sys.stderr, flush=True)
+        return EXIT_FAILED, rows
     problem = frames_lost(rows, total)
     if problem:  # said even when quiet: the series has holes
         print(f"veg-area measure: {problem}; the {measured} frames measured are kept"

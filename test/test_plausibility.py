@@ -1,0 +1,215 @@
+"""A number that cannot be right never leaves with exit 0: no object in the ROI gives Af 0 with a warning (not
+the background's noise counted), reversed levels, a colour index on a grey image and targets in the wrong unit
+are refused with the reason."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from helpers import REPO, run_cli
+
+from veg_area_ros.area import AreaMeasurer
+from veg_area_ros.classify import Classifier, ClassifyError
+from veg_area_ros.sim.synthetic import (
+    ENDOSCOPE,
+    bush_scene,
+    cube_scene,
+    empty_scene,
+    render_scene,
+    scene_targets,
+    scene_targets_content,
+)
+from veg_area_ros.targets import TargetsError, TargetsSpec
+
+
+def render(scene, light: float, seed: int) -> np.ndarray:
+    return render_scene(ENDOSCOPE, scene, 0.7, noise_sigma=4, light_gradient=light, seed=seed)
+
+
+# not (190, 0.3): a fixed threshold inside the background's own range of light (a 30 % gradient spans 140-205)
+# takes the dark end of an empty background for an object, and the light's surface cannot be fitted around it
+@pytest.mark.parametrize("light, threshold", [(0.0, "otsu"), (0.3, "otsu"), (0.0, 120), (0.3, 120), (0.0, 190)])
+def test_an_empty_scene_gives_af_0_and_says_no_object(light, threshold):
+    for seed in range(3):
+        result = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=threshold)).measure(
+            render(empty_scene(cube_scene()), light, seed))
+        assert result.area_m2 == 0 and result.pixel_count == 0
+        assert result.warnings[0].startswith("no object found")
+        assert not any(w.startswith(("counted whole pixels", "threshold sweep")) for w in result.warnings)
+
+
+@pytest.mark.parametrize("light", [0.0, 0.3])
+@pytest.mark.parametrize("threshold", ["otsu", 120])
+def test_an_object_is_never_taken_for_none(light, threshold):
+    for scene in (cube_scene(), bush_scene()):
+        for seed in range(3):
+            result = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=threshold)).measure(
+                render(scene, light, seed))
+            assert abs(result.area_m2 / scene.true_area_m2 - 1) < 0.01
+            assert not any(w.startswith("no object found") for w in result.warnings)
+
+
+def test_a_small_object_on_an_empty_scene_is_still_found():
+    frame = render(empty_scene(cube_scene()), 0.0, 1)
+    cv2.circle(frame, (320, 240), 6, (40, 40, 40), -1)
+    result = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold="otsu")).measure(frame)
+    assert result.pixel_count > 80 and not any(w.startswith("no object found") for w in result.warnings)
+
+
+@pytest.mark.parametrize("object_, levels", [("dark", (230, 40)), ("bright", (40, 230)), ("green", (60, 200))])
+def test_reversed_levels_are_refused(object_, levels):
+    with pytest.raises(ClassifyError, match="reversed"):
+        AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120, object=object_), levels=levels)
+
+
+def test_the_excess_green_index_refuses_a_grey_image():
+    grey = cv2.cvtColor(cv2.cvtColor(render(cube_scene(), 0.0, 0), cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR)
+    with pytest.raises(ClassifyError, match="has no colour"):
+        Classifier(object="green").index_image(grey)
+    plant = grey.copy()
+    plant[200:280, 280:360] = (40, 160, 60)
+    assert Classifier(object="green").index_image(plant).max() > 150
+
+
+@pytest.mark.parametrize("factor, hint", [(1000.0, "millimetres given as metres"), (1e13, "millimetres"),
+                                          (1e-3, "metres given as kilometres")])
+def test_targets_in_the_wrong_unit_are_refused(factor, hint):
+    content = scene_targets_content()
+    content["markers"] = {k: [x * factor, y * factor] for k, (x, y) in content["markers"].items()}
+    with pytest.raises(TargetsError, match=hint):
+        TargetsSpec.from_dict(content)
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("plausible")
+    (folder / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    cv2.imwrite(str(folder / "empty.png"), render(empty_scene(cube_scene()), 0.0, 0))
+    cv2.imwrite(str(folder / "cube.png"), render(cube_scene(), 0.0, 0))
+    grey = cv2.cvtColor(cv2.imread(str(folder / "cube.png")), cv2.COLOR_BGR2GRAY)
+    cv2.imwrite(str(folder / "grey.jpg"), cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR))
+    return folder
+
+
+def measure(folder, image, *extra):
+    return run_cli("measure", str(folder / image), "--calibration", "none", "--targets",
+                   str(folder / "targets.yaml"), *extra, cwd=folder)
+
+
+def test_the_cli_says_no_object_and_exits_1_keeping_the_row(folder):
+    done = measure(folder, "empty.png", "--json", "--csv", "empty.csv")
+    assert done.returncode == 1 and "no object found in the frame measured" in done.stderr, done.stderr
+    row = json.loads(done.stdout)
+    assert row["area_m2"] == 0 and row["warnings"][0].startswith("no object found")
+    assert [r["area_m2"] for r in csv.DictReader((folder / "empty.csv").open())] == ["0.0"]
+    assert measure(folder, "cube.png").returncode == 0
+
+
+@pytest.mark.parametrize("extra, code, message", [
+    (("--levels", "230,40"), 2, "are reversed for a dark object"),
+    (("--object", "green"), 1, "has no colour"),
+])
+def test_the_cli_refuses_what_cannot_be_right(folder, extra, code, message):
+    done = measure(folder, "grey.jpg", *extra)
+    assert done.returncode == code and message in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+def test_the_cli_refuses_targets_in_millimetres(folder):
+    content = scene_targets_content()
+    content["markers"] = {k: [1000 * x, 1000 * y] for k, (x, y) in content["markers"].items()}
+    (folder / "mm.yaml").write_text(yaml.safe_dump(content))
+    done = run_cli("measure", str(folder / "cube.png"), "--calibration", "none", "--targets", str(folder / "mm.yaml"),
+                   cwd=folder)
+    assert done.returncode == 1 and "millimetres given as metres" in done.stderr, done.stderr
+
+
+def _real_views():
+    from veg_area_ros.board import BoardSpec
+    from veg_area_ros.calibration import View
+
+    board = BoardSpec.parse("chessboard:9x6:1")
+    views = []
+    for path in sorted((REPO / "test" / "data" / "opencv-left").glob("*.jpg")):
+        detection = board.detect(cv2.imread(str(path)))
+        if detection is not None:
+            views.append(View(path.name, detection))
+    return views
+
+
+def test_one_photograph_given_many_times_is_one_view():
+    from veg_area_ros.calibration import CalibrationError, View, calibrate
+
+    views = _real_views()
+    copies = [View(f"copy{k}.jpg", views[0].detection) for k in range(15)]
+    with pytest.raises(CalibrationError, match=r"1 usable views.*14 more repeat a view already counted"):
+        calibrate(copies, (640, 480))
+
+
+def test_a_repeated_view_counts_once_and_the_fit_says_so():
+    from dataclasses import replace
+
+    from veg_area_ros.calibration import View, calibrate
+
+    views = _real_views()
+    jittered = replace(views[2].detection, image_points=views[2].detection.image_points + 0.03)  # sensor noise
+    result = calibrate([*views, View("again.jpg", views[2].detection), View("still.jpg", jittered)], (640, 480),
+                       cross_validate=False)
+    alone = calibrate(views, (640, 480), cross_validate=False)
+    assert result.views_used == len(views) == alone.views_used
+    assert set(result.rejected_views) == {"again.jpg", "still.jpg"}
+    assert f"the same view as {views[2].name}" in result.rejected_views["again.jpg"]
+    assert any("counted once" in w and f"{len(views)} distinct views" in w for w in result.warnings)
+    assert result.camera.c == pytest.approx(alone.camera.c, rel=1e-9)
+    assert not any("counted once" in w for w in alone.warnings)
+
+
+def test_a_fifo_and_a_dangling_symlink_are_named_for_what_they_are(folder):
+    import os
+
+    fifo = folder / "frames.fifo"
+    if not fifo.exists():
+        os.mkfifo(fifo)
+    done = measure(folder, "frames.fifo")
+    assert done.returncode == 1 and "not a regular file or folder (a pipe, socket or device)" in done.stderr
+    (folder / "gone.png").unlink(missing_ok=True)
+    (folder / "gone.png").symlink_to(folder / "deleted.png")
+    done = measure(folder, "gone.png")
+    assert done.returncode == 1 and "a symlink to" in done.stderr and "which does not exist" in done.stderr
+
+
+@pytest.mark.parametrize("extra, message", [
+    (("--start-time", "nan"), "--start-time must be a time in seconds, got nan"),
+    (("--start-time", "10", "--end-time", "5"), "--start-time 10 s lies after --end-time 5 s"),
+    (("--end-time", "5"), "pick bag frames by their header stamp; the inputs hold no bag"),
+    (("--roi", "0,0,1e9,0,1e9,1e9"), "lies beyond any image"),
+])
+def test_options_that_cannot_select_anything_are_refused_with_the_reason(folder, extra, message):
+    done = measure(folder, "cube.png", *extra)
+    assert done.returncode == 2 and message in done.stderr, done.stderr
+
+
+def test_a_roi_outside_an_uncalibrated_frame_is_said_so(folder):
+    done = measure(folder, "cube.png", "--roi", "2000,2000,2100,2000,2100,2100")
+    assert done.returncode == 1 and "lies outside the 640x480 image" in done.stderr, done.stderr
+    assert "target" not in done.stderr
+
+
+def test_a_spreadsheets_csv_with_a_bom_is_read(tmp_path):
+    from veg_area_ros.drag import DragError, read_runs
+
+    rows = "velocity_m_s,force_n,area_m2\r\n0.2,0.05,0.01\r\n0.4,0.16,0.009\r\n0.6,0.3,0.008\r\n"
+    (tmp_path / "bom.csv").write_bytes(b"\xef\xbb\xbf" + rows.encode())
+    (tmp_path / "plain.csv").write_bytes(rows.encode())
+    with_bom, plain = read_runs(tmp_path / "bom.csv"), read_runs(tmp_path / "plain.csv")
+    assert np.array_equal(with_bom[0], plain[0]) and np.array_equal(with_bom[1], plain[1])
+    (tmp_path / "legacy.csv").write_bytes(rows.replace("velocity", "vélocité").encode("cp1252"))
+    with pytest.raises(DragError, match="not UTF-8 text"):
+        read_runs(tmp_path / "legacy.csv")
+    (tmp_path / "other.csv").write_bytes(rows.replace("force_n", "F").encode())
+    with pytest.raises(DragError, match=r"needs columns .*; it has 'velocity_m_s', 'F', 'area_m2'"):
+        read_runs(tmp_path / "other.csv")
