@@ -248,3 +248,38 @@ def test_a_batch_names_the_damaged_input_and_finishes_the_others(workspace):
     assert "of 30 frames could not be read" in summary["cut_b.avi"]["error"]
     assert int(summary["cut_b.avi"]["measured"]) >= 5
     assert summary["fine_b.avi"]["error"] == "" and summary["fine_b.avi"]["measured"] == "6"
+
+
+@pytest.mark.parametrize("args, message", [
+    (("-o", "scene.png"), "-o scene.png exists already; a recording never overwrites a bag or a file"),
+    (("-o", "frames"), "-o frames exists already"),
+    (("-o", "scene.png/bag"), "scene.png is a file, not a folder; nothing was recorded"),
+    (("/bad//name", "-o", "new_bag"), "'//' (an empty part)"),
+    (("2topic", "-o", "new_bag"), "a part may not start with a digit"),
+    (("image raw", "-o", "new_bag"), "' ' not allowed"),
+    (("~name", "-o", "new_bag"), "'~' must be followed by '/'"),
+])
+def test_record_refuses_a_bad_output_or_topic_before_ros_starts(workspace, args, message):
+    done = veg_area(workspace, "record", *args)
+    assert done.returncode == 2 and message in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and "transport:" not in done.stderr  # no node was started
+    assert not (workspace / "new_bag").exists()
+
+
+@pytest.mark.parametrize("bag, message", [
+    ("no_such_bag", "no such bag"),
+    ("scene.png", "not a rosbag2 bag"),
+    ("frames", "not a readable rosbag2 bag"),
+])
+def test_play_names_what_is_wrong_with_the_bag(workspace, bag, message):
+    done = veg_area(workspace, "play", bag)
+    assert done.returncode == 1 and message in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+def test_topic_names_follow_the_ros_rules():
+    from veg_area_ros.bags import topic_name_problem
+
+    for good in ("image_raw", "/camera/image_raw", "~/debug", "projected_area/info", "{node}/x", "a1/b_2"):
+        assert topic_name_problem(good) is None, good
+    for bad in ("", "a//b", "a/", "1a", "a/2b", "é", "a b", "a~b", "~x", "a{b"):
+        assert topic_name_problem(bad), bad

@@ -56,6 +56,32 @@ def typestore():
     return get_typestore(Stores.ROS2_KILTED)
 
 
+def topic_name_problem(name: str) -> str | None:
+    """Why `name` is not a valid ROS 2 topic name (relative, absolute or private), or None: the rules of
+    rcl_validate_topic_name (letters, digits, '_' and '/', '~' only first, '{substitutions}', no empty or
+    digit-led token, no trailing '/')."""
+    if not name:
+        return "a topic name cannot be empty"
+    body = name[1:] if name.startswith("~") else name
+    if "~" in body:
+        return f"topic {name!r}: '~' may only start a name"
+    if name.startswith("~") and body and not body.startswith("/"):
+        return f"topic {name!r}: '~' must be followed by '/'"
+    bad = sorted({c for c in body if not (c.isascii() and (c.isalnum() or c in "_/{}"))})
+    if bad:
+        return f"topic {name!r}: {''.join(bad)!r} not allowed (letters, digits, '_' and '/')"
+    if body.endswith("/") and body != "":
+        return f"topic {name!r} must not end with '/'"
+    if "//" in body:
+        return f"topic {name!r}: '//' (an empty part)"
+    for token in body.strip("/").split("/"):
+        if token and token[0].isdigit():
+            return f"topic {name!r}: a part may not start with a digit ({token!r})"
+        if token.count("{") != token.count("}"):
+            return f"topic {name!r}: unbalanced '{{' '}}'"
+    return None
+
+
 class BagRecorder:
     """Writes serialized messages of named topics into a new rosbag2 folder."""
 
@@ -239,6 +265,10 @@ class BagFrame:
 
 
 def _open_reader(path: str | Path) -> Reader:
+    if not Path(path).exists():
+        raise BagError(f"{path}: no such bag (a rosbag2 bag is a folder with metadata.yaml)")
+    if not Path(path).is_dir() and Path(path).suffix not in (".mcap", ".db3"):
+        raise BagError(f"{path}: not a rosbag2 bag (a bag is a folder with metadata.yaml, or its .mcap/.db3 file)")
     try:
         reader = Reader(path)
         reader.open()

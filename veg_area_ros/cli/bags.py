@@ -39,7 +39,24 @@ def add_parsers(sub) -> None:
 
 
 def cmd_record(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from ..bags import topic_name_problem
     from ..ros.record_node import main as record_main
+    from .common import unwritable
+
+    for topic in args.topics:  # said before ROS starts, not as an RCLError from inside it
+        problem = topic_name_problem(topic)
+        if problem:
+            raise CliError(problem, EXIT_USAGE)
+    if args.output:
+        output = Path(args.output)
+        if output.exists() or output.is_symlink():
+            raise CliError(f"-o {args.output} exists already; a recording never overwrites a bag or a file",
+                           EXIT_USAGE)
+        problem = unwritable(output, folder=True)
+        if problem:
+            raise CliError(f"-o {args.output}: {problem}; nothing was recorded", EXIT_USAGE)
 
     ros_args = ["--ros-args", "-p", f"storage:={args.storage}"]
     if args.output:

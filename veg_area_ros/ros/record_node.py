@@ -16,7 +16,7 @@ from pathlib import Path
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..bags import STORAGES, BagError, BagRecorder, OfferedQos
+from ..bags import STORAGES, BagError, BagRecorder, OfferedQos, topic_name_problem
 from ..cdr import ImageMessageError, stamp_ns
 from .messages import message_class
 from .params import declare
@@ -40,6 +40,8 @@ def process_start_ns() -> int:
 
 
 class RecordNode(Node):
+    recorder: BagRecorder | None = None  # until the bag is created (a node that cannot start has none)
+
     def __init__(self, name: str = "record_node", **kwargs):
         super().__init__(name, **kwargs)
         self.wanted = list(declare(self, "topics", DEFAULT_TOPICS, "Topics to record.", read_only=True))
@@ -56,6 +58,10 @@ class RecordNode(Node):
         if duration > 0:
             self.create_timer(duration, self._stop)
         self.output = output or dt.datetime.now().strftime("veg_area_%Y%m%d_%H%M%S")
+        for topic in self.wanted:
+            problem = topic_name_problem(topic)
+            if problem:
+                raise BagError(problem)
         self.recorder = BagRecorder(self.output, storage)
         self.recording: dict[str, str] = {}  # resolved topic -> type
         self.topic_subscriptions = []
@@ -140,6 +146,9 @@ class RecordNode(Node):
         return missed
 
     def destroy_node(self) -> None:
+        if self.recorder is None:  # it could not start (the reason is said): nothing to close or count
+            super().destroy_node()
+            return
         self.recorder.close()
         counts = ", ".join(f"{t} {n}" for t, n in self.recorder.counts.items())
         self.get_logger().info(f"bag {self.output} closed: {counts or 'no messages'}")
