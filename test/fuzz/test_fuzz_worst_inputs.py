@@ -23,6 +23,7 @@ from veg_area_ros.calib_io import to_camera_info_dict, write_calibration
 from veg_area_ros.sim.synthetic import (
     ENDOSCOPE,
     cube_scene,
+    empty_scene,
     render_scene,
     scene_targets_content,
 )
@@ -128,6 +129,12 @@ def workspace(tmp_path_factory) -> Path:
     mistyped[ids[2]] = [markers[ids[2]][0] * 10, markers[ids[2]][1]]
     (folder / "mistyped.yaml").write_text(yaml.safe_dump(scene_targets_content(mistyped)))
     (folder / "a_file").write_text("not a folder")
+    for name, factor in (("mm", 1e3), ("huge", 1e13), ("km", 1e-3)):  # coordinates in the wrong unit
+        scaled = {k: [x * factor, y * factor] for k, (x, y) in markers.items()}
+        (folder / f"targets_{name}.yaml").write_text(yaml.safe_dump(scene_targets_content(scaled)))
+    cv2.imwrite(str(folder / "empty.png"), render_scene(ENDOSCOPE, empty_scene(cube_scene()), 0.7, noise_sigma=3))
+    cv2.imwrite(str(folder / "grey.png"), cv2.cvtColor(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR))
+    os.mkfifo(folder / "frames.fifo")
     return folder
 
 
@@ -158,6 +165,32 @@ CASES = {
     "bag-recover of a missing path": (["bag-recover", "nowhere.mcap", "out_bag"], "no such bag"),
     "bag-recover of a mangled file": (["bag-recover", "cube.png", "out_bag2"], "not an MCAP file"),
     "roi off the image": (measure("--roi", "2000,2000,2100,2000,2100,2100"), "lies outside"),
+    # plausibility: a number that cannot be right never leaves with exit 0
+    "reversed levels": (measure("--levels", "230,40"), "reversed for a dark object"),
+    "reversed levels, far apart": (measure("--levels", "250,5"), "reversed for a dark object"),
+    "reversed levels, bright object": (measure("--levels", "40,230", "--object", "bright"),
+                                       "reversed for a bright object"),
+    "green on a grey image": (measure("--object", "green", image="grey.png"), "has no colour"),
+    "targets in millimetres": (measure(targets="targets_mm.yaml"), "millimetres given as metres"),
+    "targets 1e13 too large": (measure(targets="targets_huge.yaml"), "millimetres given as metres"),
+    "targets in kilometres": (measure(targets="targets_km.yaml"), "metres given as kilometres"),
+    "no object, fixed threshold": (measure(image="empty.png"), "no object found"),
+    "no object, otsu": (measure("--threshold", "otsu", image="empty.png"), "no object found"),
+    "roi at 1e9 px": (measure("--roi", "0,0,1e9,0,1e9,1e9"), "beyond any image"),
+    # outputs over inputs
+    "csv over the image": (measure("--csv", "cube.png"), "is the input cube.png"),
+    "overlay over the image": (measure("--overlay", "cube.png"), "is the input cube.png"),
+    "csv over the calibration": (measure("--csv", "camera.yaml"), "is the input camera.yaml"),
+    "csv over the targets": (measure("--csv", "targets.yaml"), "is the input targets.yaml"),
+    # messages that name the real cause
+    "a fifo as input": (measure(image="frames.fifo"), "not a regular file or folder"),
+    "start time nan": (measure("--start-time", "nan"), "got nan"),
+    "start after end": (measure("--start-time", "9", "--end-time", "3"), "lies after --end-time"),
+    "time range without a bag": (measure("--end-time", "3"), "the inputs hold no bag"),
+    "record over a file": (["record", "-o", "cube.png"], "exists already"),
+    "record under a file": (["record", "-o", "a_file/bag"], "a_file is a file"),
+    "record a bad topic": (["record", "a//b", "-o", "new_bag"], "'//'"),
+    "play a plain file": (["play", "cube.png"], "not a rosbag2 bag"),
 }
 
 

@@ -176,9 +176,10 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
                           {"idealized_from": str(Path(job.calibration).resolve())})
     rows: list[dict] = []
-    # each row on disk before the next frame; begun at the first measured frame (an error-only run keeps an
-    # earlier table)
-    log = RowLog(csv_path, CSV_COLUMNS, lambda row: not row["error"]) if csv_path is not None else None
+    # each row on disk before the next frame; begun at the first frame measured with an object in it (a run of
+    # errors or empty frames keeps an earlier table)
+    log = RowLog(csv_path, CSV_COLUMNS, lambda row: not row["error"] and not _no_object(row)) \
+        if csv_path is not None else None
     warned: dict[str, int] = {}
     stamps: list[float] = []  # of the frames left out by the time range
     interrupted = False
@@ -245,8 +246,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     if warned and measured > 1:
         say("warnings: " + "; ".join(f"{kind} on {count} of {measured} frames" for kind, count in warned.items()))
 
-    if log is not None and measured == 0 and csv_path.exists():  # an error-only table must not replace one
-        say(f"time series not written: no frame was measured (the existing {csv_path} is kept)")
+    if log is not None and not log.begun and rows and csv_path.exists():  # errors or empty frames only
+        say(f"time series not written: no frame was measured with an object in it (the existing {csv_path} "
+            "is kept)")
     elif log is not None and rows:  # a new file lists every frame, with its error where there is one
         log.close(write_held=True)
         say(f"time series: {csv_path}")
@@ -265,7 +267,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError(f"no frame measured: {'; '.join(reasons)[:500] or 'the inputs hold no frame'}")
     if measured < len(rows):
         say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
-    empty = sum(1 for row in rows if any(w.startswith("no object found") for w in row.get("warnings", [])))
+    empty = sum(1 for row in rows if _no_object(row))
     if measured and empty == measured:  # Af 0 everywhere: the settings or the scene are wrong, not the plant gone
         where = "the frame" if measured == 1 else f"any of the {measured} frames"
         print(f"veg-area measure: no object found in {where} measured (see the warnings); check the threshold, "
@@ -277,6 +279,12 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
               + (f" in {csv_path}" if csv_path is not None else ""), file=sys.stderr, flush=True)
         return EXIT_FAILED, rows
     return EXIT_OK, rows
+
+
+def _no_object(row: dict) -> bool:
+    warnings = row.get("warnings", ())  # a list, or the CSV cell that joins it
+    return any(w.startswith("no object found") for w in (warnings.split(" | ") if isinstance(warnings, str)
+                                                          else warnings))
 
 
 def frames_lost(rows: list[dict], total: int | None = None) -> str:
