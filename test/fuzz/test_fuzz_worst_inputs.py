@@ -135,6 +135,7 @@ def workspace(tmp_path_factory) -> Path:
     cv2.imwrite(str(folder / "empty.png"), render_scene(ENDOSCOPE, empty_scene(cube_scene()), 0.7, noise_sigma=3))
     cv2.imwrite(str(folder / "grey.png"), cv2.cvtColor(cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), cv2.COLOR_GRAY2BGR))
     os.mkfifo(folder / "frames.fifo")
+    (folder / "runs.csv").write_text("velocity_m_s,force_n,area_m2\n0.2,0.05,0.01\n0.4,0.16,0.009\n0.6,0.3,0.008\n")
     return folder
 
 
@@ -191,6 +192,13 @@ CASES = {
     "record under a file": (["record", "-o", "a_file/bag"], "a_file is a file"),
     "record a bad topic": (["record", "a//b", "-o", "new_bag"], "'//'"),
     "play a plain file": (["play", "cube.png"], "not a rosbag2 bag"),
+    # outputs checked before the work, not after it
+    "vogel plot under a file": (["vogel", "runs.csv", "--plot", "a_file/plot.png"], "a_file is a file"),
+    "vogel plot over its table": (["vogel", "runs.csv", "--plot", "runs.csv"], "is the input runs.csv"),
+    "calibration report that is a file": (["calibrate", "cube.png", "--board", "chessboard:9x6:0.03", "-o",
+                                           "fresh.yaml", "--report", "a_file"], "exists and is not a folder"),
+    "demo output under a file": (["demo", "--output", "a_file/demo"], "a_file is a file"),
+    "calibration demo output under a file": (["calibration-demo", "--output", "a_file/demo"], "a_file is a file"),
 }
 
 
@@ -222,6 +230,7 @@ def test_bad_input_is_refused_quickly_and_clearly(workspace, startup_s, name):
     assert run.seconds - startup_s < TIME_LIMIT_S, (run.seconds, startup_s)
     assert run.peak_rss < MEMORY_LIMIT, run.peak_rss / 2**20
     assert existing.read_text() == "frame,area_m2\nyesterday,0.0105\n"  # a user's series is never replaced
+    assert not (workspace / "fresh.yaml").exists()  # nothing written before an output was found unwritable
 
 
 def test_good_input_still_measures_under_the_same_watch(workspace, startup_s):

@@ -126,9 +126,10 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     output = Path(args.output)
     check_outputs([("-o", args.output, False), ("--report", args.report, True)], [*args.inputs, args.lens],
                   "calibrated")
-    problem = unwritable(output, folder=False)
-    if problem:
-        raise CliError(f"-o {output}: {problem}; nothing was calibrated", EXIT_USAGE)
+    for option, path, folder in (("-o", output, False), ("--report", args.report, True)):
+        problem = unwritable(Path(path), folder) if path else None
+        if problem:
+            raise CliError(f"{option} {path}: {problem}; nothing was calibrated", EXIT_USAGE)
     if args.port or args.lens:
         return _calibrate_port(args, say)
     if not args.inputs or not args.board:

@@ -6,7 +6,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import EXIT_FAILED, CliError, positive_float
+from .common import EXIT_FAILED, EXIT_USAGE, CliError, positive_float, unwritable
+
+
+def _check_output(folder: str) -> Path:
+    problem = unwritable(Path(folder), folder=True)
+    if problem:
+        raise CliError(f"--output {folder}: {problem}; nothing was run", EXIT_USAGE)
+    return Path(folder)
 
 
 def add_parsers(sub) -> None:
@@ -28,7 +35,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     """The main job: the ROS 2 graph (composed in this process) on the built-in synthetic endoscope."""
     from ..ros.graph import run_graph
 
-    code = run_graph(Path(args.output), measurements=args.measurements, timeout_s=args.timeout)
+    code = run_graph(_check_output(args.output), measurements=args.measurements, timeout_s=args.timeout)
     if code == EXIT_FAILED:
         raise CliError("the graph did not deliver calibrated measurements in time")
     return code
@@ -37,4 +44,4 @@ def cmd_demo(args: argparse.Namespace) -> int:
 def cmd_calibration_demo(args: argparse.Namespace) -> int:
     from ..sim.calibration_demo import run_demo
 
-    return run_demo(Path(args.output), quiet=args.quiet)
+    return run_demo(_check_output(args.output), quiet=args.quiet)

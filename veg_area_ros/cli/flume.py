@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from .common import EXIT_USAGE, CliError, positive_float
+from .common import EXIT_USAGE, CliError, check_outputs, positive_float, unwritable
 
 
 def add_parser(sub) -> None:
@@ -39,6 +39,11 @@ def cmd_vogel(args: argparse.Namespace) -> int:
     bags = [Path(i) for i in args.inputs if is_bag(Path(i))]
     if (bags and len(bags) != len(args.inputs)) or (not bags and len(args.inputs) != 1):
         raise CliError("give one experiment table (CSV), or rosbag2 bags (one run each)", EXIT_USAGE)
+    plot = Path(args.plot) if args.plot else Path(args.inputs[0].rstrip("/")).with_suffix(".vogel.png")
+    check_outputs([("--plot", str(plot), True)], args.inputs, "fitted")
+    problem = unwritable(plot, folder=False)
+    if problem:
+        raise CliError(f"--plot {plot}: {problem}; nothing was fitted", EXIT_USAGE)
     try:
         if bags:
             runs = [bag_run(b, args.force_axis, args.velocity_axis, args.force_topic, args.velocity_topic,
@@ -54,7 +59,7 @@ def cmd_vogel(args: argparse.Namespace) -> int:
         fit = vogel_fit(velocity, cd_area, args.confidence)
     except (DragError, BagError) as exc:
         raise CliError(str(exc)) from exc
-    plot = Path(args.plot) if args.plot else Path(args.inputs[0].rstrip("/")).with_suffix(".vogel.png")
+    plot.parent.mkdir(parents=True, exist_ok=True)
     plot_vogel(velocity, cd_area, fit, plot)
     result = {"exponent": fit.exponent, "interval": list(fit.interval), "confidence": fit.confidence,
               "coefficient_m2": fit.coefficient, "r_squared": fit.r_squared, "runs": fit.runs, "plot": str(plot)}
