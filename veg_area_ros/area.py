@@ -258,6 +258,12 @@ class AreaMeasurer:
         self.rebuilds = 0  # how often the weights were (re)built: once for a steady camera
         self._light: _Light | None = None  # the light and levels found and carried (sub-pixel mode)
 
+    def start_segment(self) -> None:
+        """Forget what is carried from frame to frame (tracked markers, weights, light): the next frame is
+        measured as a first frame. A long input measured in segments gives the same rows whether its segments
+        run one after another or on different workers."""
+        self._markers, self._weights, self._last_scale, self._light = {}, None, None, None
+
     def _idealize_points(self, raw_pixels: np.ndarray) -> np.ndarray:
         """Raw-frame pixels -> the idealized image."""
         if self.camera is None or len(raw_pixels) == 0:
@@ -949,6 +955,10 @@ class PortAreaMeasurer:
             self.camera, rvec, object_tvec, box=self._targets_box(rvec, tvec),
             more_tvecs=(np.asarray(tvec, float),) if offset else ())
         self._inner = AreaMeasurer(absorbed, self.targets, self.classifier, **self.options)
+
+    def start_segment(self) -> None:
+        """As AreaMeasurer.start_segment; the plane's pose through the port is found anew too."""
+        self._inner, self._rebuilds_seen = None, 0
 
     def measure(self, frame: np.ndarray, keep_images: bool = False) -> AreaResult:
         if self._inner is None:

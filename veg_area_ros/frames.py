@@ -37,6 +37,7 @@ class Frame:
     stamp: tuple[int, int] | None = None  # a bag frame's header stamp (sec, nanosec)
     camera_info: object | None = None  # a bag frame's latest recorded CameraInfoFields
     lost: int = 0  # frames of the input this entry stands for that could not be read (damage); 1 for any unreadable
+    position: int | None = None  # a video's frame index or a bag's image message index; None for an image file
 
     def __post_init__(self) -> None:
         if self.image is None and self.lost == 0:
@@ -209,21 +210,28 @@ def video_frame_count(path: Path) -> int:
         capture.release()
 
 
-def iter_video(path: Path, step: int = 1) -> Iterator[Frame]:
+def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = None) -> Iterator[Frame]:
+    """Every `step`-th frame of a video (indices counted from its first frame), from index `start` up to
+    `stop` (exclusive): a range of a long video for one worker."""
     capture = cv2.VideoCapture(str(path))
     if not capture.isOpened():
         yield Frame(path.name, None, "is not a video OpenCV can open")
         return
     fps = capture.get(cv2.CAP_PROP_FPS)
     declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
+    if stop is not None:
+        declared = min(declared, stop)
+    index = start
     try:
-        index = 0
-        while True:
+        if start and not (capture.set(cv2.CAP_PROP_POS_FRAMES, start)
+                          and int(capture.get(cv2.CAP_PROP_POS_FRAMES)) == start):
+            index = declared  # cannot be sought to: said below as frames that could not be read
+        while index < declared or stop is None:
             if index % step == 0:
                 ok, image = capture.read()
                 if not ok:
                     break
-                yield Frame(f"{path.name}#{index}", image, time_s=index / fps if fps > 0 else None)
+                yield Frame(f"{path.name}#{index}", image, time_s=index / fps if fps > 0 else None, position=index)
             elif not capture.grab():
                 break
             index += 1
@@ -236,28 +244,37 @@ def iter_video(path: Path, step: int = 1) -> Iterator[Frame]:
                         f"video is damaged or cut short ({index} of {declared} frames read)", lost=lost)
 
 
-def iter_bag(path: Path, image_topic: str | None = None) -> Iterator[Frame]:
+def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: int | None = None) -> Iterator[Frame]:
+    """The bag's image messages number `start` up to `stop` (exclusive), each with the camera_info recorded
+    before it (read through the messages skipped)."""
     from .bags import iter_bag_frames
     from .cdr import ImageMessageError
 
     for frame in iter_bag_frames(path, image_topic):
+        if frame.index < start:
+            continue
+        if stop is not None and frame.index >= stop:
+            break
         header = frame.image.header
         try:
             image, problem = frame.image.pixels(), ""
         except ImageMessageError as exc:
             image, problem = None, str(exc)
         yield Frame(f"{path.name}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
-                    frame.camera_info)
+                    frame.camera_info, position=frame.index)
 
 
-def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: str | None = None) -> Iterator[Frame]:
-    """Every frame of the inputs; unreadable ones come with image None and the reason."""
+def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: str | None = None,
+                frame_range: tuple[int, int] | None = None) -> Iterator[Frame]:
+    """Every frame of the inputs; unreadable ones come with image None and the reason. `frame_range`
+    (start, stop): only those frames of a video or bag (one input)."""
+    start, stop = frame_range if frame_range is not None else (0, None)
     for path in expand_inputs(paths):
         suffix = path.suffix.lower()
         if is_bag(path):
-            yield from iter_bag(path, image_topic)
+            yield from iter_bag(path, image_topic, start, stop)
         elif suffix in VIDEO_SUFFIXES:
-            yield from iter_video(path, video_step)
+            yield from iter_video(path, video_step, start, stop)
         elif suffix in IMAGE_SUFFIXES:
             image, problem = read_image(path)
             yield Frame(path.name, image, problem)

@@ -16,7 +16,17 @@ from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecu
 from dataclasses import replace
 from pathlib import Path
 
-from .common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE, CliError, check_outputs, progress, write_csv
+from .common import (
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_USAGE,
+    CliError,
+    check_outputs,
+    progress,
+    unwritable,
+    write_csv,
+)
 from .measure_job import MeasureJob, frames_lost, measure
 
 BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "std_area_m2", "warnings", "csv", "error")
@@ -54,13 +64,17 @@ def warning_counts(rows: list[dict]) -> str:
 def _measure_one(job: MeasureJob, position: int, progress_queue, stopping) -> dict:
     """Input number `position` of a batch, in a worker process: its CSV and plot, and a one-line summary."""
     source, csv_path = job.inputs[0], job.csv
-    summary = _summary(source, csv_path)
     try:
         code, rows = measure(job, on_frame=lambda index, total: progress_queue.put((position, index, total)),
                              stop=stopping.is_set)
     except CliError as exc:
-        summary["error"] = str(exc)
-        return summary
+        return _summary(source, csv_path, str(exc))
+    return input_summary(source, csv_path, code, rows)
+
+
+def input_summary(source: str, csv_path: str, code: int, rows: list[dict]) -> dict:
+    """One input's row of batch_summary.csv from its measured rows and its run's exit code."""
+    summary = _summary(source, csv_path)
     if code == EXIT_INTERRUPTED:
         summary["error"] = f"interrupted after {len(rows)} frames"
     elif code == EXIT_FAILED:
@@ -84,7 +98,9 @@ def _outcome(future, source: str, csv_path: str) -> dict:
         return _summary(source, csv_path, f"worker failed: {detail}")
 
 
-def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
+def check_batch(job: MeasureJob, folder: Path) -> list[str]:
+    """Refuse (exit 2, before any work) what does not apply to a batch or would be written over an input; the
+    per-input CSV paths. Creates the output folder."""
     if job.csv:
         raise CliError("--csv names one file; a batch writes <input>_area.csv per input into --output-dir",
                        EXIT_USAGE)
@@ -99,10 +115,50 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
     check_outputs([("--output-dir", str(folder), True), ("--overlay", job.overlay, True),
                    *(("--output-dir", str(path), True) for path in batch_csv_paths(inputs, folder))], sources,
                   "measured")
+    problem = unwritable(folder, folder=True)
+    if problem:
+        raise CliError(f"--output-dir {folder}: {problem}; nothing was measured", EXIT_USAGE)
+    return [str(path) for path in batch_csv_paths(inputs, folder)]  # by position: an input may come twice
+
+
+def input_job(job: MeasureJob, source: str, csv_path: str) -> MeasureJob:
+    """The batch's job for one of its inputs, writing into its own CSV (and overlay folder)."""
+    return replace(job, inputs=(source,), csv=csv_path, json=False, quiet=True,
+                   overlay=str(Path(job.overlay) / Path(csv_path).stem) if job.overlay else None)
+
+
+def finish_batch(job: MeasureJob, folder: Path, rows: list[dict], interrupted: bool) -> int:
+    """batch_summary.csv, a line (or JSON object) per input, and the exit code of the whole batch."""
+    say = progress(job.quiet)
+    summary_path = folder / "batch_summary.csv"
+    write_csv(summary_path, BATCH_COLUMNS, rows)
+    for row in rows:
+        if job.json:  # one object per input (the frames are in its CSV)
+            print(json.dumps(row), flush=True)
+            continue
+        mean = f"Af = {row['mean_area_m2']:.6g} m² (sd {row['std_area_m2']:.2g}) over {row['measured']} frames" \
+            if row["measured"] else f"not measured: {row['error'] or 'no frame measured'}"
+        print(f"{row['input']}: {mean}", flush=True)
+    say(f"batch summary: {summary_path}")
+    if interrupted:
+        say("batch interrupted: what each input measured so far is in its CSV")
+        return EXIT_INTERRUPTED
+    failed = [row["input"] for row in rows if not row["measured"]]
+    if failed:
+        raise CliError(f"{len(failed)} of {len(rows)} inputs gave no measurement: {', '.join(failed)}")
+    damaged = [row["input"] for row in rows if row["error"]]
+    if damaged:
+        raise CliError(f"{len(damaged)} of {len(rows)} inputs lost frames they could not read: {', '.join(damaged)} "
+                       "(see batch_summary.csv)")
+    return EXIT_OK
+
+
+def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
+    csv_paths = check_batch(job, folder)
+    inputs = list(job.inputs)
     folder.mkdir(parents=True, exist_ok=True)
     workers = min(jobs or os.cpu_count() or 1, len(inputs))
     context = multiprocessing.get_context("spawn")  # workers start clean (OpenCV threads, no forked state)
-    csv_paths = [str(path) for path in batch_csv_paths(inputs, folder)]  # by position: an input may come twice
     say = progress(job.quiet)
     say(f"batch: {len(inputs)} inputs, {workers} at a time")
     with context.Manager() as manager, ProcessPoolExecutor(workers, mp_context=context,
@@ -110,9 +166,8 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
         progress_queue, stopping = manager.Queue(), manager.Event()
         pending = {}
         for k, source in enumerate(inputs):
-            one = replace(job, inputs=(source,), csv=csv_paths[k], json=False, quiet=True,
-                          overlay=str(Path(job.overlay) / Path(csv_paths[k]).stem) if job.overlay else None)
-            pending[pool.submit(_measure_one, one, k, progress_queue, stopping)] = k
+            pending[pool.submit(_measure_one, input_job(job, source, csv_paths[k]), k, progress_queue,
+                                stopping)] = k
         done_frames: dict[int, tuple[int, int]] = {}
         summaries: dict[int, dict] = {}
         last_line = 0.0
@@ -142,25 +197,4 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
                 future.cancel()
             for future, k in pending.items():
                 summaries[k] = _outcome(future, inputs[k], csv_paths[k])
-    rows = [summaries[k] for k in range(len(inputs))]
-    summary_path = folder / "batch_summary.csv"
-    write_csv(summary_path, BATCH_COLUMNS, rows)
-    for row in rows:
-        if job.json:  # one object per input (the frames are in its CSV)
-            print(json.dumps(row), flush=True)
-            continue
-        mean = f"Af = {row['mean_area_m2']:.6g} m² (sd {row['std_area_m2']:.2g}) over {row['measured']} frames" \
-            if row["measured"] else f"not measured: {row['error'] or 'no frame measured'}"
-        print(f"{row['input']}: {mean}", flush=True)
-    say(f"batch summary: {summary_path}")
-    if interrupted:
-        say("batch interrupted: what each input measured so far is in its CSV")
-        return EXIT_INTERRUPTED
-    failed = [row["input"] for row in rows if not row["measured"]]
-    if failed:
-        raise CliError(f"{len(failed)} of {len(rows)} inputs gave no measurement: {', '.join(failed)}")
-    damaged = [row["input"] for row in rows if row["error"]]
-    if damaged:
-        raise CliError(f"{len(damaged)} of {len(rows)} inputs lost frames they could not read: {', '.join(damaged)} "
-                       "(see batch_summary.csv)")
-    return EXIT_OK
+    return finish_batch(job, folder, [summaries[k] for k in range(len(inputs))], interrupted)

@@ -10,7 +10,7 @@ from pathlib import Path
 from ..settings import MeasurementSettings
 from .batch import measure_batch
 from .common import EXIT_USAGE, CliError, positive_float
-from .measure_job import MeasureJob, measure
+from .measure_job import SEGMENT_FRAMES, MeasureJob, measure
 
 DEFAULTS = MeasurementSettings()
 
@@ -88,18 +88,40 @@ def add_parser(sub) -> None:
                      "default for a video: VIDEO_area.csv here")
     mea.add_argument("--idealized", metavar="DIR", help="write the idealized frames and their camera here")
     mea.add_argument("--video-step", type=int, default=1, help="measure every Nth video frame")
-    mea.add_argument("--jobs", type=int, default=1, metavar="N",
-                     help="batch: measure the inputs N at a time in worker processes, 0 = every core; a CSV and "
-                          "plot per input and batch_summary.csv go to --output-dir")
-    mea.add_argument("--output-dir", default=".", metavar="DIR", help="where a batch writes (default: here)")
+    mea.add_argument("--jobs", type=int, default=None, metavar="N",
+                     help="several inputs: measure them N at a time in worker processes on this machine, 0 = every "
+                          "core (default 1); a CSV and plot per input and batch_summary.csv go to --output-dir")
+    mea.add_argument("--scheduler", metavar="ADDRESS",
+                     help="measure on a Dask cluster: the address of its scheduler (tcp://head:8786); the inputs "
+                          "must be readable by the workers at the same paths (a shared filesystem); long videos "
+                          "and bags are split into segments over the workers")
+    mea.add_argument("--segment-frames", type=int, default=SEGMENT_FRAMES, metavar="N",
+                     help=f"a video or bag is measured in segments of N frames, each begun afresh (markers found "
+                          f"anew, weights and light rebuilt), whoever measures it (default {SEGMENT_FRAMES})")
+    mea.add_argument("--output-dir", default=None, metavar="DIR",
+                     help="where several inputs or a --scheduler run write (default: here)")
     mea.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     mea.set_defaults(func=cmd_measure)
 
 
 def cmd_measure(args: argparse.Namespace) -> int:
-    if args.jobs < 0:
+    if args.jobs is not None and args.jobs < 0:
         raise CliError("--jobs must be 0 (every core) or more", EXIT_USAGE)
+    if args.scheduler and args.jobs is not None:
+        raise CliError("--jobs counts this machine's processes; with --scheduler the cluster's workers measure",
+                       EXIT_USAGE)
     job = MeasureJob.from_args(args)
-    if args.jobs != 1 and len(args.inputs) > 1:
-        return measure_batch(job, args.jobs, Path(args.output_dir))
+    folder = Path(args.output_dir or ".")
+    if args.scheduler:
+        from .cluster import measure_on_cluster
+
+        return measure_on_cluster(job, args.scheduler, folder)
+    if len(args.inputs) > 1:  # one behaviour whatever runs it: a CSV per input and the summary
+        return measure_batch(job, 1 if args.jobs is None else args.jobs, folder)
+    if args.output_dir is not None:
+        raise CliError("--output-dir is where several inputs (or a --scheduler run) are written; for one input "
+                       "give --csv", EXIT_USAGE)
+    if args.jobs not in (None, 1):
+        raise CliError("--jobs spreads several inputs over processes; one input is measured in one "
+                       "(--scheduler splits a long one)", EXIT_USAGE)
     return measure(job)[0]

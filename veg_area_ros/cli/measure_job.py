@@ -30,6 +30,9 @@ CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area
                "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2", "object_plane_offset_m",
                "exposure_std_m2", "scale_m_per_px", "scale_kind", "calibrated", "missing_targets", "warnings", "error")
 
+SEGMENT_FRAMES = 1000
+
+
 @dataclass(frozen=True)
 class MeasureJob:
     """One `measure` run over its inputs: what the command line asked for, checked; a batch gives each worker
@@ -49,6 +52,10 @@ class MeasureJob:
     json: bool = False
     quiet: bool = False
     background: str | None = None  # an image of the empty scene: evens the light for sub-pixel shares
+    # a video or bag is measured in segments of this many frames, each begun afresh (markers found anew,
+    # weights and light rebuilt): the unit a cluster splits a long input into, same rows whoever measures it
+    segment_frames: int = SEGMENT_FRAMES
+    frame_range: tuple[int, int] | None = None  # (start, stop): these frames of the one video or bag only
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> MeasureJob:
@@ -69,7 +76,9 @@ class MeasureJob:
                                            sweep_step=args.sweep_step)
         except ClassifyError as exc:
             raise CliError(str(exc), EXIT_USAGE) from exc
-        names = {f.name for f in fields(cls)} - {"settings", "inputs"}
+        if args.segment_frames < 1:
+            raise CliError("--segment-frames must be 1 or more", EXIT_USAGE)
+        names = {f.name for f in fields(cls)} - {"settings", "inputs", "frame_range"}
         return cls(inputs=tuple(args.inputs), settings=settings, **{name: getattr(args, name) for name in names})
 
 
@@ -78,10 +87,11 @@ def frame_file_name(name: str) -> str:
 
 
 def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
-            stop: Callable[[], bool] | None = None) -> tuple[int, list[dict]]:
+            stop: Callable[[], bool] | None = None, part: bool = False) -> tuple[int, list[dict]]:
     """Measure every frame of the job's inputs; (exit code, CSV rows; EXIT_INTERRUPTED when interrupted, with
     what was measured so far). `on_frame(index, total)` (a batch worker) replaces the per-frame lines on stdout;
-    `stop()` true (the batch was interrupted) ends the series as Ctrl-C does."""
+    `stop()` true (the batch was interrupted) ends the series as Ctrl-C does. `part`: one range of a longer
+    input (a cluster task): the rows only, no file written and no verdict on the run."""
     import cv2
 
     from ..area import NO_CALIBRATION_FOR_OFFSET, draw_overlay
@@ -134,7 +144,12 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     total = (sum(video_frame_count(v) // job.video_step for v in videos) + bag_frames
              + len(files) - len(videos) - len(bags))
     series = videos + bags
-    csv_path = Path(job.csv) if job.csv else (Path(f"{series[0].stem}_area.csv") if series else None)
+    if job.frame_range is not None:
+        if len(files) != 1 or not series:
+            raise CliError("a frame range applies to one video or bag", EXIT_USAGE)
+        total = len(range(job.frame_range[0], job.frame_range[1], job.video_step if videos else 1))
+    csv_path = None if part else Path(job.csv) if job.csv else (Path(f"{series[0].stem}_area.csv") if series
+                                                                 else None)
     check_outputs([("--csv", str(csv_path) if csv_path else None, True),  # its plot goes beside it
                    ("--overlay", job.overlay, True), ("--idealized", job.idealized, True)],
                   [*job.inputs, job.calibration if job.calibration.lower() not in ("none", "bag") else None,
@@ -183,10 +198,16 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     warned: dict[str, int] = {}
     stamps: list[float] = []  # of the frames left out by the time range
     interrupted = False
+    segment = None
     try:
-        for index, frame in enumerate(iter_frames(files, job.video_step, job.image_topic), 1):
+        for index, frame in enumerate(iter_frames(files, job.video_step, job.image_topic, job.frame_range), 1):
             row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
             line = ""
+            if frame.position is not None and (where := (frame.name.rsplit("#", 1)[0],
+                                                        frame.position // job.segment_frames)) != segment:
+                segment = where  # a new input or segment begins afresh
+                if measurer is not None:
+                    measurer.start_segment()
             if frame.stamp is not None:
                 row["stamp_sec"], row["stamp_nanosec"] = frame.stamp
                 if not (job.start_time <= frame.time_s <= job.end_time):
@@ -241,6 +262,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     except BrokenPipeError:  # stdout closed (`... --json | head -n 1`): stop quietly, the CSV keeps what was done
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
         interrupted = True
+    if part:
+        return (EXIT_INTERRUPTED if interrupted else EXIT_OK), rows
     # counted from the rows: the frame in hand when Ctrl-C came is left out of both
     measured = sum(1 for row in rows if not row["error"])
     if warned and measured > 1:
@@ -253,7 +276,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         log.close(write_held=True)
         say(f"time series: {csv_path}")
         if len(rows) > 1:
-            say(f"plot: {_plot_series(rows, csv_path)}")
+            say(f"plot: {plot_series(rows, csv_path)}")
     if interrupted:  # the frame in hand when Ctrl-C came is not in the rows
         say(f"interrupted after {len(rows)} of {total} frames ({measured} measured)"
             + (f"; the series so far: {csv_path}" if csv_path is not None and rows else ""))
@@ -299,7 +322,7 @@ def frames_lost(rows: list[dict], total: int | None = None) -> str:
     return f"{lost} of {total} frames could not be read ({where[:400]})"
 
 
-def _plot_series(rows: list[dict], csv_path: Path) -> Path:
+def plot_series(rows: list[dict], csv_path: Path) -> Path:
     from ..report import plot_area_series
 
     nan = float("nan")
