@@ -283,3 +283,33 @@ def test_topic_names_follow_the_ros_rules():
         assert topic_name_problem(good) is None, good
     for bad in ("", "a//b", "a/", "1a", "a/2b", "é", "a b", "a~b", "~x", "a{b"):
         assert topic_name_problem(bad), bad
+
+
+def test_a_bag_with_a_damaged_chunk_says_how_many_images_were_read_and_exits_1(workspace):
+    import struct
+
+    from veg_area_ros.bags import BagRecorder
+    from veg_area_ros.cdr import encode_image
+
+    recorder = BagRecorder(workspace / "damaged_bag", "mcap")
+    recorder.add_topic("/image_raw", "sensor_msgs/msg/Image")
+    frame = cv2.imread(str(workspace / "scene.png"))
+    for k in range(12):
+        recorder.write("/image_raw", 1000 + k, encode_image(frame, k, 0, "camera"))
+    recorder.close()
+    mcap = next((workspace / "damaged_bag").glob("*.mcap"))
+    data, offset, chunks = bytearray(mcap.read_bytes()), 8, []
+    while offset + 9 <= len(data):  # the chunk records (opcode 0x06)
+        opcode, (length,) = data[offset], struct.unpack_from("<Q", data, offset + 1)
+        if opcode == 0x06:
+            chunks.append(offset)
+        offset += 9 + length
+    middle = chunks[len(chunks) // 2]
+    data[middle + 69:middle + 89] = b"\xff" * 20  # a record's header inside the chunk
+    mcap.write_bytes(bytes(data))
+    done = veg_area(workspace, *MEASURE, "damaged_bag", "--csv", "damaged_bag.csv")
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "could not be read: the bag is damaged" in done.stderr and "of 12 frames could not be read" in done.stderr
+    rows = list(csv.DictReader((workspace / "damaged_bag.csv").open()))
+    measured = [r for r in rows if r["area_m2"]]
+    assert 1 <= len(measured) < 12 and "bag-recover" in rows[-1]["error"]

@@ -247,21 +247,37 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
 def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: int | None = None) -> Iterator[Frame]:
     """The bag's image messages number `start` up to `stop` (exclusive), each with the camera_info recorded
     before it (read through the messages skipped)."""
-    from .bags import iter_bag_frames
+    from .bags import bag_image_count, iter_bag_frames
     from .cdr import ImageMessageError
 
-    for frame in iter_bag_frames(path, image_topic):
-        if frame.index < start:
-            continue
-        if stop is not None and frame.index >= stop:
-            break
-        header = frame.image.header
-        try:
-            image, problem = frame.image.pixels(), ""
-        except ImageMessageError as exc:
-            image, problem = None, str(exc)
-        yield Frame(f"{path.name}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
-                    frame.camera_info, position=frame.index)
+    declared = bag_image_count(path, image_topic)
+    end = declared if stop is None else min(stop, declared)
+    read, problem = start, ""
+    try:
+        for frame in iter_bag_frames(path, image_topic):
+            if frame.index < start:
+                continue
+            if frame.index >= end:
+                break
+            read = frame.index + 1
+            yield _bag_frame(path, frame, ImageMessageError)
+    except Exception as exc:  # rosbags raises its own classes for a damaged chunk: the rest is lost, said below
+        problem = f" ({' '.join(str(exc).split())[:200]})"
+    if read < end:  # the index lists more image messages than could be read: damaged chunks
+        yield Frame(f"{path.name}#{read}", None, f"image messages {read} to {end - 1} could not be read: the bag "
+                    f"is damaged{problem} ({read} of {declared} read); 'veg-area bag-recover' rebuilds what is "
+                    "readable", lost=end - read)
+
+
+def _bag_frame(path: Path, frame, image_error: type[Exception]) -> Frame:
+    """One bag image message as a Frame, with the reason where its pixels cannot be decoded."""
+    header = frame.image.header
+    try:
+        image, problem = frame.image.pixels(), ""
+    except image_error as exc:
+        image, problem = None, str(exc)
+    return Frame(f"{path.name}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
+                 frame.camera_info, position=frame.index)
 
 
 def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: str | None = None,
