@@ -23,9 +23,9 @@ def _pyplot():
 
 
 
-def write_calibration_report(result: CalibrationResult, folder: str | Path) -> list[Path]:
+def write_calibration_report(result: CalibrationResult, folder: str | Path, guide=None) -> list[Path]:
     """Write residuals.png, per_view.png, coverage.png, radial.png, uncertainty.png and calibration.json into
-    `folder`."""
+    `folder`; with `guide` (guidance.CalibrationGuide over the views) also variety.png, the bars."""
     plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -120,9 +120,33 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path) -> l
         fig.savefig(written[-1], dpi=110, bbox_inches="tight")
         plt.close(fig)
 
+    if guide is not None:
+        written.append(plot_variety(guide, folder / "variety.png"))
     written.append(folder / "calibration.json")
     written[-1].write_text(json.dumps(result.summary(), indent=2))
     return written
+
+
+def plot_variety(guide, path: str | Path) -> Path:
+    """The variety bars of the views (as the calibration node's feedback shows them) and what is still needed."""
+    from .feedback import bar_rows
+
+    plt = _pyplot()
+    rows = bar_rows(guide)
+    fig, ax = plt.subplots(figsize=(8, 3.8))
+    fills = [fill for _, fill in rows]
+    ax.barh(range(len(rows)), fills, color=["tab:green" if f >= 1 else "tab:orange" for f in fills])
+    ax.set_yticks(range(len(rows)), [label for label, _ in rows])
+    ax.invert_yaxis()
+    ax.set_xlim(0, 1)
+    ax.set_xlabel("share of the variety each parameter needs")
+    needed = guide.still_needed()
+    ax.set_title(f"{len(guide.kept)} views; " + (f"still needed: {needed}" if needed else "variety enough"),
+                 fontsize=10)
+    path = Path(path)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
 
 
 def plot_area_series(times: list[float], areas: list[float], stds: list[float], path: str | Path,

@@ -59,6 +59,7 @@ class BoardViews:
     no_board: list[str] = field(default_factory=list)
     wrong_size: list[str] = field(default_factory=list)
     repeated: list[str] = field(default_factory=list)
+    guide: object | None = None  # guidance.CalibrationGuide over the views: their variety, what is still needed
 
 
 def collect_views(files: list[Path], board, step: int, say, image_size: tuple[int, int] | None = None,
@@ -68,6 +69,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
     still over several frames counts once."""
     from ..calibration import View, same_pose
     from ..frames import iter_frames
+    from ..guidance import CalibrationGuide
 
     found = BoardViews(image_size=image_size)
     last_kept: dict[str, object] = {}  # per video: the last view kept
@@ -99,7 +101,14 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
                 continue
             last_kept[video] = detection
         found.views.append(View(frame.name, detection))
-        say(f"[{seen}] {frame.name}: {len(detection)} board points")
+        if found.guide is None:
+            found.guide = CalibrationGuide(board, found.image_size)
+        verdict = found.guide.offer(detection, frame.image, keep=True)  # the user chose them: advice only
+        advice = f" ({verdict.reason})" if not verdict.kept and verdict.kind != "similar" else ""
+        say(f"[{seen}] {frame.name}: {len(detection)} board points{advice}")
+    if found.guide is not None:
+        needed = found.guide.still_needed()
+        say(f"still needed: {needed}" if needed else "variety of the views: enough for every parameter")
     return found
 
 
@@ -171,7 +180,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     summary = result.summary()
     summary.update(unreadable=found.unreadable, no_board=found.no_board, wrong_size=found.wrong_size,
-                   repeated_poses=found.repeated, output=str(output))
+                   repeated_poses=found.repeated, output=str(output), variety=found.guide.summary())
     if previous is not None and previous.camera.image_size == result.camera.image_size \
             and quality_rms(previous) < result.rms_px:
         raise CliError(
@@ -183,7 +192,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.report:
         from ..report import write_calibration_report
 
-        for path in write_calibration_report(result, args.report):
+        for path in write_calibration_report(result, args.report, found.guide):
             say(f"report: {path}")
     for warning in result.warnings:
         say(f"warning: {warning}")

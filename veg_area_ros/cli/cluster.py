@@ -14,7 +14,7 @@ from .batch import _summary, check_batch, finish_batch, input_job, input_summary
 from .common import EXIT_FAILED, EXIT_OK, CliError, progress, write_csv
 from .measure_job import CSV_COLUMNS, MeasureJob, csv_row, frames_lost, measure, plot_series
 
-CONNECT_TIMEOUT_S = 8  # the whole refusal, interpreter included, within 10 s
+CONNECT_TIMEOUT_S = 6  # the whole refusal within 10 s, the interpreter and its imports included
 PROGRESS_EVERY_S = 2.0
 
 

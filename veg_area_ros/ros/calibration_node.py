@@ -6,15 +6,15 @@ from __future__ import annotations
 import json
 import math
 import os
+import threading
 
-import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from ..board import BoardSpec, BoardSpecError
+from ..board import BoardSpec, BoardSpecError, detect_scaled
 from ..calib_io import (
     camera_info_url_to_path,
     fit_metadata,
@@ -23,12 +23,14 @@ from ..calib_io import (
     read_calibration,
     write_calibration,
 )
-from ..calibration import NEW_POSE_DISTANCE, CalibrationError, View, calibrate, coverage_grid, pose_signature
+from ..calibration import CalibrationError, View, calibrate
 from ..camera_model import BrownCamera
 from ..cdr import decode_image
+from ..feedback import FitView, render_feedback
+from ..guidance import CalibrationGuide
 from ..sources import DEFAULT_BOARD
 from .health import CountedWarnings, InputWatch, publish_safely
-from .messages import ImageMessageError, camera_to_info, info_to_camera
+from .messages import ImageMessageError, camera_to_info, image_bytes, info_to_camera
 from .params import declare, read_start_file
 from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
 from .run import run_nodes
@@ -42,8 +44,9 @@ class CalibrationNode(Node):
         self.medium = declare(self, "medium", "water", "Medium the calibration is made in.", choices=("air", "water"))
         self.distance = declare(self, "calibration_distance_m", 0.7, "Camera-to-board distance, metres.",
                                 low=0.01, high=100.0)
-        self.min_views = declare(self, "min_views", 12, "Views kept before an automatic fit.", low=4, high=500)
-        self.auto_calibrate = declare(self, "auto_calibrate", True, "Fit once min_views good views are in.")
+        self.min_views = declare(self, "min_views", 12, "Views kept before an automatic fit (which also waits for "
+                                 "enough variety: see ~/feedback).", low=4, high=500)
+        self.auto_calibrate = declare(self, "auto_calibrate", True, "Fit once min_views varied views are in.")
         self.camera_name = declare(self, "camera_name", "camera", "camera_name written in the YAML.")
         url = declare(self, "camera_info_url", "file://" + os.path.expanduser("~/.ros/camera_info/veg_area.yaml"),
                       "Where the calibration is loaded from at start and written to (file://).", read_only=True)
@@ -54,15 +57,17 @@ class CalibrationNode(Node):
             raise ValueError(f"parameter board: {exc}") from exc
         self.path = camera_info_url_to_path(url)
         self.views: list[View] = []
-        self.signatures: list[np.ndarray] = []
-        self.covered = np.zeros((3, 3), bool)
+        self.guide: CalibrationGuide | None = None  # from the first frame on (its size)
         self.image_size: tuple[int, int] | None = None
         self.frames_seen = 0
+        self.frames_skipped = 0  # arrived while the last one was still being looked at: counted, never queued
         self.camera: BrownCamera | None = None
         self.rms: float = math.inf
         self.fitted = False
+        self.fit_view: FitView | None = None
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
         self.progress_pub = self.create_publisher(String, "~/progress", RESULT_QOS)
+        self.feedback_pub = self.create_publisher(Image, "~/feedback", IMAGE_QOS)
         self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS, raw=True)  # a view, no copy
         self.input_watch = InputWatch(self, "image_raw")
         self.warn = CountedWarnings(self.get_logger())
@@ -74,13 +79,40 @@ class CalibrationNode(Node):
             if existing is not None:
                 self._serve(existing.camera, quality_rms(existing), persist=False)
                 self.get_logger().info(f"serving {self.path} (RMS {self.rms:.3f} px)")
+        # frames are looked at in a thread of their own: a 10-megapixel frame's board search must not hold up
+        # the executor (services, parameters), and a frame that arrives meanwhile replaces the waiting one
+        self._state = threading.Lock()
+        self._waiting: bytes | None = None
+        self._wake = threading.Condition()
+        self._closing = False
+        self._looker = threading.Thread(target=self._look_loop, name="calibration-views", daemon=True)
+        self._looker.start()
 
     # --- views -----------------------------------------------------------------------------------------
     def _on_image(self, data: bytes) -> None:
         self.input_watch.frame()
-        self.frames_seen += 1
-        if self.fitted and not self.auto_calibrate:
-            return
+        with self._wake:
+            self.frames_seen += 1
+            if self._waiting is not None:
+                self.frames_skipped += 1
+            self._waiting = data
+            self._wake.notify()
+
+    def _look_loop(self) -> None:
+        while True:
+            with self._wake:
+                while self._waiting is None and not self._closing:
+                    self._wake.wait(0.5)
+                if self._closing:
+                    return
+                data, self._waiting = self._waiting, None
+            try:
+                with self._state:
+                    self._look(data)
+            except Exception as exc:  # a bug must not end the view collection: said, throttled
+                self.warn("frame not looked at", f"{type(exc).__name__}: {exc}")
+
+    def _look(self, data: bytes) -> None:
         try:
             image = decode_image(data).pixels()
         except ImageMessageError as exc:
@@ -89,46 +121,58 @@ class CalibrationNode(Node):
         size = (image.shape[1], image.shape[0])
         if self.image_size is None:
             self.image_size = size
+            self.guide = CalibrationGuide(self.board, size, self.min_views)
         elif size != self.image_size:
             self.warn("frame ignored", f"{size[0]}x{size[1]}, the views so far are "
                                        f"{self.image_size[0]}x{self.image_size[1]}")
             return
-        if self.fitted:
+        watched = self.feedback_pub.get_subscription_count() > 0
+        collecting = not self.fitted
+        if not collecting and not watched:
             return  # a served fit: views are collected again only after ~/calibrate is called
-        detection = self.board.detect(image)
-        if detection is None:
-            return
-        signature = pose_signature(detection.image_points, size)
-        cells = coverage_grid([detection.image_points], *size, 3, 3)
-        new_cells = cells & ~self.covered
-        nearest = min((np.linalg.norm(signature - s) for s in self.signatures), default=math.inf)
-        if nearest < NEW_POSE_DISTANCE and not new_cells.any():
-            return
-        self.views.append(View(f"frame{self.frames_seen}", detection))
-        self.signatures.append(signature)
-        self.covered |= cells
-        self._report(f"view {len(self.views)} kept ({len(detection)} points, coverage "
-                     f"{self.covered.mean():.0%})")
-        if self.auto_calibrate and len(self.views) >= self.min_views:
+        detection = detect_scaled(self.board, image)
+        verdict = None
+        if detection is not None and collecting:
+            verdict = self.guide.offer(detection, image)
+            if verdict.kept:
+                self.views.append(View(f"frame{self.frames_seen}", detection))
+                self._report(f"view {len(self.views)} kept ({len(detection)} points, coverage "
+                             f"{self.guide.covered.mean():.0%})")
+            elif verdict.kind != "similar":
+                self._report(f"view rejected: {verdict.reason}")
+        if watched:
+            feedback = render_feedback(image, self.guide, None if detection is None else detection.image_points,
+                                       verdict, self.fit_view)
+            publish_safely(self, self.feedback_pub, image_bytes(feedback, self.get_clock().now().to_msg(),
+                                                                self.frame_id))
+        if verdict is not None and verdict.kept and self.auto_calibrate and self.guide.enough():
             self._fit()
 
     def _report(self, text: str, **extra) -> None:
         self.get_logger().info(text)
+        guide = self.guide.summary() if self.guide is not None else {}
         state = {"views_kept": len(self.views), "frames_seen": self.frames_seen,
-                 "coverage": float(self.covered.mean()), "fitted": self.fitted,
-                 "rms_px": None if math.isinf(self.rms) else self.rms, "message": text, **extra}
+                 "frames_skipped": self.frames_skipped,
+                 "coverage": float(self.guide.covered.mean()) if self.guide is not None else 0.0,
+                 "fitted": self.fitted, "rms_px": None if math.isinf(self.rms) else self.rms, "message": text,
+                 **{k: v for k, v in guide.items() if k != "views_kept"}, **extra}
         publish_safely(self, self.progress_pub, String(data=json.dumps(state)))
 
     # --- fitting and serving ---------------------------------------------------------------------------
     def _fit(self) -> tuple[bool, str]:
+        missing = self.guide.still_needed() if self.guide is not None else "views of the board"
+        lacking = f"; the views still lack variety: {missing}" if missing else ""
         if self.image_size is None or len(self.views) < 4:
-            return False, f"{len(self.views)} views kept; at least 4 are needed (12+ recommended)"
+            return False, f"{len(self.views)} views kept; at least 4 are needed (12+ recommended){lacking}"
         try:
             result = calibrate(self.views, self.image_size)
         except CalibrationError as exc:
-            self._report(f"fit failed: {exc}")
-            return False, str(exc)
+            self._report(f"fit failed: {exc}{lacking}")
+            return False, f"{exc}{lacking}"
         self.fitted = True
+        self.fit_view = FitView(result.rms_px, dict(result.std), result.projection_std_px,
+                                result.image_points[-1] if result.image_points else None,
+                                result.residuals[-1] if result.residuals else None)
         warnings = list(result.warnings)
         if result.rms_px > self.rms:
             text = (f"new fit RMS {result.rms_px:.4f} px is worse than the served {self.rms:.4f} px; "
@@ -138,7 +182,7 @@ class CalibrationNode(Node):
         metadata = fit_metadata(result.summary(), self.medium, self.distance, str(self.board), "calibration_node")
         self._serve(result.camera, result.rms_px, persist=True, metadata=metadata)
         text = (f"calibrated on {result.views_used} views: RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} "
-                f"fy {result.camera.fy:.2f} cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}")
+                f"fy {result.camera.fy:.2f} cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}{lacking}")
         self._report(text, warnings=warnings)
         for warning in warnings:
             self.get_logger().warning(warning)
@@ -159,9 +203,17 @@ class CalibrationNode(Node):
         return failed
 
     def _on_calibrate(self, request, response):
-        self.fitted = False  # a fit on request: also resumes collecting views afterwards
-        response.success, response.message = self._fit()
+        with self._state:
+            self.fitted = False  # a fit on request: also resumes collecting views afterwards
+            response.success, response.message = self._fit()
         return response
+
+    def destroy_node(self) -> None:
+        with self._wake:
+            self._closing = True
+            self._wake.notify()
+        self._looker.join(timeout=30)
+        super().destroy_node()
 
     def _on_set_camera_info(self, request, response):
         try:

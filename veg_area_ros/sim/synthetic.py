@@ -192,15 +192,20 @@ def degrade(image: np.ndarray, rng: np.random.Generator, noise_sigma: float = 1.
 def render_board_views(
     camera: BrownCamera, board: BoardSpec, poses: list[tuple[np.ndarray, np.ndarray]],
     port: FlatPort | None = None, noise_sigma: float = 1.0, rng: np.random.Generator | None = None,
-    blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3,
+    blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3, gain: float = 1.0,
 ) -> list[np.ndarray]:
-    """Grey images of the board at each pose, with mild sensor noise (and flume degradation if asked)."""
+    """Grey images of the board at each pose, with mild sensor noise (and flume degradation if asked). The
+    board's white renders at BOARD_WHITE, as a well-exposed camera leaves headroom; `gain` over 1.09 clips it."""
     rng = rng or np.random.default_rng(0)
     pixels_per_metre = 40.0 / board.square  # 40 texels per square: finer than any camera pixel here
-    texture = board.texture(pixels_per_metre)
+    texture = np.round(board.texture(pixels_per_metre).astype(np.float32) * (BOARD_WHITE / 255)).astype(np.uint8)
     return [degrade(render_plane(camera, texture, board.extent(), rvec, tvec, port, background=110,
-                                 supersample=supersample), rng, noise_sigma, blur_sigma_px, light_gradient)
+                                 supersample=supersample), rng, noise_sigma, blur_sigma_px, light_gradient,
+                    gain=gain)
             for rvec, tvec in poses]
+
+
+BOARD_WHITE = 235  # grey level of the board's white squares in a well-exposed view (255 would be clipped)
 
 
 # a DSLR as in the paper (3872x2592) with an 18 mm-class lens: milder distortion than the endoscope
