@@ -74,13 +74,14 @@ def main(workdir: Path) -> None:
         results["unreachable"] = step(veg_area(*MEASURE, "v0.avi", "--scheduler", "tcp://127.0.0.1:9",
                                                "--output-dir", "cluster_unreachable"), time.monotonic() - started)
 
-        # Ctrl-C after the first input is done: finished inputs kept, the rest cancelled
-        client_run = veg_area(*MEASURE, "v0.avi", "long.avi", "--segment-frames", "2", "--scheduler", address,
+        # Ctrl-C after the first input is done: finished inputs kept, the rest cancelled (the long one: 120
+        # frames in 60 segments, many seconds of work after the short one is done)
+        client_run = veg_area(*MEASURE, "v0.avi", "longer.avi", "--segment-frames", "2", "--scheduler", address,
                               "--output-dir", "cluster_interrupted", stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         lines = []
         for line in client_run.stderr:
             lines.append(line)
-            if "v0.avi done" in line:
+            if " done: " in line:
                 client_run.send_signal(signal.SIGINT)
                 break
         out, err = client_run.communicate(timeout=120)

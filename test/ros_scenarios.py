@@ -198,7 +198,8 @@ def main() -> int:
                   "drag": scenario_drag, "interop": scenario_interop, "foreign": scenario_foreign,
                   "full_rate": scenario_full_rate, "driver_qos": scenario_driver_qos,
                   "replay": scenario_replay, "record_cli": scenario_record_cli,
-                  "two_machines": scenario_two_machines, "bad_start_files": scenario_bad_start_files}[name](
+                  "two_machines": scenario_two_machines, "bad_start_files": scenario_bad_start_files,
+                  "guidance": scenario_guidance}[name](
                       options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
@@ -912,3 +913,78 @@ def scenario_bad_start_files(options: dict, nodes: Nodes) -> dict:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def scenario_guidance(options: dict, nodes: Nodes) -> dict:
+    """calibration_node fed a sequence of board views (options["sequence"]: varied, no_tilt, no_corner or
+    no_roll, from test_guidance's pose generator) by the probe: its ~/progress, whether it fitted, and ~/feedback
+    (first without a subscriber, then with one)."""
+    import rclpy
+    from rclpy.node import Node
+    from sensor_msgs.msg import Image
+    from std_msgs.msg import String
+    from test_guidance import BOARD_SPEC, PORT, poses
+
+    from veg_area_ros.ros.messages import image_to_msg, msg_to_image
+    from veg_area_ros.ros.qos import IMAGE_QOS, RESULT_QOS
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, render_board_views
+
+    sequence = options["sequence"]
+    arguments = {"varied": {}, "no_tilt": {"tilt": 0.0}, "no_roll": {"rolls": (0.0,)},
+                 "no_corner": {"places": ((-1, -1), (1, -1), (-1, 1), (0, 0), (-1, 0), (0, -1), (0, 1), (1, 0))}}
+    images = render_board_views(ENDOSCOPE, BOARD_SPEC, poses(16, **arguments[sequence]), port=PORT,
+                                rng=np.random.default_rng(1), noise_sigma=2.0, supersample=2)
+    served = Path("guided.yaml").resolve()
+    nodes.start("calibration_node", camera_info_url=f"file://{served}", min_views=12)
+    rclpy.init()
+    probe = Node("probe")
+    progress: list[dict] = []
+    probe.create_subscription(String, "calibration_node/progress", lambda m: progress.append(json.loads(m.data)),
+                              RESULT_QOS)
+    publisher = probe.create_publisher(Image, "image_raw", IMAGE_QOS)
+    out: dict = {"sequence": sequence}
+
+    def spin(seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            rclpy.spin_once(probe, timeout_sec=0.02)
+
+    deadline = time.monotonic() + 30
+    while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+        spin(0.1)
+    for image in images:  # each pose held for three frames, as a hand holds it
+        for _ in range(3):
+            publisher.publish(image_to_msg(image, probe.get_clock().now().to_msg(), "camera"))
+            spin(0.25)
+    spin(15 if sequence == "varied" else 3)  # a fit takes seconds
+    out["progress"] = progress[-1] if progress else None
+    out["feedback_before_subscribing"] = progress[-1].get("feedback_published") if progress else None
+    out["rejected_lines"] = [p["message"] for p in progress if p["message"].startswith("view rejected")]
+    out["fitted"] = served.exists()
+
+    # ~/feedback: nothing before anyone subscribes (the node counts what it published), then frames
+    feedback: list = []
+    probe.create_subscription(Image, "calibration_node/feedback", feedback.append, IMAGE_QOS)
+    spin(2.0)
+    image = images[len(images) // 2]
+    for _ in range(8):
+        publisher.publish(image_to_msg(image, probe.get_clock().now().to_msg(), "camera"))
+        spin(0.3)
+    spin(1.0)
+    out["feedback_count"] = len(feedback)
+    if feedback:
+        last = feedback[-1]
+        out["feedback_encoding"], out["feedback_size"] = last.encoding, [last.width, last.height]
+        shown = msg_to_image(last)
+        detection = BOARD_SPEC.detect(image)
+        from veg_area_ros.feedback import KEPT_COLOUR, REJECTED_COLOUR, SIMILAR_COLOUR
+
+        rings = []
+        for x, y in detection.image_points[::5]:  # a ring round each detected point, in one of the point colours
+            patch = shown[round(y) - 4:round(y) + 5, round(x) - 4:round(x) + 5].reshape(-1, 3).astype(int)
+            rings.append(int(min(np.min(np.abs(patch - np.array(colour)).sum(axis=1))
+                                 for colour in (KEPT_COLOUR, SIMILAR_COLOUR, REJECTED_COLOUR))))
+        out["ring_distances"] = rings
+    probe.destroy_node()
+    rclpy.try_shutdown()
+    return out

@@ -73,3 +73,8 @@ def test_ros_transport_delivers_in_every_case():
     for row in rows:
         sent, got = int(row[5]), int(row[6])
         assert 0 < got <= sent, row
+
+
+def test_the_guidance_bench_runs():
+    out = run_bench("guidance_speed.py", "--repeats", "1")
+    assert "640x480: a frame looked at" in out and "3872x2592: a frame looked at" in out

@@ -40,6 +40,13 @@ def scenario(tmp_path_factory) -> tuple[Path, dict]:
     for k in range(6):
         _video(folder / f"v{k}.avi", 12, 100 * k)
     _video(folder / "long.avi", 40, 1000)
+    capture = cv2.VideoCapture(str(folder / "long.avi"))
+    frames = [capture.read()[1] for _ in range(40)]
+    capture.release()
+    writer = cv2.VideoWriter(str(folder / "longer.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 10, ENDOSCOPE.image_size)
+    for k in range(120):
+        writer.write(frames[k % 40])
+    writer.release()
     env = dict(os.environ, PYTHONPATH=str(REPO), HOME=str(folder), PYTHONUNBUFFERED="1",
                DASK_DISTRIBUTED__DIAGNOSTICS__NVML="False")
     done = subprocess.run(confined([sys.executable, str(REPO / "test" / "dask_scenario.py"), str(folder)]),
@@ -127,9 +134,10 @@ def test_ctrl_c_cancels_the_rest_and_keeps_what_finished(scenario):
     interrupted = results["interrupted"]
     assert interrupted["code"] == 130, interrupted["stderr"]
     summary = {r["input"]: r for r in rows(folder / "cluster_interrupted" / "batch_summary.csv")}
-    assert summary["v0.avi"]["measured"] == "12"
-    assert summary["long.avi"]["error"] == "interrupted before it finished"
+    assert summary["v0.avi"]["measured"] == "12", summary
+    assert summary["longer.avi"]["error"] == "interrupted before it finished"
     assert len(rows(folder / "cluster_interrupted" / "v0_area.csv")) == 12
+    assert not (folder / "cluster_interrupted" / "longer_area.csv").exists()
 
 
 def test_one_batch_behaviour_whatever_runs_it(scenario, tmp_path):

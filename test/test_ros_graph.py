@@ -350,3 +350,26 @@ def test_a_killed_node_leaves_nothing_in_the_hosts_shared_memory(tmp_path):
     assert "published" in done.stdout, done.stderr[-2000:]
     assert done.returncode != 0, done.returncode  # killed (-9; unshare reports its child's death as 1)
     assert shm_files() - before == set()
+
+
+@pytest.mark.parametrize("sequence, needed", [
+    ("varied", None),
+    ("no_tilt", "tilt the board about its horizontal axis (top towards the camera, then away)"),
+    ("no_corner", "cover the bottom-right corner"),
+    ("no_roll", "roll the board by 90 degrees (turn it on its side)"),
+])
+def test_the_calibration_node_guides_the_operator_and_fits_only_on_enough_variety(tmp_path, sequence, needed):
+    """Board views published to a real calibration_node process: the 'still needed' line on ~/progress, an
+    automatic fit only for the varied sequence; ~/feedback drawn only once someone subscribes, bgr8, the
+    detected points ringed where they are."""
+    result = run_scenario("guidance", tmp_path, timeout=300, sequence=sequence)
+    progress = result["progress"]
+    assert progress is not None and progress["views_kept"] >= 8, progress
+    assert progress["still_needed"] == needed, progress
+    assert result["fitted"] is (sequence == "varied")
+    assert set(progress["bars"]) == {"x", "y", "size", "tilt_h", "tilt_v", "roll", "coverage"}
+    assert result["feedback_before_subscribing"] == 0  # frames were looked at, no image drawn for nobody
+    assert result["feedback_count"] >= 3, result
+    assert result["feedback_encoding"] == "bgr8" and result["feedback_size"] == [640 + 330, 480]
+    assert max(result["ring_distances"]) < 60, result["ring_distances"]
+    assert all(result["alive_at_end"].values()) and result["exit_codes"] == {"calibration_node": 0}

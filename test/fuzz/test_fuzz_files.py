@@ -60,7 +60,8 @@ def test_a_scrambled_jpeg_is_reported_corrupt_not_measured(workspace, tmp_path, 
     (folder / "b_scrambled.jpg").write_bytes(scrambled_jpeg(good, 0, 2000))
     code = measure(workspace, str(folder), extra=("--csv", str(tmp_path / "areas.csv")))
     err = capsys.readouterr().err
-    assert code == 0 and "b_scrambled.jpg" in err and "corrupt JPEG" in err
+    # a frame lost to damage: the good one measured and kept, the run exits 1 and names the lost one
+    assert code == 1 and "b_scrambled.jpg" in err and "corrupt JPEG" in err and "1 of 2 frames could not be read" in err
     rows = (tmp_path / "areas.csv").read_text().splitlines()
     assert len(rows) == 3 and "corrupt JPEG" in rows[2] and rows[2].split(",")[4] == ""  # no area for it
 

@@ -12,6 +12,7 @@ from pathlib import Path
 from .common import EXIT_REFUSED, EXIT_USAGE, CliError, check_outputs, positive_float, progress, unwritable
 
 VIEWS_PER_VIDEO = 60  # consecutive frames add little but time
+DETECT_WORKERS = 2  # board searches at once: the two cores of a lab PC (OpenCV runs them without the GIL)
 
 
 def add_parser(sub) -> None:
@@ -70,10 +71,16 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
     from ..calibration import View, same_pose
     from ..frames import iter_frames
     from ..guidance import CalibrationGuide
+    from ..pipeline import ordered_map
 
     found = BoardViews(image_size=image_size)
     last_kept: dict[str, object] = {}  # per video: the last view kept
-    for frame in iter_frames(files, step):
+
+    def detect(frame):
+        return None if frame.image is None else board.detect(frame.image)
+
+    # frames read and searched by two threads (OpenCV releases Python's lock), judged here in their order
+    for frame, detection in ordered_map(detect, iter_frames(files, step), workers=DETECT_WORKERS):
         found.seen += 1
         seen = found.seen
         if frame.image is None:
@@ -88,7 +95,6 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
             say(f"[{seen}] {frame.name}: skipped, {size[0]}x{size[1]} differs from {size_source}'s "
                 f"{found.image_size[0]}x{found.image_size[1]}")
             continue
-        detection = board.detect(frame.image)
         if detection is None:
             found.no_board.append(frame.name)
             say(f"[{seen}] {frame.name}: no {board.kind} board found")

@@ -138,7 +138,10 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
         interrupted = True
         client.cancel(list(pending))
     finally:
-        client.close()
+        try:
+            client.close()
+        except KeyboardInterrupt:  # a second Ctrl-C while closing: the summary is still written
+            interrupted = True
     return finish_batch(job, folder, [summaries.get(k) or _summary(inputs[k], "", "interrupted before it finished")
                                       for k in range(len(inputs))], interrupted)
 

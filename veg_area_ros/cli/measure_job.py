@@ -110,6 +110,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     )
     from ..idealize import FrameSizeError
     from ..light import LightError
+    from ..pipeline import prefetched
     from ..targets import TargetsError, TargetsSpec
 
     say = progress(job.quiet)
@@ -200,7 +201,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     interrupted = False
     segment = None
     try:
-        for index, frame in enumerate(iter_frames(files, job.video_step, job.image_topic, job.frame_range), 1):
+        # the next frames decoded while this one is measured (same frames, same order)
+        frames = prefetched(iter_frames(files, job.video_step, job.image_topic, job.frame_range))
+        for index, frame in enumerate(frames, 1):
             row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
             line = ""
             if frame.position is not None and (where := (frame.name.rsplit("#", 1)[0],

@@ -61,6 +61,7 @@ class CalibrationNode(Node):
         self.image_size: tuple[int, int] | None = None
         self.frames_seen = 0
         self.frames_skipped = 0  # arrived while the last one was still being looked at: counted, never queued
+        self.feedback_published = 0  # ~/feedback images: drawn only while someone subscribes
         self.camera: BrownCamera | None = None
         self.rms: float = math.inf
         self.fitted = False
@@ -143,8 +144,9 @@ class CalibrationNode(Node):
         if watched:
             feedback = render_feedback(image, self.guide, None if detection is None else detection.image_points,
                                        verdict, self.fit_view)
-            publish_safely(self, self.feedback_pub, image_bytes(feedback, self.get_clock().now().to_msg(),
-                                                                self.frame_id))
+            if publish_safely(self, self.feedback_pub, image_bytes(feedback, self.get_clock().now().to_msg(),
+                                                                   self.frame_id)):
+                self.feedback_published += 1
         if verdict is not None and verdict.kept and self.auto_calibrate and self.guide.enough():
             self._fit()
 
@@ -152,7 +154,7 @@ class CalibrationNode(Node):
         self.get_logger().info(text)
         guide = self.guide.summary() if self.guide is not None else {}
         state = {"views_kept": len(self.views), "frames_seen": self.frames_seen,
-                 "frames_skipped": self.frames_skipped,
+                 "frames_skipped": self.frames_skipped, "feedback_published": self.feedback_published,
                  "coverage": float(self.guide.covered.mean()) if self.guide is not None else 0.0,
                  "fitted": self.fitted, "rms_px": None if math.isinf(self.rms) else self.rms, "message": text,
                  **{k: v for k, v in guide.items() if k != "views_kept"}, **extra}
