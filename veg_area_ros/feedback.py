@@ -61,7 +61,11 @@ def render_feedback(image: np.ndarray, guide: CalibrationGuide, points: np.ndarr
                             (255, 0, 255), 1, cv2.LINE_AA, tipLength=0.3)
     needed = guide.still_needed()
     banner = (verdict.reason if verdict is not None and not verdict.kept and verdict.kind != "similar" else "")
-    _banner(frame, needed or "enough variety: ready to calibrate", (40, 40, 40) if needed else (30, 110, 30))
+    if fit is not None:
+        _banner(frame, f"calibrated: RMS {fit.rms_px:.3f} px (~/calibrate collects more views and fits again)",
+                (30, 110, 30))
+    else:
+        _banner(frame, needed or "enough variety: ready to calibrate", (40, 40, 40) if needed else (30, 110, 30))
     if banner:
         _text(frame, f"rejected: {banner}", (8, height - 40), REJECTED_COLOUR, scale=0.45)
     panel = _panel(guide, verdict, fit, height)
@@ -83,11 +87,11 @@ def _draw_coverage(frame: np.ndarray, covered: np.ndarray) -> None:
 
 
 def _draw_uncertainty(frame: np.ndarray, projection: dict, scale: float) -> None:
-    """The projection uncertainty at its grid points: a filled circle coloured from green (small) to red."""
+    """The projection uncertainty at its grid points: a filled circle from green (0.1 px or less) through
+    orange to red (1 px or more), on a log scale the same for every fit."""
     values = np.asarray(projection["std_px"], float)
-    top = max(float(values.max()), 1e-9)
     for (x, y), value in zip(np.asarray(projection["points"], float) * scale, values, strict=True):
-        share = value / top
+        share = float(np.clip(np.log10(max(value, 1e-9) / 0.1), 0.0, 1.0))
         cv2.circle(frame, (round(float(x)), round(float(y))), 4, (0, round(255 * (1 - share)), round(255 * share)),
                    -1, cv2.LINE_AA)
 
