@@ -911,8 +911,6 @@ def scenario_bad_start_files(options: dict, nodes: Nodes) -> dict:
     return out
 
 
-if __name__ == "__main__":
-    sys.exit(main())
 
 
 def scenario_guidance(options: dict, nodes: Nodes) -> dict:
@@ -988,3 +986,7 @@ def scenario_guidance(options: dict, nodes: Nodes) -> dict:
     probe.destroy_node()
     rclpy.try_shutdown()
     return out
+
+
+if __name__ == "__main__":
+    sys.exit(main())
