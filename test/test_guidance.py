@@ -171,3 +171,23 @@ def test_a_large_frame_is_searched_reduced_and_its_feedback_is_at_most_1280_wide
     guide = CalibrationGuide(board, DSLR.image_size)
     guide.offer(reduced, image)
     assert render_feedback(image, guide, reduced.image_points).shape[1] == MAX_WIDTH + PANEL_WIDTH
+
+
+def test_veg_area_calibrate_says_what_is_still_needed_and_reports_the_bars(tmp_path):
+    from helpers import REPO, run_cli
+
+    done = run_cli("calibrate", str(REPO / "test" / "data" / "opencv-left"), "--board", "chessboard:9x6:1",
+                   "--medium", "air", "-o", str(tmp_path / "left.yaml"), "--report", str(tmp_path / "report"),
+                   "--json")
+    assert done.returncode == 0, done.stderr
+    import json
+
+    variety = json.loads(done.stdout)["variety"]
+    lines = [line for line in done.stderr.splitlines() if line.startswith(("still needed:", "variety of the views"))]
+    assert len(lines) == 1
+    assert lines[0] == (f"still needed: {variety['still_needed']}" if variety["still_needed"]
+                        else "variety of the views: enough for every parameter")
+    assert set(variety["bars"]) == {"x", "y", "size", "tilt_h", "tilt_v", "roll", "coverage"}
+    assert (tmp_path / "report" / "variety.png").stat().st_size > 10_000
+    # the clipped real photos (whites at 250+ around the corners) get the advice, and are still used
+    assert "over-exposed board" in done.stderr and json.loads(done.stdout)["views_used"] >= 11

@@ -1,0 +1,76 @@
+"""Overlapped work gives what the plain loop gives: prefetched frames in order (an error raised where the loop
+meets it, an early stop closing the source), ordered_map's results in the items' order, and a video measured
+with decoding overlapped gives the rows of a plain loop over its frames."""
+
+from __future__ import annotations
+
+import threading
+
+import cv2
+import numpy as np
+import pytest
+
+from veg_area_ros.area import AreaMeasurer
+from veg_area_ros.classify import Classifier
+from veg_area_ros.frames import iter_video
+from veg_area_ros.pipeline import ordered_map, prefetched
+from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets
+
+
+def test_prefetched_gives_every_item_in_order():
+    assert list(prefetched(iter(range(1000)), depth=3)) == list(range(1000))
+
+
+def test_an_error_is_raised_where_the_loop_meets_it():
+    def source():
+        yield from range(5)
+        raise ValueError("frame 5 cannot be read")
+
+    seen = []
+    with pytest.raises(ValueError, match="frame 5"):
+        for item in prefetched(source()):
+            seen.append(item)
+    assert seen == [0, 1, 2, 3, 4]
+
+
+def test_stopping_early_stops_the_reader_and_closes_the_source():
+    closed = threading.Event()
+
+    def source():
+        try:
+            yield from range(10**9)
+        finally:
+            closed.set()
+
+    for item in prefetched(source()):
+        if item == 3:
+            break
+    assert closed.wait(5)
+    assert not any(t.name == "prefetch" and t.is_alive() for t in threading.enumerate())
+
+
+def test_ordered_map_keeps_the_order_whatever_finishes_first():
+    import time
+
+    def slow_on_even(k: int) -> int:
+        time.sleep(0.02 if k % 2 == 0 else 0.0)
+        return k * k
+
+    assert list(ordered_map(slow_on_even, range(30), workers=3, ahead=5)) == [(k, k * k) for k in range(30)]
+    assert list(ordered_map(slow_on_even, range(5), workers=1)) == [(k, k * k) for k in range(5)]
+
+
+def test_a_video_measured_with_decoding_overlapped_gives_the_plain_loops_rows(tmp_path):
+    video = tmp_path / "run.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30, ENDOSCOPE.image_size)
+    rng = np.random.default_rng(0)
+    clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0)
+    for _ in range(20):
+        writer.write(np.clip(clean + rng.normal(0, 3, clean.shape), 0, 255).astype(np.uint8))
+    writer.release()
+
+    def areas(frames) -> list[float]:
+        measurer = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
+        return [measurer.measure(frame.image).area_m2 for frame in frames]
+
+    assert areas(prefetched(iter_video(video))) == areas(iter_video(video))
