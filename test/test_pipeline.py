@@ -74,3 +74,39 @@ def test_a_video_measured_with_decoding_overlapped_gives_the_plain_loops_rows(tm
         return [measurer.measure(frame.image).area_m2 for frame in frames]
 
     assert areas(prefetched(iter_video(video))) == areas(iter_video(video))
+
+
+def test_markers_that_did_not_move_are_not_retracked_and_a_bumped_camera_is(monkeypatch):
+    """A steady camera bumped halfway (2.6 px right, 1.3 px up) under 4 DN of noise: skipping the re-tracking of
+    unmoved markers gives every frame's Af within the two runs' weight error bounds of re-tracking each frame,
+    re-tracks at the bump (the markers' positions follow it), and re-tracks far less often."""
+    from veg_area_ros import markers
+
+    clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0)
+    bumped = cv2.warpAffine(clean, np.float32([[1, 0, 2.6], [0, 1, -1.3]]), ENDOSCOPE.image_size,
+                            borderMode=cv2.BORDER_REPLICATE)
+    rng = np.random.default_rng(0)
+    frames = [np.clip((clean if k < 20 else bumped) + rng.normal(0, 4, clean.shape), 0, 255).astype(np.uint8)
+              for k in range(40)]
+    calls = {"retrack": 0}
+    real = markers.retrack_marker
+
+    def counted(*args, **kwargs):
+        calls["retrack"] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(markers, "retrack_marker", counted)
+    runs = {}
+    for skip in (False, True):
+        calls["retrack"] = 0
+        measurer = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
+        measurer.skip_unmoved_markers = skip
+        runs[skip] = ([measurer.measure(frame) for frame in frames], calls["retrack"])
+    (every, every_calls), (skipping, skipping_calls) = runs[False], runs[True]
+    for a, b in zip(every, skipping, strict=True):
+        assert abs(a.area_m2 - b.area_m2) <= (a.weight_error_bound + b.weight_error_bound) * a.area_m2
+    assert every_calls == 4 * 39 and skipping_calls <= 4 * 4  # re-tracked at the bump and just after, not every frame
+    # the bump moves the markers (in the idealized image) as re-tracking every frame sees it
+    moved = skipping[20].target_pixels["marker 0"] - skipping[19].target_pixels["marker 0"]
+    expected = every[20].target_pixels["marker 0"] - every[19].target_pixels["marker 0"]
+    assert np.hypot(*moved) > 2.5 and np.max(np.abs(moved - expected)) < 0.1

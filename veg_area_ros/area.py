@@ -252,6 +252,7 @@ class AreaMeasurer:
         self.threshold_delta = threshold_delta
         self._hand_pixels = self._idealize_points(np.array([p for p, _ in targets.points]).reshape(-1, 2))
         self._markers: dict[int, DetectedMarker] = {}  # raw-frame markers of the previous frame
+        self.skip_unmoved_markers = True  # markers whose windows did not move keep their corners (markers.unmoved)
         self._geometry: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._weights: _Weights | None = None
         self._last_scale: PlaneScale | None = None  # the last frame's fit: where a hidden marker should be
@@ -298,7 +299,7 @@ class AreaMeasurer:
         located = _Located(None, [], [], [], [], [])
         if self.targets.markers:
             self._markers = track_markers(frame, self.targets.dictionary, self._markers, set(self.targets.markers),
-                                          self._hidden_marker_guesses())
+                                          self._hidden_marker_guesses(), skip_unmoved=self.skip_unmoved_markers)
             found = [marker_id for marker_id in self.targets.markers if marker_id in self._markers]
             located.missing = [marker_id for marker_id in self.targets.markers if marker_id not in self._markers]
             raw_corners = np.array([self._markers[marker_id].corners for marker_id in found]).reshape(-1, 2)

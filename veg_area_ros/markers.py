@@ -4,7 +4,7 @@ near where they were in the previous frame (sub-pixel corners checked against th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import cv2
@@ -15,6 +15,9 @@ import numpy as np
 class DetectedMarker:
     centre: np.ndarray  # (2,) px, the projective centre (intersection of the diagonals)
     corners: np.ndarray  # (4, 2) px
+    # the marker's window as it looked in the frame where these corners were found: (grey patch, left, top,
+    # and the patch's gradients and their inverse normal matrix), to tell cheaply whether it has moved since
+    reference: tuple | None = field(default=None, compare=False, repr=False)
 
 
 def marker_centre(corners: np.ndarray) -> np.ndarray:
@@ -35,6 +38,11 @@ RETRACK_STARTS_PX = [(0.5, 0.5), (0.5, -0.5), (-0.5, 0.5), (-0.5, -0.5)]  # shif
 RETRACK_AGREEMENT_PX = 0.05  # re-tracked corners from every start must agree this closely
 CODE_CELL_PX = 8  # a marker's cells are sampled at this size to check its code
 CODE_CONTRAST = 5.0  # grey levels that must separate every black cell from every white cell of a re-tracked marker
+# a marker whose window shifted by less than this since it was tracked is where it was: re-tracking would only
+# move its corners by their own noise (a one-step gradient estimate over the window; its noise at 4 DN: ~0.004 px)
+STEADY_SHIFT_PX = 0.02
+STEADY_MEAN_DN = 8.0  # a window whose grey levels changed more than this on average (occlusion, light) is re-tracked
+STEADY_MARGIN_PX = 3
 
 
 @lru_cache(maxsize=8)
@@ -124,6 +132,52 @@ def retrack_marker(frame: np.ndarray, dictionary: str, marker_id: int,
     return DetectedMarker(marker_centre(corners), corners)
 
 
+def _window(frame: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, int, int] | None:
+    """The grey window around a marker's corners (float32), and its top-left; None at the frame's edge."""
+    (x0, y0), (x1, y1) = corners.min(axis=0), corners.max(axis=0)
+    left, top = int(x0) - STEADY_MARGIN_PX, int(y0) - STEADY_MARGIN_PX
+    right, bottom = int(np.ceil(x1)) + STEADY_MARGIN_PX, int(np.ceil(y1)) + STEADY_MARGIN_PX
+    if left < 1 or top < 1 or right > frame.shape[1] - 1 or bottom > frame.shape[0] - 1:
+        return None
+    patch = frame[top:bottom, left:right]
+    grey = patch if patch.ndim == 2 else cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)
+    return grey.astype(np.float32), left, top
+
+
+def with_reference(frame: np.ndarray, marker: DetectedMarker) -> DetectedMarker:
+    """The marker with its window in this frame kept as the reference a later frame is compared with."""
+    window = _window(frame, marker.corners)
+    if window is None:
+        return marker
+    grey, left, top = window
+    gx = cv2.Sobel(grey, cv2.CV_32F, 1, 0, ksize=3) / 8
+    gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3) / 8
+    normal = np.array([[float((gx * gx).sum()), float((gx * gy).sum())],
+                       [float((gx * gy).sum()), float((gy * gy).sum())]])
+    if np.linalg.det(normal) <= 1e-6 * max(np.trace(normal), 1e-12) ** 2:
+        return marker  # no texture to tell a shift by
+    return replace(marker, reference=(grey, left, top, gx, gy, np.linalg.inv(normal)))
+
+
+def unmoved(frame: np.ndarray, marker: DetectedMarker) -> bool:
+    """Whether the marker's window is where it was when its corners were found: its shift, one Lucas-Kanade
+    step over the window against the reference, under STEADY_SHIFT_PX, and its grey levels changed no more
+    than STEADY_MEAN_DN on average (something in front of it, or the light, changes them)."""
+    if marker.reference is None:
+        return False
+    grey, left, top, gx, gy, inverse = marker.reference
+    bottom, right = top + grey.shape[0], left + grey.shape[1]
+    if bottom > frame.shape[0] or right > frame.shape[1]:
+        return False
+    patch = frame[top:bottom, left:right]
+    now = (patch if patch.ndim == 2 else cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)).astype(np.float32)
+    diff = now - grey
+    if float(np.abs(diff).mean()) > STEADY_MEAN_DN:
+        return False
+    shift = -inverse @ np.array([float((diff * gx).sum()), float((diff * gy).sum())])
+    return bool(np.hypot(*shift) < STEADY_SHIFT_PX)
+
+
 def _detect_in_box(frame: np.ndarray, dictionary: str, marker_id: int,
                    box: tuple[float, float, float, float]) -> DetectedMarker | None:
     """One marker detected inside a box (x0, y0, x1, y1) of the frame, clipped to it."""
@@ -137,7 +191,23 @@ def _detect_in_box(frame: np.ndarray, dictionary: str, marker_id: int,
 
 def track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, DetectedMarker],
                   wanted: set[int] | None = None,
-                  guesses: dict[int, tuple[np.ndarray, float]] | None = None) -> dict[int, DetectedMarker]:
+                  guesses: dict[int, tuple[np.ndarray, float]] | None = None,
+                  skip_unmoved: bool = True) -> dict[int, DetectedMarker]:
+    """As `_track_markers`; with `skip_unmoved`, a marker whose window has not moved since it was tracked
+    (`unmoved`) keeps its corners without re-tracking (a steady camera: most frames), and every marker found
+    anew keeps its window as the reference for the next frames."""
+    if skip_unmoved and previous and (wanted is None or set(wanted) <= set(previous)) \
+            and all(unmoved(frame, marker) for marker in previous.values()):
+        return {marker_id: marker for marker_id, marker in previous.items() if wanted is None or marker_id in wanted}
+    found = _track_markers(frame, dictionary, previous, wanted, guesses)
+    if not skip_unmoved:
+        return found
+    return {marker_id: with_reference(frame, marker) for marker_id, marker in found.items()}
+
+
+def _track_markers(frame: np.ndarray, dictionary: str, previous: dict[int, DetectedMarker],
+                   wanted: set[int] | None = None,
+                   guesses: dict[int, tuple[np.ndarray, float]] | None = None) -> dict[int, DetectedMarker]:
     """Markers of a video frame. Each one found in the previous frame is first re-tracked (`retrack_marker`);
     if that fails, detected in a window around its last place (a wider window if the detector needs more
     context). Lost there while all the others were re-tracked in place, it is covered and missing from this
