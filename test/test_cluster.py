@@ -134,10 +134,13 @@ def test_ctrl_c_cancels_the_rest_and_keeps_what_finished(scenario):
     interrupted = results["interrupted"]
     assert interrupted["code"] == 130, interrupted["stderr"]
     summary = {r["input"]: r for r in rows(folder / "cluster_interrupted" / "batch_summary.csv")}
+    # the earlier input's tasks go first: the short one is done, the long one (60 segments) cut short
+    assert "cluster: v0.avi done: 12 frames measured" in interrupted["stderr"]
     assert summary["v0.avi"]["measured"] == "12", summary
     assert summary["longer.avi"]["error"] == "interrupted before it finished"
     assert len(rows(folder / "cluster_interrupted" / "v0_area.csv")) == 12
     assert not (folder / "cluster_interrupted" / "longer_area.csv").exists()
+    assert "Traceback" not in interrupted["stderr"] and "Exception ignored" not in interrupted["stderr"]
 
 
 def test_one_batch_behaviour_whatever_runs_it(scenario, tmp_path):

@@ -41,7 +41,7 @@ CODE_CONTRAST = 5.0  # grey levels that must separate every black cell from ever
 # a marker whose window shifted by less than this since it was tracked is where it was: re-tracking would only
 # move its corners by their own noise (a one-step gradient estimate over the window; its noise at 4 DN: ~0.004 px)
 STEADY_SHIFT_PX = 0.02
-STEADY_MEAN_DN = 8.0  # a window whose grey levels changed more than this on average (occlusion, light) is re-tracked
+STEADY_MEAN_DN = 8.0  # a window whose grey levels changed more than this on average (occlusion) is re-tracked
 STEADY_MARGIN_PX = 3
 
 
@@ -161,8 +161,9 @@ def with_reference(frame: np.ndarray, marker: DetectedMarker) -> DetectedMarker:
 
 def unmoved(frame: np.ndarray, marker: DetectedMarker) -> bool:
     """Whether the marker's window is where it was when its corners were found: its shift, one Lucas-Kanade
-    step over the window against the reference, under STEADY_SHIFT_PX, and its grey levels changed no more
-    than STEADY_MEAN_DN on average (something in front of it, or the light, changes them)."""
+    step over the window against the reference, under STEADY_SHIFT_PX, and its grey levels, the light's gain
+    and offset over the window taken out, changed no more than STEADY_MEAN_DN on average (something in front
+    of it changes them)."""
     if marker.reference is None:
         return False
     grey, left, top, gx, gy, inverse = marker.reference
@@ -171,7 +172,12 @@ def unmoved(frame: np.ndarray, marker: DetectedMarker) -> bool:
         return False
     patch = frame[top:bottom, left:right]
     now = (patch if patch.ndim == 2 else cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)).astype(np.float32)
-    diff = now - grey
+    # the light's change over the window (gain and offset) taken out: a brighter frame has not moved a marker
+    now_mean, now_std = cv2.meanStdDev(now)
+    ref_mean, ref_std = cv2.meanStdDev(grey)
+    if now_std[0, 0] < 1e-6:
+        return False
+    diff = (now - now_mean[0, 0]) * np.float32(ref_std[0, 0] / now_std[0, 0]) + np.float32(ref_mean[0, 0]) - grey
     if float(np.abs(diff).mean()) > STEADY_MEAN_DN:
         return False
     shift = -inverse @ np.array([float((diff * gx).sum()), float((diff * gy).sum())])

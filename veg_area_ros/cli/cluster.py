@@ -6,6 +6,8 @@ write); this client writes each input's CSV and plot, batch_summary.csv and the 
 
 from __future__ import annotations
 
+import signal
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -80,7 +82,8 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
     pending: dict = {}
     started, last_line, frames_done = time.monotonic(), 0.0, 0
     for k, one in enumerate(jobs):
-        future = client.submit(input_frames, one, pure=False, key=f"veg-area-count-{k}-{time.time_ns()}")
+        future = client.submit(input_frames, one, pure=False, priority=len(inputs),
+                               key=f"veg-area-count-{k}-{time.time_ns()}")
         pending[future] = ("count", k, 0)
     counting = as_completed(list(pending), loop=client.loop)
     interrupted = False
@@ -101,31 +104,39 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
             summaries[k]["error"] = "; ".join(sorted({r["error"] for r in rows}))[:500] or "no frame"
         say(f"cluster: {inputs[k]} done: {summaries[k]['error'] or str(summaries[k]['measured']) + ' frames measured'}")
 
+    # Ctrl-C and SIGTERM set a flag that the loop reads between results: raised as KeyboardInterrupt they can
+    # land inside Dask's own code (a Future's __del__ swallows it), and the interrupt would be lost
+    stop = threading.Event()
+    handlers = _catch_signals(stop)
     try:
-        for future in counting:
-            kind, k, part = pending.pop(future)
-            if k in summaries:
+        while not counting.is_empty() and not stop.is_set():
+            if not counting.has_ready():
+                stop.wait(0.05)
                 continue
-            try:
-                result = future.result()
-            except Exception as exc:  # the input cannot be opened where it runs, a bug, a worker lost thrice
-                summaries[k] = _summary(inputs[k], "", _reason(exc))
-                say(f"cluster: {inputs[k]} failed: {summaries[k]['error']}")
-                continue
-            if kind == "count":
-                frames_of[k] = result
-                ranges = segments(result, job.segment_frames) if result is not None else [None]
-                expected[k] = len(ranges)
-                for part, frame_range in enumerate(ranges):
-                    task = client.submit(measure_part, replace(jobs[k], frame_range=frame_range), pure=False,
-                                         key=f"veg-area-part-{k}-{part}-{time.time_ns()}")
-                    pending[task] = ("part", k, part)
-                    counting.add(task)
-                continue
-            parts[k][part] = result
-            frames_done += len(result)
-            if len(parts[k]) == expected[k]:
-                finish(k)
+            for future in counting.next_batch(block=False):
+                kind, k, part = pending.pop(future)
+                if k in summaries:
+                    continue
+                try:
+                    result = future.result()
+                except Exception as exc:  # the input cannot be opened where it runs, a bug, a worker lost thrice
+                    summaries[k] = _summary(inputs[k], "", _reason(exc))
+                    say(f"cluster: {inputs[k]} failed: {summaries[k]['error']}")
+                    continue
+                if kind == "count":
+                    frames_of[k] = result
+                    ranges = segments(result, job.segment_frames) if result is not None else [None]
+                    expected[k] = len(ranges)
+                    for part, frame_range in enumerate(ranges):  # earlier inputs first: their files come first
+                        task = client.submit(measure_part, replace(jobs[k], frame_range=frame_range), pure=False,
+                                             priority=-k, key=f"veg-area-part-{k}-{part}-{time.time_ns()}")
+                        pending[task] = ("part", k, part)
+                        counting.add(task)
+                    continue
+                parts[k][part] = result
+                frames_done += len(result)
+                if len(parts[k]) == expected[k]:
+                    finish(k)
             now = time.monotonic()
             if now - last_line > PROGRESS_EVERY_S and len(summaries) < len(inputs):
                 known = sum(f for f in frames_of.values() if f is not None)
@@ -134,16 +145,26 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
                 say(f"cluster: {len(summaries)}/{len(inputs)} inputs done; {frames_done} frames measured, "
                     f"{rate:.1f} frames/s{left}")
                 last_line = now
-    except KeyboardInterrupt:  # cancel what is left; every input finished so far is kept
-        interrupted = True
-        client.cancel(list(pending))
-    finally:
-        try:
-            client.close()
-        except KeyboardInterrupt:  # a second Ctrl-C while closing: the summary is still written
+        if stop.is_set():  # cancel what is left; every input finished so far is kept
             interrupted = True
+            client.cancel(list(pending))
+    finally:
+        client.close()
+        _restore_signals(handlers)
     return finish_batch(job, folder, [summaries.get(k) or _summary(inputs[k], "", "interrupted before it finished")
                                       for k in range(len(inputs))], interrupted)
+
+
+def _catch_signals(stop: threading.Event) -> dict:
+    """SIGINT and SIGTERM set `stop` (in the main thread; elsewhere they stay as they are)."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {number: signal.signal(number, lambda *_: stop.set()) for number in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _restore_signals(handlers: dict) -> None:
+    for number, handler in handlers.items():
+        signal.signal(number, handler)
 
 
 def _reason(exc: BaseException) -> str:
