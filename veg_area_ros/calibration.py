@@ -27,6 +27,7 @@ N_INTRINSIC = len(PARAM_NAMES)
 MIN_VIEWS = 3  # below this the nine camera parameters cannot be separated from the poses at all
 RECOMMENDED_VIEWS = 12
 SAME_VIEW_PX = 0.1  # views whose corners lie this close (mean) repeat one another: sensor noise moves them ~0.02
+SAME_VIEW_NEAR_PX = 50.0  # a repeat's points' centre lies this close (partial views: a tenth of them may differ)
 CORRELATION_WARNING = 0.95
 ROTATION_WARNING_DEG = 45.0
 # rings of distance from the principal point, as fractions of the half-diagonal: where the mean radial residual
@@ -468,10 +469,14 @@ def distinct_views(views: Sequence[View]) -> tuple[list[View], dict[str, str]]:
     in a video, adds no information but would shrink the std as if it did (15 copies of one photo: fx +77 %
     with a std of 21 px)."""
     kept: list[View] = []
+    centres: list[np.ndarray] = []
     repeated: dict[str, str] = {}
     for view in views:
         ids, pixels = np.asarray(view.detection.ids).ravel(), view.detection.image_points.reshape(-1, 2)
-        for earlier in kept:
+        centre = pixels.mean(axis=0)
+        # only views whose points lie about where these do can repeat it (a cheap test before the ids' match)
+        near = [k for k, other in enumerate(centres) if np.hypot(*(other - centre)) < SAME_VIEW_NEAR_PX]
+        for earlier in (kept[k] for k in near):
             shared, mine, theirs = np.intersect1d(ids, np.asarray(earlier.detection.ids).ravel(),
                                                   return_indices=True)
             if len(shared) < 0.9 * max(len(ids), len(earlier.detection.ids)):
@@ -483,6 +488,7 @@ def distinct_views(views: Sequence[View]) -> tuple[list[View], dict[str, str]]:
                 break
         else:
             kept.append(view)
+            centres.append(centre)
     return kept, repeated
 
 

@@ -71,7 +71,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
     from ..calibration import View, same_pose
     from ..frames import iter_frames
     from ..guidance import CalibrationGuide
-    from ..pipeline import ordered_map
+    from ..pipeline import ordered_map, prefetched
 
     found = BoardViews(image_size=image_size)
     last_kept: dict[str, object] = {}  # per video: the last view kept
@@ -80,7 +80,8 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
         return None if frame.image is None else board.detect(frame.image)
 
     # frames read and searched by two threads (OpenCV releases Python's lock), judged here in their order
-    for frame, detection in ordered_map(detect, iter_frames(files, step), workers=DETECT_WORKERS):
+    frames = prefetched(iter_frames(files, step), depth=2 * DETECT_WORKERS)  # decoded in a thread of their own
+    for frame, detection in ordered_map(detect, frames, workers=DETECT_WORKERS):
         found.seen += 1
         seen = found.seen
         if frame.image is None:
