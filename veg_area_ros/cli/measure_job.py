@@ -8,7 +8,6 @@ import json
 import math
 import os
 import sys
-import threading
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -200,8 +199,6 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     warned: dict[str, int] = {}
     stamps: list[float] = []  # of the frames left out by the time range
     interrupted = False
-    if log is not None and series and not part:  # the plot's library loaded while the frames are measured
-        threading.Thread(target=_load_plotting, name="load-plotting", daemon=True).start()
     segment = None
     try:
         # the next frames decoded while this one is measured (same frames, same order)
@@ -326,16 +323,6 @@ def frames_lost(rows: list[dict], total: int | None = None) -> str:
         total = sum(1 for row in rows if not row.get("lost")) + lost
     where = "; ".join(f"{row['frame']}: {row['error'].removeprefix('skipped: ')}" for row in rows if row.get("lost"))
     return f"{lost} of {total} frames could not be read ({where[:400]})"
-
-
-def _load_plotting() -> None:
-    """Import matplotlib (a third of a second) in a thread, overlapped with measuring."""
-    try:
-        from ..report import pyplot
-
-        pyplot()
-    except Exception:  # the plot at the end says what is wrong, in the main thread
-        pass
 
 
 def plot_series(rows: list[dict], csv_path: Path) -> Path:
