@@ -372,4 +372,8 @@ def test_the_calibration_node_guides_the_operator_and_fits_only_on_enough_variet
     assert result["feedback_count"] >= 3, result
     assert result["feedback_encoding"] == "bgr8" and result["feedback_size"] == [640 + 330, 480]
     assert max(result["ring_distances"]) < 60, result["ring_distances"]
+    skipped = result["skipped_report"]  # a burst of 40 frames: those that came while one was looked at
+    assert skipped is not None and skipped["frames_skipped"] > 0, result.get("skipped_report")
+    assert skipped["frames_looked"] + skipped["frames_skipped"] <= skipped["frames_seen"] <= (
+        skipped["frames_looked"] + skipped["frames_skipped"] + 1)  # one may still wait to be looked at
     assert all(result["alive_at_end"].values()) and result["exit_codes"] == {"calibration_node": 0}

@@ -201,8 +201,11 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     interrupted = False
     segment = None
     try:
-        # the next frames decoded while this one is measured (same frames, same order)
-        frames = prefetched(iter_frames(files, job.video_step, job.image_topic, job.frame_range))
+        # a video's or bag's next frames decoded while this one is measured (same frames, same order); not image
+        # files: a JPEG's decoder warnings are caught by redirecting the process's stderr while it decodes
+        frames = iter_frames(files, job.video_step, job.image_topic, job.frame_range)
+        if len(series) == len(files):
+            frames = prefetched(frames)
         for index, frame in enumerate(frames, 1):
             row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
             line = ""

@@ -7,6 +7,7 @@ import json
 import math
 import os
 import threading
+import time
 
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
@@ -61,6 +62,8 @@ class CalibrationNode(Node):
         self.image_size: tuple[int, int] | None = None
         self.frames_seen = 0
         self.frames_skipped = 0  # arrived while the last one was still being looked at: counted, never queued
+        self.frames_looked = 0
+        self._skipped_said, self._skipped_said_at = 0, -math.inf  # the skipped count last reported, and when
         self.feedback_published = 0  # ~/feedback images: drawn only while someone subscribes
         self.camera: BrownCamera | None = None
         self.rms: float = math.inf
@@ -110,6 +113,11 @@ class CalibrationNode(Node):
             try:
                 with self._state:
                     self._look(data)
+                    self.frames_looked += 1
+                    if self.frames_skipped != self._skipped_said and time.monotonic() - self._skipped_said_at > 2.0:
+                        self._skipped_said, self._skipped_said_at = self.frames_skipped, time.monotonic()
+                        self._report(f"{self.frames_skipped} frames skipped so far: they came while an earlier "
+                                     "one was looked at")
             except Exception as exc:  # a bug must not end the view collection: said, throttled
                 self.warn("frame not looked at", f"{type(exc).__name__}: {exc}")
 
@@ -154,7 +162,8 @@ class CalibrationNode(Node):
         self.get_logger().info(text)
         guide = self.guide.summary() if self.guide is not None else {}
         state = {"views_kept": len(self.views), "frames_seen": self.frames_seen,
-                 "frames_skipped": self.frames_skipped, "feedback_published": self.feedback_published,
+                 "frames_looked": self.frames_looked, "frames_skipped": self.frames_skipped,
+                 "feedback_published": self.feedback_published,
                  "coverage": float(self.guide.covered.mean()) if self.guide is not None else 0.0,
                  "fitted": self.fitted, "rms_px": None if math.isinf(self.rms) else self.rms, "message": text,
                  **{k: v for k, v in guide.items() if k != "views_kept"}, **extra}
