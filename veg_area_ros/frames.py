@@ -248,7 +248,6 @@ def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: i
     """The bag's image messages number `start` up to `stop` (exclusive), each with the camera_info recorded
     before it (read through the messages skipped)."""
     from .bags import bag_image_count, iter_bag_frames
-    from .cdr import ImageMessageError
 
     declared = bag_image_count(path, image_topic)
     end = declared if stop is None else min(stop, declared)
@@ -260,7 +259,7 @@ def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: i
             if frame.index >= end:
                 break
             read = frame.index + 1
-            yield _bag_frame(path, frame, ImageMessageError)
+            yield _bag_frame(path, frame)
     except Exception as exc:  # rosbags raises its own classes for a damaged chunk: the rest is lost, said below
         problem = f" ({' '.join(str(exc).split())[:200]})"
     if read < end:  # the index lists more image messages than could be read: damaged chunks
@@ -269,12 +268,14 @@ def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: i
                     "readable", lost=end - read)
 
 
-def _bag_frame(path: Path, frame, image_error: type[Exception]) -> Frame:
+def _bag_frame(path: Path, frame) -> Frame:
     """One bag image message as a Frame, with the reason where its pixels cannot be decoded."""
+    from .cdr import ImageMessageError
+
     header = frame.image.header
     try:
         image, problem = frame.image.pixels(), ""
-    except image_error as exc:
+    except ImageMessageError as exc:
         image, problem = None, str(exc)
     return Frame(f"{path.name}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
                  frame.camera_info, position=frame.index)

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .board import BoardSpec, Detection
+from .board import BoardSpec, Detection, nearest_spacing
 from .calibration import NEW_POSE_DISTANCE, coverage_grid, pose_signature
 
 GRID = (16, 12)  # coverage cells over the image (columns, rows): fine enough to show a missed corner
@@ -61,7 +61,7 @@ class ViewStats:
     tilt_h: float  # degrees, the board's normal turned up/down (about the image's horizontal axis)
     tilt_v: float  # degrees, turned left/right
     roll: float  # degrees, the board's first axis in the image, modulo 180
-    edge_width_px: float  # median 10-90 % width of the board's edges at its corners (blur)
+    edge_width_px: float  # median width of the board's edges at its corners, in their least steep direction
     clipped_share: float  # share of the corner windows' pixels at CLIP_LEVEL or more
     points: int
     board_points: int
@@ -96,16 +96,18 @@ class CalibrationGuide:
         `keep`: count it among the kept views whatever the verdict (a set of photos chosen by hand: the
         verdict is then advice)."""
         stats = view_stats(detection, image, self.board, self.image_size)
-        verdict = self._judge(detection, stats)
+        signature = pose_signature(detection.image_points, self.image_size)
+        cells = coverage_grid([detection.image_points], *self.image_size, *GRID)
+        verdict = self._judge(stats, signature, cells)
         if verdict.kept or keep:
             self.kept.append(stats)
-            self.signatures.append(pose_signature(detection.image_points, self.image_size))
-            self.covered |= coverage_grid([detection.image_points], *self.image_size, *GRID)
+            self.signatures.append(signature)
+            self.covered |= cells
         else:
             self.rejected[verdict.kind] += 1
         return verdict
 
-    def _judge(self, detection: Detection, stats: ViewStats) -> Verdict:
+    def _judge(self, stats: ViewStats, signature: np.ndarray, cells: np.ndarray) -> Verdict:
         if stats.points < MIN_BOARD_SHARE * stats.board_points:
             return Verdict(False, f"only part of the board ({stats.points} of {stats.board_points} points)",
                            "partial", stats)
@@ -118,10 +120,8 @@ class CalibrationGuide:
             return Verdict(False, f"motion blur (edges {stats.edge_width_px:.1f} px wide, the sharp views' "
                                   f"{limit / BLUR_FACTOR if len(self.kept) >= 3 else limit:.1f} px): hold the "
                                   "board still", "blurred", stats)
-        signature = pose_signature(detection.image_points, self.image_size)
         nearest = min((float(np.linalg.norm(signature - s)) for s in self.signatures), default=math.inf)
-        new_cells = coverage_grid([detection.image_points], *self.image_size, *GRID) & ~self.covered
-        if nearest < NEW_POSE_DISTANCE and not new_cells.any():
+        if nearest < NEW_POSE_DISTANCE and not (cells & ~self.covered).any():
             return Verdict(False, "too similar to a kept view", "similar", stats)
         return Verdict(True, "", "kept", stats)
 
@@ -221,7 +221,7 @@ def _corner_quality(grey: np.ndarray, points: np.ndarray, samples: int = 24) -> 
     steep (both after a 3x3 mean), the width a linear ramp of that contrast would have (a sharp edge about
     2-3 px, a blurred one its blur)."""
     chosen = points[np.linspace(0, len(points) - 1, min(samples, len(points))).round().astype(int)]
-    spacing = _spacing(points)
+    spacing = nearest_spacing(points) if len(points) > 1 else 20.0
     half = int(np.clip(0.35 * spacing, 3, 40))
     widths, clipped, total = [], 0, 0
     for x, y in chosen:
@@ -242,14 +242,3 @@ def _corner_quality(grey: np.ndarray, points: np.ndarray, samples: int = 24) -> 
         if high - low > 20 and steepest > 0:
             widths.append((high - low) / steepest)
     return (float(np.median(widths)) if widths else math.inf), (clipped / total if total else 0.0)
-
-
-def _spacing(points: np.ndarray) -> float:
-    if len(points) < 2:
-        return 20.0
-    step = max(1, len(points) // 30)  # a sample of the points: the nearest neighbour of each, O(n²) on few
-    sample = points[::step]
-    diff = sample[:, None, :] - points[None, :, :]
-    distance = np.hypot(diff[..., 0], diff[..., 1])
-    distance[distance == 0] = np.inf
-    return float(np.median(distance.min(axis=1)))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import EXIT_USAGE, CliError, positive_float
+from .common import EXIT_USAGE, CliError, check_writable, positive_float
 
 
 def add_parsers(sub) -> None:
@@ -43,7 +43,6 @@ def cmd_record(args: argparse.Namespace) -> int:
 
     from ..bags import topic_name_problem
     from ..ros.record_node import main as record_main
-    from .common import unwritable
 
     for topic in args.topics:  # said before ROS starts, not as an RCLError from inside it
         problem = topic_name_problem(topic)
@@ -54,9 +53,7 @@ def cmd_record(args: argparse.Namespace) -> int:
         if output.exists() or output.is_symlink():
             raise CliError(f"-o {args.output} exists already; a recording never overwrites a bag or a file",
                            EXIT_USAGE)
-        problem = unwritable(output, folder=True)
-        if problem:
-            raise CliError(f"-o {args.output}: {problem}; nothing was recorded", EXIT_USAGE)
+        check_writable([("-o", args.output, True)], "recorded")
 
     ros_args = ["--ros-args", "-p", f"storage:={args.storage}"]
     if args.output:

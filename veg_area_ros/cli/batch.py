@@ -23,8 +23,8 @@ from .common import (
     EXIT_USAGE,
     CliError,
     check_outputs,
+    check_writable,
     progress,
-    unwritable,
     write_csv,
 )
 from .measure_job import MeasureJob, frames_lost, measure
@@ -99,8 +99,8 @@ def _outcome(future, source: str, csv_path: str) -> dict:
 
 
 def check_batch(job: MeasureJob, folder: Path) -> list[str]:
-    """Refuse (exit 2, before any work) what does not apply to a batch or would be written over an input; the
-    per-input CSV paths. Creates the output folder."""
+    """Refuse (exit 2, before any work) what does not apply to a batch, would be written over an input or
+    cannot be written; the per-input CSV paths."""
     if job.csv:
         raise CliError("--csv names one file; a batch writes <input>_area.csv per input into --output-dir",
                        EXIT_USAGE)
@@ -115,9 +115,7 @@ def check_batch(job: MeasureJob, folder: Path) -> list[str]:
     check_outputs([("--output-dir", str(folder), True), ("--overlay", job.overlay, True),
                    *(("--output-dir", str(path), True) for path in batch_csv_paths(inputs, folder))], sources,
                   "measured")
-    problem = unwritable(folder, folder=True)
-    if problem:
-        raise CliError(f"--output-dir {folder}: {problem}; nothing was measured", EXIT_USAGE)
+    check_writable([("--output-dir", folder, True)], "measured")
     return [str(path) for path in batch_csv_paths(inputs, folder)]  # by position: an input may come twice
 
 

@@ -9,7 +9,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .common import EXIT_REFUSED, EXIT_USAGE, CliError, check_outputs, positive_float, progress, unwritable
+from .common import EXIT_REFUSED, EXIT_USAGE, CliError, check_outputs, check_writable, positive_float, progress
 
 VIEWS_PER_VIDEO = 60  # consecutive frames add little but time
 DETECT_WORKERS = 2  # board searches at once: the two cores of a lab PC (OpenCV runs them without the GIL)
@@ -146,10 +146,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     output = Path(args.output)
     check_outputs([("-o", args.output, False), ("--report", args.report, True)], [*args.inputs, args.lens],
                   "calibrated")
-    for option, path, folder in (("-o", output, False), ("--report", args.report, True)):
-        problem = unwritable(Path(path), folder) if path else None
-        if problem:
-            raise CliError(f"{option} {path}: {problem}; nothing was calibrated", EXIT_USAGE)
+    check_writable([("-o", output, False), ("--report", args.report, True)], "calibrated")
     if args.port or args.lens:
         return _calibrate_port(args, say)
     if not args.inputs or not args.board:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from .batch import _summary, check_batch, finish_batch, input_job, input_summary
 from .common import EXIT_FAILED, EXIT_OK, CliError, progress, write_csv
-from .measure_job import CSV_COLUMNS, MeasureJob, csv_row, frames_lost, measure, plot_series
+from .measure_job import CSV_COLUMNS, MeasureJob, csv_row, frames_lost, measure, no_object_anywhere, plot_series
 
 CONNECT_TIMEOUT_S = 6  # the whole refusal within 10 s, the interpreter and its imports included
 PROGRESS_EVERY_S = 2.0
@@ -90,10 +90,8 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
 
     def finish(k: int) -> None:
         rows = [row for part in sorted(parts[k]) for row in parts[k][part]]
-        code = EXIT_FAILED if frames_lost(rows) else EXIT_OK
+        code = EXIT_FAILED if frames_lost(rows) or no_object_anywhere(rows) else EXIT_OK
         measured = [r for r in rows if not r["error"]]
-        if measured and all(any(w.startswith("no object found") for w in r.get("warnings", ())) for r in measured):
-            code = EXIT_FAILED
         if rows:
             path = Path(csv_paths[k])
             write_csv(path, CSV_COLUMNS, [csv_row(row) for row in rows])

@@ -66,6 +66,15 @@ def unwritable(path: Path, folder: bool) -> str | None:
     return None
 
 
+def check_writable(outputs: Sequence[tuple[str, str | Path | None, bool]], what: str) -> None:
+    """Refuse (exit 2, before any work, nothing written) an output (option, path, is a folder) that cannot be
+    written where it would go (`unwritable`)."""
+    for option, value, folder in outputs:
+        problem = unwritable(Path(value), folder) if value else None
+        if problem:
+            raise CliError(f"{option} {value}: {problem}; nothing was {what}", EXIT_USAGE)
+
+
 def overwrites_input(output: Path, inputs: Sequence[str | Path], writes_images: bool = False) -> str | None:
     """Why writing `output` would destroy or pollute an input of the same command, or None: it is that file
     (the same inode, whatever the name or symlink says), or it puts images or videos (an image file, a CSV with

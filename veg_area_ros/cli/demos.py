@@ -6,13 +6,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import EXIT_FAILED, EXIT_USAGE, CliError, positive_float, unwritable
+from .common import EXIT_FAILED, CliError, check_writable, positive_float
 
 
 def _check_output(folder: str) -> Path:
-    problem = unwritable(Path(folder), folder=True)
-    if problem:
-        raise CliError(f"--output {folder}: {problem}; nothing was run", EXIT_USAGE)
+    check_writable([("--output", folder, True)], "run")
     return Path(folder)
 
 

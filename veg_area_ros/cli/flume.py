@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from .common import EXIT_USAGE, CliError, check_outputs, positive_float, unwritable
+from .common import EXIT_USAGE, CliError, check_outputs, check_writable, positive_float
 
 
 def add_parser(sub) -> None:
@@ -41,9 +41,7 @@ def cmd_vogel(args: argparse.Namespace) -> int:
         raise CliError("give one experiment table (CSV), or rosbag2 bags (one run each)", EXIT_USAGE)
     plot = Path(args.plot) if args.plot else Path(args.inputs[0].rstrip("/")).with_suffix(".vogel.png")
     check_outputs([("--plot", str(plot), True)], args.inputs, "fitted")
-    problem = unwritable(plot, folder=False)
-    if problem:
-        raise CliError(f"--plot {plot}: {problem}; nothing was fitted", EXIT_USAGE)
+    check_writable([("--plot", plot, False)], "fitted")
     try:
         if bags:
             runs = [bag_run(b, args.force_axis, args.velocity_axis, args.force_topic, args.velocity_topic,

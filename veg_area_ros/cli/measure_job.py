@@ -21,8 +21,8 @@ from .common import (
     CliError,
     RowLog,
     check_outputs,
+    check_writable,
     progress,
-    unwritable,
 )
 
 CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "area_mode",
@@ -156,12 +156,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                   [*job.inputs, job.calibration if job.calibration.lower() not in ("none", "bag") else None,
                    job.targets, job.background], "measured")
     single_overlay = job.overlay and Path(job.overlay).suffix.lower() in IMAGE_SUFFIXES
-    for option, value, folder in (("--overlay", job.overlay, not single_overlay), ("--csv", job.csv, False),
-                                  ("--idealized", job.idealized, True)):
-        if value:
-            problem = unwritable(Path(value), folder)
-            if problem:
-                raise CliError(f"{option} {value}: {problem}; nothing was measured", EXIT_USAGE)
+    check_writable([("--overlay", job.overlay, not single_overlay), ("--csv", job.csv, False),
+                    ("--idealized", job.idealized, True)], "measured")
     if single_overlay and total > 1:
         raise CliError(f"--overlay {job.overlay} names one image but the input has {total} frames; "
                        "give a folder", EXIT_USAGE)
@@ -296,8 +292,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError(f"no frame measured: {'; '.join(reasons)[:500] or 'the inputs hold no frame'}")
     if measured < len(rows):
         say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
-    empty = sum(1 for row in rows if _no_object(row))
-    if measured and empty == measured:  # Af 0 everywhere: the settings or the scene are wrong, not the plant gone
+    if no_object_anywhere(rows):
         where = "the frame" if measured == 1 else f"any of the {measured} frames"
         print(f"veg-area measure: no object found in {where} measured (see the warnings); check the threshold, "
               "--object and the ROI", file=sys.stderr, flush=True)
@@ -314,6 +309,13 @@ def _no_object(row: dict) -> bool:
     warnings = row.get("warnings", ())  # a list, or the CSV cell that joins it
     return any(w.startswith("no object found") for w in (warnings.split(" | ") if isinstance(warnings, str)
                                                           else warnings))
+
+
+def no_object_anywhere(rows: list[dict]) -> bool:
+    """Whether frames were measured and none held an object (Af 0 everywhere: the settings or the scene are
+    wrong, not the plant gone): a run like that exits 1."""
+    measured = [row for row in rows if not row["error"]]
+    return bool(measured) and all(_no_object(row) for row in measured)
 
 
 def frames_lost(rows: list[dict], total: int | None = None) -> str:

@@ -232,10 +232,12 @@ class CalibrationNode(Node):
         except ValueError as exc:
             response.success, response.status_message = False, f"refused: {exc}"
             return response
-        # an explicit replacement by the user: persisted and served whatever its RMS (unknown here)
-        failed = self._serve(camera, math.inf, persist=True, metadata={"source": "set_camera_info",
-                                                                       **provenance("calibration_node")})
-        self.fitted = True
+        # an explicit replacement by the user: persisted and served whatever its RMS (unknown here); not while
+        # the views' thread fits and serves
+        with self._state:
+            failed = self._serve(camera, math.inf, persist=True, metadata={"source": "set_camera_info",
+                                                                           **provenance("calibration_node")})
+            self.fitted = True
         if failed:  # served, but a service must not say a failed write succeeded
             response.success, response.status_message = False, f"camera_info set and served but {failed}"
             return response
