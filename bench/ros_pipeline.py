@@ -26,6 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from rosbench import (
     Children,
     bench_main,
+    cpu_over,
+    cpu_seconds,
     figure,
     latency_ms,
     memory_mb,
@@ -128,12 +130,13 @@ def probe(spec: dict) -> dict:
     while time.monotonic() < settle:
         executor.spin_once(timeout_sec=0.05)
     latencies.clear()
-    started = time.monotonic()
+    started, window_start = time.monotonic(), time.time()
     first_info = info(infos[-1]) if infos else None
     while time.monotonic() - started < spec["seconds"]:
         executor.spin_once(timeout_sec=0.05)
     elapsed = time.monotonic() - started
-    out = {"results": len(latencies), "per_s": len(latencies) / elapsed, "latency_ms": latency_ms(latencies)}
+    out = {"results": len(latencies), "per_s": len(latencies) / elapsed, "latency_ms": latency_ms(latencies),
+           "window": [window_start, time.time()]}
     if first_info and infos:
         last_info = info(infos[-1])
         received = last_info["frames_received"] - first_info["frames_received"]
@@ -141,6 +144,23 @@ def probe(spec: dict) -> dict:
         out.update(frames_in_per_s=received / elapsed, dropped_share=skipped / max(received + skipped, 1),
                    rebuilds=last_info["weights_rebuilt"] - first_info["weights_rebuilt"], frames=received)
     return out
+
+
+def profiled_area(spec: dict) -> int:
+    """The package's area node under cProfile (wall time, this thread), its statistics written to
+    spec['profile'] when the node stops."""
+    import cProfile
+
+    from veg_area_ros.ros.area_node import AreaNode
+    from veg_area_ros.ros.run import run_nodes
+
+    profiler = cProfile.Profile()
+    profiler.enable()
+    try:
+        return run_nodes([AreaNode], [])
+    finally:
+        profiler.disable()
+        profiler.dump_stats(spec["profile"])
 
 
 def role_main(role: str, spec: dict) -> int:
@@ -152,6 +172,8 @@ def role_main(role: str, spec: dict) -> int:
         return run_nodes([lambda: plain_camera(spec)], [])
     if role == "plain_area":
         return run_nodes([lambda: plain_area(spec)], [])
+    if role == "profiled_area":
+        return profiled_area(spec)
     ensure_ros_environment()
     rclpy.init()
     try:
@@ -205,12 +227,14 @@ def run_case(pipeline: str, transport: str, spec: dict, domain: int) -> tuple[di
     env = transport_environment(transport, domain)
     children = Children()
     memory: dict[str, dict] = {}
+    cpu: dict[str, list[tuple[float, float]]] = {"camera": [], "area": [], "area main": []}
     try:
         probe_process = children.start(role_command(SCRIPT, "probe", spec), env)
         if pipeline == "veg_area_ros":
             camera = children.start(node_command("camera_node", source=spec["still"], loop="true", rate_hz=spec["rate"],
                                                  camera_info_url=f"file://{spec['calibration']}"), env)
-            area = children.start(node_command("area_node"), env)
+            area = children.start(role_command(SCRIPT, "profiled_area", spec) if spec.get("profile")
+                                  else node_command("area_node"), env)
         else:
             camera = children.start(role_command(SCRIPT, "plain_camera", spec), env)
             area = children.start(role_command(SCRIPT, "plain_area", spec), env)
@@ -220,10 +244,39 @@ def run_case(pipeline: str, transport: str, spec: dict, domain: int) -> tuple[di
             for name, process in (("camera", camera), ("area", area)):  # the last sample before the probe ends
                 if process.poll() is None:
                     memory[name] = memory_mb(process.pid)
+                    for key, main_only in ((name, False), (f"{name} main", True)):
+                        used = cpu_seconds(process.pid, main_only) if key in cpu else None
+                        if used is not None:
+                            cpu[key].append((time.time(), used))
             memory["/dev/shm"] = {"rss": shm_mb(), "pss": shm_mb()}
-        return children.result(probe_process, 5.0), memory
+        result = children.result(probe_process, 5.0)
+        if result and "window" in result:
+            result["cpu_s"] = {name: cpu_over(samples, *result["window"]) for name, samples in cpu.items()}
+        return result, memory
     finally:
         children.reap()
+
+
+def summarize_noise(rates: dict, cpu_per_af: dict) -> None:
+    """Per size and transport: the noisy cases' Af/s and the area node's CPU per Af against the noise-free ones
+    of the same round (ours only); the median of the rounds' ratios and their range."""
+    import statistics
+
+    for (pipeline, transport, size, sigma), noisy in rates.items():
+        clean = rates.get((pipeline, transport, size, 0.0), {})
+        if pipeline != "veg_area_ros" or sigma == 0:
+            continue
+        ratios = [noisy[k] / clean[k] for k in noisy if k in clean]
+        if not ratios:
+            continue
+        line = (f"noise {sigma:g} DN, {size} {transport}: Af/s {statistics.median(ratios):.2f}x the noise-free figure "
+                f"of the same round (median of {len(ratios)} rounds, {min(ratios):.2f}-{max(ratios):.2f})")
+        noisy_cpu = cpu_per_af.get((pipeline, transport, size, sigma), {})
+        clean_cpu = cpu_per_af.get((pipeline, transport, size, 0.0), {})
+        cpu_ratios = [noisy_cpu[k] / clean_cpu[k] for k in noisy_cpu if k in clean_cpu]
+        if cpu_ratios:
+            line += f"; the area node's CPU per Af {statistics.median(cpu_ratios):.2f}x"
+        print(line, flush=True)
 
 
 def inside(args) -> int:
@@ -234,31 +287,57 @@ def inside(args) -> int:
         print("rendering the still frames ...", flush=True)
         inputs = prepare_inputs(Path(folder), noise)
         print(f"{'pipeline':12} {'transport':9} {'size':9} {'noise':>5} {'cam Hz':>6} {'Af/s':>6} {'in/s':>6} "
-              f"{'drop':>5} {'mean ms':>8} {'p99 ms':>8} {'rebuilt':>9}  memory MB (RSS / PSS)", flush=True)
+              f"{'drop':>5} {'mean ms':>8} {'p99 ms':>8} {'rebuilt':>9} {'CPU cam':>7} {'area':>5} {'ms/Af':>6} "
+              f"{'main':>5}  memory MB (RSS / PSS)", flush=True)
         domain = 100
-        for transport in args.transports.split(","):
-            for width, height, rate in LOADS:
-                if f"{width}x{height}" not in args.sizes.split(","):
-                    continue
-                for sigma, pipeline in [(s, p) for s in noise for p in PIPELINES if s == 0 or p == "veg_area_ros"]:
-                    domain += 1
-                    key = f"{width}x{height}" + (f" noise {sigma:g}" if sigma else "")
-                    spec = dict(inputs[key], rate=rate, seconds=args.seconds)
-                    result, memory = run_case(pipeline, transport, spec, domain)
-                    row = f"{pipeline:12} {transport:9} {f'{width}x{height}':9} {sigma:5g} {rate:6g}"
-                    if not result or not result["results"]:
-                        print(f"{row}  no Af arrived within {FIRST_RESULT_TIMEOUT_S:g} s", flush=True)
+        rates: dict[tuple[str, str, str, float], dict[int, float]] = {}  # case -> round -> Af/s
+        cpu_per_af: dict[tuple[str, str, str, float], dict[int, float]] = {}
+        for round_number in range(args.repeats):
+            for transport in args.transports.split(","):
+                for width, height, rate in LOADS:
+                    size = f"{width}x{height}"
+                    if size not in args.sizes.split(","):
                         continue
-                    latency = result["latency_ms"]
-                    dropped = result.get("dropped_share")
-                    held = "  ".join(f"{name} {m['rss']:.0f}/{m['pss']:.0f}" if name != "/dev/shm"
-                                     else f"{name} {m['rss']:.0f}" for name, m in memory.items())
-                    rebuilt = f"{result['rebuilds']}/{result['frames']}" if "rebuilds" in result else "-"
-                    print(f"{row} {result['per_s']:6.1f} {figure(result.get('frames_in_per_s')):>6} "
-                          f"{'-' if dropped is None else f'{dropped:.0%}':>5} {figure(latency['mean']):>8} "
-                          f"{figure(latency['p99']):>8} {rebuilt:>9}  {held}", flush=True)
+                    cases = [(s, p) for s in noise for p in PIPELINES if s == 0 or p == "veg_area_ros"]
+                    # every other round backwards: this machine's speed drifts by up to 2x within minutes, and a
+                    # drift must not always favour the cases that come first
+                    for sigma, pipeline in cases[::-1] if round_number % 2 else cases:
+                        domain += 1
+                        key = size + (f" noise {sigma:g}" if sigma else "")
+                        spec = dict(inputs[key], rate=rate, seconds=args.seconds)
+                        if args.profile and pipeline == "veg_area_ros":
+                            spec["profile"] = str(Path(args.profile).resolve() /
+                                                  f"area_{transport}_{key.replace(' ', '_')}.prof")
+                        result, memory = run_case(pipeline, transport, spec, domain)
+                        row = f"{pipeline:12} {transport:9} {size:9} {sigma:5g} {rate:6g}"
+                        if not result or not result["results"]:
+                            print(f"{row}  no Af arrived within {FIRST_RESULT_TIMEOUT_S:g} s", flush=True)
+                            continue
+                        case = (pipeline, transport, size, sigma)
+                        rates.setdefault(case, {})[round_number] = result["per_s"]
+                        latency = result["latency_ms"]
+                        dropped = result.get("dropped_share")
+                        held = "  ".join(f"{name} {m['rss']:.0f}/{m['pss']:.0f}" if name != "/dev/shm"
+                                         else f"{name} {m['rss']:.0f}" for name, m in memory.items())
+                        rebuilt = f"{result['rebuilds']}/{result['frames']}" if "rebuilds" in result else "-"
+                        window = result["window"][1] - result["window"][0]
+                        cpu = result.get("cpu_s", {})
+                        shares = [f"{cpu[name] / window:.0%}" if cpu.get(name) is not None else "-"
+                                  for name in ("camera", "area")]
+                        per_af = None if cpu.get("area") is None else 1000 * cpu["area"] / result["results"]
+                        main_per_af = (None if cpu.get("area main") is None
+                                       else 1000 * cpu["area main"] / result["results"])
+                        if per_af is not None:
+                            cpu_per_af.setdefault(case, {})[round_number] = per_af
+                        print(f"{row} {result['per_s']:6.1f} {figure(result.get('frames_in_per_s')):>6} "
+                              f"{'-' if dropped is None else f'{dropped:.0%}':>5} {figure(latency['mean']):>8} "
+                              f"{figure(latency['p99']):>8} {rebuilt:>9} {shares[0]:>7} {shares[1]:>5} "
+                              f"{figure(per_af, 2):>6} {figure(main_per_af, 2):>5}  {held}", flush=True)
+        summarize_noise(rates, cpu_per_af)
     print("Af/s: results reaching a third process; in/s: frames the area node took (ours reports it); drop: share\n"
-          "of the camera's frames skipped while measuring (ours counts them); latency: camera stamp -> Af arrival.")
+          "of the camera's frames skipped while measuring (ours counts them); latency: camera stamp -> Af arrival;\n"
+          "CPU: share of one core each node used over the window (two cores here); ms/Af: the area node's CPU time\n"
+          "per Af result, all its threads (main: its executor's thread alone, where the callbacks measure).")
     return 0
 
 
@@ -268,7 +347,10 @@ def main() -> int:
     parser.add_argument("--transports", default="shm,default")
     parser.add_argument("--sizes", default=",".join(f"{w}x{h}" for w, h, _ in LOADS), help="e.g. 640x480")
     parser.add_argument("--noise", default="0,2,4", help="sensor noise of the camera's frames, DN (0: one still)")
-    return bench_main(SCRIPT, ("probe", "plain_camera", "plain_area"), role_main, parser, inside)
+    parser.add_argument("--repeats", type=int, default=1, help="rounds of every case (medians summarized)")
+    parser.add_argument("--profile", metavar="FOLDER", help="run the area node under cProfile, one .prof per case "
+                        "written here (read with python -m pstats); its rates are then not comparable")
+    return bench_main(SCRIPT, ("probe", "plain_camera", "plain_area", "profiled_area"), role_main, parser, inside)
 
 
 if __name__ == "__main__":

@@ -117,6 +117,23 @@ def memory_mb(pid: int) -> dict[str, float]:
     return {"rss": fields.get("Rss", 0.0), "pss": fields.get("Pss", 0.0)}
 
 
+def cpu_seconds(pid: int, main_thread_only: bool = False) -> float | None:
+    """CPU time a process has used so far (user + system; all its threads, or only its main thread, where
+    rclpy's executor runs the callbacks), None once it has ended."""
+    try:
+        stat = Path(f"/proc/{pid}/task/{pid}/stat" if main_thread_only else f"/proc/{pid}/stat")
+        fields = stat.read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime: fields 14, 15
+
+
+def cpu_over(samples: list[tuple[float, float]], start: float, end: float) -> float | None:
+    """CPU seconds used between two wall-clock times, from (time, cpu_seconds) samples taken meanwhile."""
+    inside = [cpu for at, cpu in samples if start <= at <= end]
+    return inside[-1] - inside[0] if len(inside) >= 2 else None
+
+
 def shm_mb() -> float:
     """What the transport holds in /dev/shm (this confinement's own when private)."""
     total = 0

@@ -26,4 +26,5 @@ def run_scenario(name: str, tmp_path: Path, timeout: float = 240.0, environment:
     result = json.loads(lines[-1][len("RESULT "):])
     result["isolated"] = netns_available()
     result["log"] = done.stderr[-4000:]
+    result["whole_log"] = done.stderr
     return result

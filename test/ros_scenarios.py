@@ -490,11 +490,13 @@ def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
         rclpy.spin_once(probe, timeout_sec=0.05)
     camera = nodes.start("camera_node", source=str(still), loop=True, rate_hz=1000.0,
                          camera_info_url=f"file://{calibration}")
+    camera_started = time.monotonic()
     try:
         end = time.monotonic() + float(options["seconds"]) + 10
         while time.monotonic() < end:
             rclpy.spin_once(probe, timeout_sec=0.01)
         camera.send_signal(signal.SIGINT)  # then take what is still queued here, so no camera_info is left out
+        camera_seconds = time.monotonic() - camera_started
         camera.wait(10)
         idle_since, deadline = time.monotonic(), time.monotonic() + 30
         while time.monotonic() - idle_since < 1.0 and time.monotonic() < deadline:
@@ -515,7 +517,8 @@ def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
             "received_in_window": last["frames_received"] - first["frames_received"] if first else 0,
             "dropped_in_window": last["frames_dropped"] - first["frames_dropped"] if first else 0,
             "lost_in_window": last["frames_lost"] - first["frames_lost"] if first else 0,
-            "truth_m2": cube_scene().true_area_m2, "areas": [i["area_m2"] for i in window[-20:]]}
+            "truth_m2": cube_scene().true_area_m2, "areas": [i["area_m2"] for i in window[-20:]],
+            "camera_seconds": camera_seconds}
 
 
 def scenario_foreign(options: dict, nodes: Nodes) -> dict:

@@ -63,6 +63,8 @@ def test_ros_pipeline_measures_ours_and_plain_rclpy():
         assert af_per_s > 0, line
         if line.startswith("veg_area_ros"):
             assert re.search(r" \d+/\d+ ", line), line  # the weights' rebuilds over the frames taken
+            assert re.search(r" \d+% +\d+% +[\d.]+ +[\d.]+ ", line), line  # CPU shares, ms per Af (all, main)
+    assert re.search(r"noise 4 DN, 640x480 shm: Af/s [\d.]+x the noise-free figure of the same round", out), out
 
 
 @pytest.mark.skipif(not netns_available(), reason="the ROS benches' fixed domains need a private network namespace")

@@ -155,6 +155,12 @@ def test_a_steady_cameras_light_is_carried_and_found_again_when_it_changes():
                           gain=0.8, **FLUME)  # a cloud over the flume: the same scene 20 % darker
     errors.append(measurer.measure(darker).area_m2 / scene.true_area_m2 - 1)
     assert measurer.rebuilds == rebuilds and measurer._light.age == 0  # the light changed: found afresh
+    fits = measurer.light_fits
+    for k in range(5, 9):  # the cloud stays: the light found in its first frame is carried again
+        frame = render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, seed=k, light_direction_deg=30.0,
+                             gain=0.8, **FLUME)
+        errors.append(measurer.measure(frame).area_m2 / scene.true_area_m2 - 1)
+    assert measurer.light_fits == fits and measurer._light.age == 4, (measurer.light_fits, fits)
     assert max(abs(e) for e in errors) <= 0.003, errors
 
 

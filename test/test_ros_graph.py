@@ -221,6 +221,9 @@ def test_skipped_frames_are_counted_exactly_when_the_camera_outruns_the_area_nod
     assert received + dropped + lost == published, result
     areas = np.array(result["areas"])
     assert len(areas) and np.all(np.abs(areas / result["truth_m2"] - 1) <= 0.005), areas
+    # said in the log, at most once every 10 s (frames are skipped with every frame at this rate)
+    said = result["whole_log"].count(" frames skipped, ")
+    assert 1 <= said <= 1 + result["camera_seconds"] // 10, (said, result["camera_seconds"])
 
 
 def test_the_main_job_measures_the_cube_within_half_a_percent(tmp_path):

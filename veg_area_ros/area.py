@@ -257,6 +257,7 @@ class AreaMeasurer:
         self._weights: _Weights | None = None
         self._last_scale: PlaneScale | None = None  # the last frame's fit: where a hidden marker should be
         self.rebuilds = 0  # how often the weights were (re)built: once for a steady camera
+        self.light_fits = 0  # how often the flat field and levels were found: every LIGHT_REFRESH_FRAMES, or a drift
         self._light: _Light | None = None  # the light and levels found and carried (sub-pixel mode)
 
     def start_segment(self) -> None:
@@ -473,6 +474,7 @@ class AreaMeasurer:
             band, threshold, light, histogram = self._evened(raw_band, weights, fresh=True)
             roi_count = histogram.sum(axis=1)
             estimator = LevelEstimator(roi_count, object_is_high)
+            self._light_drifted(estimator, threshold)  # found in this frame: what the next frames are held to
         # area (m²) and number of the ROI's pixels at every band value, from one 2-D histogram
         roi_area = histogram @ weights.level_area * factor
         morphology = self.classifier.open_px or self.classifier.close_px
@@ -695,6 +697,7 @@ class AreaMeasurer:
         if self.even_light:
             if fresh or light is None or light.weights is not weights or light.age >= LIGHT_REFRESH_FRAMES:
                 raw_threshold, reach = threshold, INTERIOR_PX
+                self.light_fits += 1
                 for _ in range(2):  # again with a wider interior where the edges are wider (blur, turbidity)
                     found = self._flat_field(raw_band, weights, raw_threshold, reach)
                     light = _Light(weights, None if found is None else found.unevenness,

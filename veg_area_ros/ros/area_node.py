@@ -43,6 +43,7 @@ from .params import declare, read_start_file
 from .qos import ANY_INFO_QOS, IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS
 from .run import run_nodes
 
+TALLY_LOG_PERIOD_S = 10.0  # the skipped and lost frames' log lines, at most once in this long
 BUSY_GAP_NS = 1_000_000  # callbacks closer than 1 ms: the node never waited for messages in between
 DEFAULTS = MeasurementSettings()
 # the parameters that are MeasurementSettings, tunable at run time (`ros2 param set`), and targets_file
@@ -83,6 +84,7 @@ class AreaNode(Node):
         self.frames_measured = 0
         self._skipped_logged = 0
         self._lost_logged = 0
+        self._tally_logged_at = -TALLY_LOG_PERIOD_S
         self._busy: deque[tuple[int, int]] = deque(maxlen=64)  # recent measurements, (start, end) ns
         self._measuring_since: int | None = None
         self.area_pub = self.create_publisher(Vector3Stamped, "projected_area", RESULT_QOS)
@@ -209,7 +211,11 @@ class AreaNode(Node):
         have taken it (lost)."""
         if end_ns <= start_ns:
             return True
-        measuring = sum(max(0, min(end, end_ns) - max(start, start_ns)) for start, end in self._busy)
+        measuring = 0
+        for start, end in reversed(self._busy):  # newest first: the stretches before start_ns end the walk
+            if end <= start_ns:
+                break
+            measuring += max(0, min(end, end_ns) - max(start, start_ns))
         return measuring >= 0.5 * (end_ns - start_ns)
 
     def _on_camera_info_received(self, data: bytes, info: dict) -> None:  # two arguments: rclpy passes the info
@@ -285,16 +291,21 @@ class AreaNode(Node):
         finally:
             self._note_busy(self._measuring_since, time.time_ns())
             self._measuring_since = None
+        # checked here, not by rclpy's throttle: its logger looks up the caller's source line on every call
+        # (0.25 ms), and at full rate frames are skipped with every frame
+        if time.monotonic() < self._tally_logged_at + TALLY_LOG_PERIOD_S:
+            return
         skipped, lost = self.frames.skipped, self.frames.lost
         if skipped is not None and skipped > self._skipped_logged:
             self.get_logger().warning(f"{skipped} frames skipped, {self.frames.received} measured or refused: the "
-                                      "camera is faster than the measurement (the newest frame is measured)",
-                                      throttle_duration_sec=10.0)
+                                      "camera is faster than the measurement (the newest frame is measured)")
             self._skipped_logged = skipped
+            self._tally_logged_at = time.monotonic()
         if lost is not None and lost > self._lost_logged:
             self.get_logger().warning(f"{lost} frames lost in transport ({self.input_watch.transport}): their "
-                                      "camera_info came, the image did not", throttle_duration_sec=10.0)
+                                      "camera_info came, the image did not")
             self._lost_logged = lost
+            self._tally_logged_at = time.monotonic()
 
     def _on_image(self, data: bytes) -> None:
         try:
