@@ -42,14 +42,20 @@ def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
 
 
 def test_calibration_speed_ours_fits_no_worse_than_opencv():
-    out = run_bench("calibration_speed.py", "--repeats", "1", "--large-views", "20")
+    out = run_bench("calibration_speed.py", "--repeats", "1", "--large-views", "20",
+                    "--real", str(REPO / "test" / "data" / "opencv-left"), "chessboard:9x6:0.03")
     rows = [numbers(line) for line in out.splitlines() if re.match(r"\s+\d+\s+\d", line)]
     assert [int(r[0]) for r in rows] == [15, 50], out
     for views, opencv_s, ours_s, _, opencv_rms, ours_rms in rows:
         assert opencv_s > 0 and ours_s > 0
         assert ours_rms <= opencv_rms + 1e-4, (views, opencv_rms, ours_rms)
-    large = next(line for line in out.splitlines() if "whole command" in line)
+    large = next(line for line in out.splitlines() if "rendered views" in line)
     assert "every fit converged: True" in large and numbers(large.split("(")[1])[0] > 0, large
+    real = next(line for line in out.splitlines() if "real photos in opencv-left" in line)
+    assert "views used 13 (the script's 13)" in real, real
+    ours, on_our_detections = (float(v) for v in re.findall(r"RMS ours ([\d.]+) px, calibrateCamera on our "
+                                                            r"detections ([\d.]+) px", real)[0])
+    assert ours <= on_our_detections + 1e-3, real  # the same fit: no worse than OpenCV's
 
 
 @pytest.mark.skipif(not netns_available(), reason="the ROS benches' fixed domains need a private network namespace")
