@@ -169,6 +169,14 @@ def test_roi_outside_the_image_and_corrupt_calibration(workspace, tmp_path):
     assert done.returncode == 1 and "corrupt.yaml" in done.stderr
 
 
+def test_a_roi_starting_left_of_the_image_is_read_as_a_value(workspace):
+    """`--roi -50,...`: argparse alone reads a value that starts with a minus as another option."""
+    done = measure(workspace, "--roi", "-50,-50,700,-50,700,530,-50,530")
+    assert done.returncode == 0, done.stderr
+    done = measure(workspace, "--roi", "-5000,-5000,-4000,-5000,-4000,-4000")
+    assert done.returncode == 2 and "lies outside the 640x480 image" in done.stderr, done.stderr
+
+
 def test_paper_reproduction_endoscope():
     """The paper's table on synthetic ground truth, endoscope rows: calibrated errors within the issue's
     bounds in every medium, and the several-percent uncalibrated effect."""

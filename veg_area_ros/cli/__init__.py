@@ -43,8 +43,32 @@ def _terminate_as_interrupt(number, frame) -> None:
     raise KeyboardInterrupt
 
 
+# options whose value may start with a minus (an ROI corner left of or above the image): argparse would read
+# `--roi -100,0,...` as two options
+NEGATIVE_VALUE_OPTIONS = ("--roi",)
+
+
+def joined_negative_values(argv: Sequence[str]) -> list[str]:
+    """`--roi -100,0,...` as `--roi=-100,0,...`, what argparse understands; anything after `--` untouched."""
+    joined: list[str] = []
+    tokens = iter(argv)
+    for token in tokens:
+        if token == "--":
+            joined += [token, *tokens]
+            break
+        if token in NEGATIVE_VALUE_OPTIONS:
+            value = next(tokens, None)
+            if value is not None and value[:1] == "-" and value[1:2].isdigit():
+                joined.append(f"{token}={value}")
+                continue
+            joined += [token] if value is None else [token, value]
+            continue
+        joined.append(token)
+    return joined
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = build_parser().parse_args(joined_negative_values(sys.argv[1:] if argv is None else argv))
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminate_as_interrupt)
     try:
