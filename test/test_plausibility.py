@@ -164,7 +164,9 @@ def test_a_repeated_view_counts_once_and_the_fit_says_so():
     assert set(result.rejected_views) == {"again.jpg", "still.jpg"}
     assert f"the same view as {views[2].name}" in result.rejected_views["again.jpg"]
     assert any("counted once" in w and f"{len(views)} distinct views" in w for w in result.warnings)
-    assert result.camera.c == pytest.approx(alone.camera.c, rel=1e-9)
+    # the fit without them, to 1e-6: the same fit run twice differs by ~1e-9 (threaded sums), a repeated view
+    # counted moves c by ~1e-4
+    assert result.camera.c == pytest.approx(alone.camera.c, rel=1e-6)
     assert not any("counted once" in w for w in alone.warnings)
 
 
