@@ -20,6 +20,10 @@ import yaml
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+# what the harness gave this process (a user's shell, confined): the nodes and commands it starts get exactly
+# this; the probes in this process take the nodes' transport (main() applies it to os.environ)
+GIVEN_ENVIRONMENT = dict(os.environ)
+
 
 class Nodes:
     """Node processes started with `python -m veg_area_ros.ros.<module> --ros-args ...`; always reaped."""
@@ -35,7 +39,7 @@ class Nodes:
             args += ["-r", f"__node:={name}"]
         for key, value in parameters.items():
             args += ["-p", f"{key}:={json.dumps(value) if isinstance(value, list | bool) else value}"]
-        process = subprocess.Popen(args, stdout=sys.stderr, stderr=sys.stderr)
+        process = subprocess.Popen(args, env=GIVEN_ENVIRONMENT, stdout=sys.stderr, stderr=sys.stderr)
         self.processes.append((module, process))
         return process
 
@@ -191,7 +195,11 @@ def scenario_delivery(options: dict, nodes: Nodes) -> dict:
 
 
 def main() -> int:
+    from veg_area_ros.ros.run import ensure_ros_environment
+
     name, options = sys.argv[1], json.loads(sys.argv[2])
+    if name != "foreign":  # the probes here talk to our nodes as one of them would; a foreign node does not
+        ensure_ros_environment()
     nodes = Nodes()
     try:
         result = {"delivery": scenario_delivery, "graph": scenario_graph, "record": scenario_record,
@@ -581,7 +589,7 @@ def scenario_interop(options: dict, nodes: Nodes) -> dict:
     calibration = air_endoscope_calibration()
     ours = [nodes.start("camera_node", rate_hz=10.0, synthetic_scene="cube", synthetic_medium="air",
                         camera_info_url=f"file://{calibration}"), nodes.start("area_node")]
-    defaults = {k: v for k, v in os.environ.items() if k != "FASTDDS_DEFAULT_PROFILES_FILE"}
+    defaults = {k: v for k, v in GIVEN_ENVIRONMENT.items() if not k.startswith(("FASTDDS_", "VEG_AREA_"))}
     foreign = subprocess.Popen([sys.executable, __file__, "foreign", json.dumps({"seconds": options["seconds"]})],
                                env=defaults, stdout=subprocess.PIPE, stderr=sys.stderr, text=True)
     nodes.processes.append(("foreign", foreign))
@@ -697,7 +705,7 @@ def scenario_two_machines(options: dict, nodes: Nodes) -> dict:
 
     pcs = _two_pcs(Path("pcs").resolve())
     calibration = air_endoscope_calibration()
-    defaults = {k: v for k, v in os.environ.items() if not k.startswith(("FASTDDS_", "VEG_AREA_"))}
+    defaults = {k: v for k, v in GIVEN_ENVIRONMENT.items() if not k.startswith(("FASTDDS_", "VEG_AREA_"))}
     seconds = float(options["seconds"])
     listeners = {}
     for pc in ("a", "b"):
@@ -705,7 +713,7 @@ def scenario_two_machines(options: dict, nodes: Nodes) -> dict:
             [*pcs[pc], sys.executable, __file__, "foreign", json.dumps({"seconds": seconds + 15, "images": False})],
             env=defaults, stdout=subprocess.PIPE, stderr=sys.stderr, text=True)
         nodes.processes.append((f"listener_{pc}", listeners[pc]))
-    ours = dict(os.environ)
+    ours = dict(GIVEN_ENVIRONMENT)
     for pc, module, parameters in (("b", "area_node", {}),
                                    ("a", "camera_node", dict(rate_hz=float(options["rate_hz"]), synthetic_scene="cube",
                                                              synthetic_medium="air",
@@ -743,7 +751,8 @@ def scenario_record_cli(options: dict, nodes: Nodes) -> dict:
     for name, args in (("mistyped", ["image_rwa"]), ("all", ["--all"])):
         started = time.monotonic()
         done = subprocess.run([sys.executable, "-m", "veg_area_ros.cli", "record", *args, "--duration", "3", "-o",
-                               str(Path(name).resolve())], capture_output=True, text=True, timeout=60)
+                               str(Path(name).resolve())], env=GIVEN_ENVIRONMENT, capture_output=True, text=True,
+                              timeout=60)
         runs[name] = {"exit": done.returncode, "stderr": done.stderr[-2000:], "seconds": time.monotonic() - started,
                       "bag": str(Path(name).resolve())}
     return runs
@@ -770,7 +779,8 @@ def scenario_replay(options: dict, nodes: Nodes) -> dict:
         while time.monotonic() < deadline and not probe.get_publishers_info_by_topic("/projected_area"):
             rclpy.spin_once(probe, timeout_sec=0.1)
         player = subprocess.Popen([sys.executable, "-m", "veg_area_ros.cli", "play", options["bag"], "--topics",
-                                   "image_raw", "camera_info", "--delay", "2"], stdout=sys.stderr, stderr=sys.stderr)
+                                   "image_raw", "camera_info", "--delay", "2"], env=GIVEN_ENVIRONMENT,
+                                  stdout=sys.stderr, stderr=sys.stderr)
         nodes.processes.append(("player", player))
         deadline = time.monotonic() + 120
         while player.poll() is None and time.monotonic() < deadline:

@@ -224,6 +224,9 @@ def test_skipped_frames_are_counted_exactly_when_the_camera_outruns_the_area_nod
     # said in the log, at most once every 10 s (frames are skipped with every frame at this rate)
     said = result["whole_log"].count(" frames skipped, ")
     assert 1 <= said <= 1 + result["camera_seconds"] // 10, (said, result["camera_seconds"])
+    # both nodes chose their transport themselves, as in a user's shell (the harness sets none in a namespace)
+    chosen = "veg_area_ros 'auto'" if result["isolated"] else "veg_area_ros 'local'"
+    assert result["whole_log"].count(f"transport: {chosen} (") == 2, result["log"]
 
 
 def test_the_main_job_measures_the_cube_within_half_a_percent(tmp_path):

@@ -2,8 +2,9 @@
 
 As root with `unshare` (CI): a private network namespace that has only loopback and a private /dev/shm
 (tmpfs), so no traffic can leave and nothing is left in the host's /dev/shm; every node started lives and dies
-in there. Elsewhere (fallback): the nodes use the shipped Fast DDS profile (shared memory, UDP on 127.0.0.1
-only, so discovery stays on loopback), and what a run added to /dev/shm is removed after it. No rclpy here.
+in there, and chooses its transport itself as in a user's shell. Elsewhere (fallback): VEG_AREA_TRANSPORT=local
+(shared memory, UDP on 127.0.0.1 only, so discovery stays on loopback), and what a run added to /dev/shm is
+removed after it. No rclpy here.
 """
 
 from __future__ import annotations
@@ -14,23 +15,7 @@ import os
 import subprocess
 from pathlib import Path
 
-from ..transport import config_file
-
 SOURCE_ROOT = Path(__file__).resolve().parents[2]  # the folder holding veg_area_ros: PYTHONPATH of the children
-
-
-def _profile(name: str) -> str:
-    """A Fast DDS profile of the package's config/ (transport.config_file's rule: installed share/, or the tree)."""
-    path = config_file(name)
-    if path is None:
-        raise FileNotFoundError(f"config/{name} is neither installed nor in the source tree")
-    return path
-
-
-# the nodes' default profile (shared memory + UDP on every interface) where the namespace confines it; this
-# machine only (shared memory + UDP on 127.0.0.1) where there is no private namespace
-PROFILE = _profile("fastdds.xml")
-LOCAL_PROFILE = _profile("fastdds_local.xml")
 _domains = itertools.count((os.getpid() % 50) * 4 + 1)
 
 
@@ -49,13 +34,14 @@ def next_domain() -> int:
 
 
 def ros_environment(home: Path, domain: int) -> dict[str, str]:
-    """This environment without the caller's ROS/DDS settings, plus a log home, a domain, Fast DDS with the
-    shipped profile (the local one outside a private namespace), and this source tree on PYTHONPATH."""
+    """This environment without the caller's ROS/DDS settings, plus a home (where ROS logs), a domain and this
+    source tree on PYTHONPATH. No transport setting where a private namespace confines the run: every node
+    chooses its transport itself, as in a user's shell. Without one, VEG_AREA_TRANSPORT=local is the
+    confinement (UDP on 127.0.0.1 only)."""
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "VEG_AREA_"))}
-    env.update(HOME=str(home), ROS_LOG_DIR=str(home / "ros_log"), PYTHONPATH=str(SOURCE_ROOT),
-               ROS_DOMAIN_ID=str(domain), RMW_IMPLEMENTATION="rmw_fastrtps_cpp",
-               FASTDDS_DEFAULT_PROFILES_FILE=PROFILE if netns_available() else LOCAL_PROFILE,
-               PYTHONUNBUFFERED="1")
+    env.update(HOME=str(home), PYTHONPATH=str(SOURCE_ROOT), ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED="1")
+    if not netns_available():
+        env["VEG_AREA_TRANSPORT"] = "local"
     return env
 
 
