@@ -51,6 +51,13 @@ def is_bag(path: Path) -> bool:
     return path.suffix.lower() == ".mcap"
 
 
+def decodable_ahead(files: list[Path]) -> bool:
+    """Whether these inputs' frames may be decoded in another thread while earlier ones are used: videos and
+    bags. Not image files: a JPEG's decoder warnings are caught by redirecting the process's stderr while it
+    decodes (`read_image`), which would swallow other threads' lines."""
+    return all(f.suffix.lower() in VIDEO_SUFFIXES or is_bag(f) for f in files)
+
+
 JPEG_STANDALONE_MARKERS = {0x01, *range(0xD0, 0xD9)}  # TEM, restarts, start of image: no length follows
 MIN_IMAGE_SIDE = 16  # smaller holds no board and no targets
 

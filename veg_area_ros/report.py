@@ -13,7 +13,7 @@ import numpy as np
 from .calibration import CalibrationResult, radial_residuals
 
 
-def pyplot():
+def _pyplot():
     import matplotlib
 
     matplotlib.use("Agg")  # files only, no display
@@ -26,7 +26,7 @@ def pyplot():
 def write_calibration_report(result: CalibrationResult, folder: str | Path, guide=None) -> list[Path]:
     """Write residuals.png, per_view.png, coverage.png, radial.png, uncertainty.png and calibration.json into
     `folder`; with `guide` (guidance.CalibrationGuide over the views) also variety.png, the bars."""
-    plt = pyplot()
+    plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     width, height = result.camera.image_size
@@ -131,7 +131,7 @@ def plot_variety(guide, path: str | Path) -> Path:
     """The variety bars of the views (as the calibration node's feedback shows them) and what is still needed."""
     from .feedback import bar_rows
 
-    plt = pyplot()
+    plt = _pyplot()
     rows = bar_rows(guide)
     fig, ax = plt.subplots(figsize=(8, 3.8))
     fills = [fill for _, fill in rows]
@@ -152,7 +152,7 @@ def plot_variety(guide, path: str | Path) -> Path:
 def plot_area_series(times: list[float], areas: list[float], stds: list[float], path: str | Path,
                      title: str = "Projected area", time_label: str = "time [s]") -> Path:
     """Af(t) with its ±1 standard deviation band (PNG); NaN areas (frames that failed) leave gaps."""
-    plt = pyplot()
+    plt = _pyplot()
     t = np.asarray(times, float)
     a = np.asarray(areas, float) * 1e4
     s = np.asarray(stds, float) * 1e4

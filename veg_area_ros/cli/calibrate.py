@@ -69,7 +69,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
     another size than `image_size` (default: the first readable frame's) are skipped; in a video, a pose held
     still over several frames counts once."""
     from ..calibration import View, same_pose
-    from ..frames import VIDEO_SUFFIXES, is_bag, iter_frames
+    from ..frames import decodable_ahead, iter_frames
     from ..guidance import CalibrationGuide
     from ..pipeline import ordered_map, prefetched
 
@@ -80,10 +80,9 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
         return None if frame.image is None else board.detect(frame.image)
 
     # frames searched by two threads (OpenCV releases Python's lock), judged here in their order; a video's
-    # frames also decoded in a thread of their own. Not image files: a JPEG's decoder warnings are caught by
-    # redirecting the process's stderr while it decodes, which would swallow other threads' lines
+    # frames also decoded in a thread of their own
     frames = iter_frames(files, step)
-    if all(f.suffix.lower() in VIDEO_SUFFIXES or is_bag(f) for f in files):
+    if decodable_ahead(files):
         frames = prefetched(frames, depth=2 * DETECT_WORKERS)
     for frame, detection in ordered_map(detect, frames, workers=DETECT_WORKERS):
         found.seen += 1

@@ -103,6 +103,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         IMAGE_SUFFIXES,
         VIDEO_SUFFIXES,
         InputError,
+        decodable_ahead,
         expand_inputs,
         is_bag,
         iter_frames,
@@ -197,10 +198,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     interrupted = False
     segment = None
     try:
-        # a video's or bag's next frames decoded while this one is measured (same frames, same order); not image
-        # files: a JPEG's decoder warnings are caught by redirecting the process's stderr while it decodes
+        # the next frames decoded while this one is measured (same frames, same order)
         frames = iter_frames(files, job.video_step, job.image_topic, job.frame_range)
-        if len(series) == len(files):
+        if decodable_ahead(files):
             frames = prefetched(frames)
         for index, frame in enumerate(frames, 1):
             row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
