@@ -106,6 +106,38 @@ def test_the_bush_under_the_flumes_light(direction):
         assert abs(error) * scene.true_area_m2 <= 3 * result.area_std_m2
 
 
+def test_levels_are_read_deeper_only_where_a_blur_pulls_them():
+    """A dark ring 60 px wide (40 DN on 200, a leaf at a DSLR's scale) under 7 px of blur reads its level 3 px
+    inside its edges pulled towards the background; deeper it settles on the true level. A sharp ring with a
+    lighter middle (a dark leaf's lighter midrib) also reads differently deeper inside, but towards the
+    background: no blur does that, so the interior is not deepened for it."""
+    y, x = np.mgrid[0:400, 0:400]
+    radius = np.hypot(x - 200, y - 200)
+    noise = np.random.default_rng(0).normal(0, 4, radius.shape)
+    ring = (radius > 90) & (radius < 150)
+    blurred = cv2.GaussianBlur(np.where(ring, 40.0, 200.0), (0, 0), 7) + noise
+    textured = np.where(ring, np.where(np.abs(radius - 120) < 15, 70.0, 40.0), 200.0) + noise
+    measurer = AreaMeasurer(ENDOSCOPE, targets_for(cube_scene()), Classifier(threshold=120))
+    roi = np.full(radius.shape, 255, np.uint8)
+    for image, deepened in ((blurred, True), (textured, False)):
+        band = np.clip(np.rint(image), 0, 255).astype(np.uint8)
+        levels, reach, _ = measurer._interior_levels(band, roi, 120)
+        assert (reach > 3) == deepened, (reach, levels)
+        classes = [(band <= 120).astype(np.uint8), (band > 120).astype(np.uint8)]
+        shallow = AreaMeasurer._levels_inside(band, classes, 3)
+        if deepened:
+            assert shallow.object > 45 and abs(levels.object - 40) < 1 and abs(levels.background - 200) < 1
+            assert levels.object_error < 0.3  # settled: a deeper reading agreed
+        else:
+            assert levels == shallow
+    # a ring 30 px wide has no pure pixel under this blur: its level still moved when its interior ran out,
+    # and that move joins its error (45.5 DN read, truly 40: an error of 0.25 DN would be a false claim)
+    narrow = (radius > 105) & (radius < 135)
+    band = np.clip(np.rint(cv2.GaussianBlur(np.where(narrow, 40.0, 200.0), (0, 0), 7) + noise), 0, 255)
+    levels, reach, _ = measurer._interior_levels(band.astype(np.uint8), roi, 120)
+    assert reach > 3 and levels.object - 40 > 3 and levels.object_error > 1, levels
+
+
 def test_the_fitted_surface_recovers_a_known_light():
     height, width = 300, 400
     y, x = np.mgrid[0:height, 0:width].astype(float)

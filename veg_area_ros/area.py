@@ -697,7 +697,7 @@ class AreaMeasurer:
         band, light = raw_band, self._light
         if self.even_light:
             if fresh or light is None or light.weights is not weights or light.age >= LIGHT_REFRESH_FRAMES:
-                raw_threshold, reach = threshold, INTERIOR_PX
+                raw_threshold, reach, start = threshold, INTERIOR_PX, INTERIOR_PX
                 self.light_fits += 1
                 for _ in range(2):  # again, the background kept as far from the edges as they are wide
                     found = self._flat_field(raw_band, weights, raw_threshold, reach)
@@ -707,10 +707,10 @@ class AreaMeasurer:
                     if light.flat is not None:
                         band = light.flat.apply(raw_band)
                         threshold = self.classifier.resolve_threshold(band, weights.roi)
-                    light.levels, settled = self._interior_levels(band, weights.roi, threshold, reach)
+                    light.levels, settled, before = self._interior_levels(band, weights.roi, threshold, start)
                     if settled <= reach:
                         break
-                    reach = settled
+                    reach, start = settled, before  # the last step is taken again on the evened band
                 self._light = light
             else:
                 light.age += 1
@@ -739,28 +739,39 @@ class AreaMeasurer:
                 or now.background_spread > 1.5 * then.background_spread + 1.0)
 
     def _interior_levels(self, band: np.ndarray, roi: np.ndarray, threshold: float,
-                         reach: int = INTERIOR_PX) -> tuple[Levels | None, int]:
-        """Both levels from the pixels at least `reach` pixels inside their class (and the ROI), and that reach:
-        no edge pixel, blurred or not, pulls them towards each other, as it pulls a histogram's modes where an
-        object is mostly edge (a bush's twigs under blur and noise: its level 2.4 DN off, Af +0.9 %). Where the
-        edges are wider than `reach` (turbid water, a DSLR's 7 px sd of blur) the levels still move as the
-        interior shrinks (the bush's object level 57 DN at 3 px inside, 40.2 at 18, truly 40): the reach grows
-        by half until neither level moves by more than twice its standard error, or a class has too few
-        interior pixels left. None where a class has too small an interior even at `reach` (twigs 1-3 px
+                         start: int = INTERIOR_PX) -> tuple[Levels | None, int, int]:
+        """Both levels from the pixels at least `start` pixels inside their class (and the ROI), or deeper; the
+        reach they were read at and the one before it. No edge pixel, blurred or not, pulls them towards each
+        other, as it pulls a histogram's modes where an object is mostly edge (a bush's twigs under blur and
+        noise: its level 2.4 DN off, Af +0.9 %). Where the edges are wider (turbid water, a DSLR's 7 px sd of
+        blur) the levels still move as the interior shrinks (the bush's object level 57 DN at 3 px inside,
+        40.2 at 18, truly 40): the reach grows by half until neither level moves away from the other class by
+        more than twice its standard error. Where a class runs out of interior pixels (or the reach its
+        limit) while a level still moved, the last move is added to that level's error: a deeper reading might
+        have moved it as far again. None where a class has too small an interior even at `start` (twigs 1-3 px
         wide): the histogram's modes are used."""
         kind = self.classifier.object_side(band, threshold)
         inside = roi > 0
         classes = [(kind & inside).astype(np.uint8), (~kind & inside).astype(np.uint8)]
-        levels = self._levels_inside(band, classes, reach)
+        levels = self._levels_inside(band, classes, start)
+        reach = before = start
         if levels is None:
-            return None, reach
+            return None, reach, before
+        last_move = None
         while reach < MAX_INTERIOR_PX:
             deeper = min(MAX_INTERIOR_PX, int(np.ceil(reach * 1.5)))
             further = self._levels_inside(band, classes, deeper)
-            if further is None or not _levels_moved(levels, further):
+            if further is None:
                 break
-            levels, reach = further, deeper
-        return levels, reach
+            if not _levels_moved(levels, further):
+                last_move = None  # settled: a deeper reading agrees
+                break
+            last_move = (abs(further.object - levels.object), abs(further.background - levels.background))
+            levels, before, reach = further, reach, deeper
+        if last_move is not None:
+            levels = replace(levels, object_error=math.hypot(levels.error("object"), last_move[0]),
+                             background_error=math.hypot(levels.error("background"), last_move[1]))
+        return levels, reach, before
 
     @staticmethod
     def _levels_inside(band: np.ndarray, classes: list[np.ndarray], reach: int) -> Levels | None:
@@ -827,9 +838,13 @@ class AreaMeasurer:
 
 
 def _levels_moved(nearer: Levels, deeper: Levels) -> bool:
-    """Whether either level moved, deeper inside its class, by more than twice the two readings' error."""
-    return any(abs(getattr(deeper, name) - getattr(nearer, name))
-               > 2 * math.hypot(nearer.error(name), deeper.error(name)) for name in ("object", "background"))
+    """Whether either level moved, deeper inside its class, away from the other class by more than twice the two
+    readings' error: a blurred edge only ever pulls a level towards the other class; a move the other way is
+    the object's texture or the light (a dark leaf with a lighter midrib), which a deeper interior does not cure."""
+    away = np.sign(nearer.background - nearer.object)  # the background's side of the object
+    moves = {"object": (nearer.object - deeper.object) * away,
+             "background": (deeper.background - nearer.background) * away}
+    return any(moved > 2 * math.hypot(nearer.error(name), deeper.error(name)) for name, moved in moves.items())
 
 
 @dataclass
