@@ -184,6 +184,7 @@ def test_paper_reproduction_endoscope():
     assert {(r.condition, r.object) for r in rows} == {(c, o) for c in ("air", "water tank", "flume")
                                                        for o in ("cube", "bush")}
     for row in rows:
+        assert row.subpixel_applied, row  # the shares were read, flume included (no fallback to the count)
         limit = 0.3 if row.condition in ("air", "flume") else 0.5
         if row.object == "cube":
             assert abs(row.calibrated_error_pct) <= limit, row
@@ -191,6 +192,15 @@ def test_paper_reproduction_endoscope():
             assert abs(row.calibrated_error_pct) <= row.calibrated_std_pct, row
             assert row.condition != "flume" or abs(row.calibrated_error_pct) <= 0.6, row
         assert abs(row.raw_error_pct) > 4 * abs(row.calibrated_error_pct) and abs(row.raw_error_pct) > 2, row
+
+
+def test_the_reproduction_table_says_where_sub_pixel_mode_counted_whole_pixels():
+    from veg_area_ros.sim.reproduction import Row, format_table
+
+    fell_back = Row("dslr", "flume", "bush", 0.0048, -3.9, 2.0, 3.6, 0.8, 3.6, 0.9, None, None, subpixel_applied=False)
+    shares = Row("dslr", "flume", "cube", 0.0105, -6.1, 0.28, 0.15, 0.26, 0.53, 0.9, None, None)
+    bush, cube = format_table([fell_back, shares]).splitlines()[2:]
+    assert "(± 3.60 %, counted whole pixels)" in bush and "counted" not in cube
 
 
 @pytest.fixture(scope="module")

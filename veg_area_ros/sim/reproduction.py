@@ -91,6 +91,7 @@ class Row:
     calibration_rms_px: float
     paper_raw_pct: float | None
     paper_calibrated_pct: float | None
+    subpixel_applied: bool = True  # the calibrated sub-pixel column used the shares (else it counted whole pixels)
 
 
 def calibrate_synthetic(setup: Setup, condition: Condition, rng: np.random.Generator):
@@ -142,7 +143,8 @@ def run(cameras: tuple[str, ...] = ("endoscope", "dslr"), progress: Callable[[st
                                 100 * (raw.area_m2 / truth - 1), 100 * (calibrated.area_m2 / truth - 1),
                                 100 * calibrated.area_std_m2 / truth, 100 * (counted.area_m2 / truth - 1),
                                 100 * counted.area_std_m2 / truth, calibration.rms_px,
-                                paper[0] if paper else None, paper[1] if paper else None))
+                                paper[0] if paper else None, paper[1] if paper else None,
+                                calibrated.subpixel_applied))
                 progress(f"  {object_name}: raw {rows[-1].raw_error_pct:+.2f} %, "
                          f"calibrated {rows[-1].calibrated_error_pct:+.3f} % (± {rows[-1].calibrated_std_pct:.2f} %), "
                          f"counted {rows[-1].count_error_pct:+.3f} % (± {rows[-1].count_std_pct:.2f} %)")
@@ -158,7 +160,8 @@ def format_table(rows: list[Row]) -> str:
              "| --- | --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for r in rows:
         lines.append(f"| {r.camera} | {r.condition} | {r.object} | {1e4 * r.true_area_m2:.2f} "
-                     f"| {r.raw_error_pct:+.2f} % | {r.calibrated_error_pct:+.3f} % (± {r.calibrated_std_pct:.2f} %) "
+                     f"| {r.raw_error_pct:+.2f} % | {r.calibrated_error_pct:+.3f} % (± {r.calibrated_std_pct:.2f} %"
+                f"{'' if r.subpixel_applied else ', counted whole pixels'}) "
                      f"| {r.count_error_pct:+.3f} % (± {r.count_std_pct:.2f} %) "
                      f"| {paper(r.paper_raw_pct)} | {paper(r.paper_calibrated_pct)} |")
     return "\n".join(lines)
