@@ -161,7 +161,7 @@ def format_table(rows: list[Row]) -> str:
     for r in rows:
         lines.append(f"| {r.camera} | {r.condition} | {r.object} | {1e4 * r.true_area_m2:.2f} "
                      f"| {r.raw_error_pct:+.2f} % | {r.calibrated_error_pct:+.3f} % (± {r.calibrated_std_pct:.2f} %"
-                f"{'' if r.subpixel_applied else ', counted whole pixels'}) "
+                     f"{'' if r.subpixel_applied else ', counted whole pixels'}) "
                      f"| {r.count_error_pct:+.3f} % (± {r.count_std_pct:.2f} %) "
                      f"| {paper(r.paper_raw_pct)} | {paper(r.paper_calibrated_pct)} |")
     return "\n".join(lines)
