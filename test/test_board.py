@@ -1,9 +1,11 @@
+import cv2
 import numpy as np
 import pytest
 from helpers import render_views
 
 from veg_area_ros.board import BoardSpec, BoardSpecError
-from veg_area_ros.sim.synthetic import ENDOSCOPE, look_at_pose, render_board_views
+from veg_area_ros.camera_model import BrownCamera
+from veg_area_ros.sim.synthetic import ENDOSCOPE, board_views, look_at_pose, render_board_views
 
 
 def test_spec_round_trip_and_points():
@@ -88,3 +90,24 @@ def test_no_board_gives_none(spec):
     noise = rng.integers(0, 255, (480, 640), dtype=np.uint8)
     assert BoardSpec.parse(spec).detect(noise) is None
     assert BoardSpec.parse(spec).detect(np.full((480, 640, 3), 128, np.uint8)) is None
+
+
+def test_a_board_only_the_sector_detector_finds_is_refined_like_every_other():
+    """A lens so strongly distorted that the board's far rows are squashed: OpenCV's classic detector misses
+    the board and the sector-based one finds it; its corners are then refined as every other detection's (the
+    sector detector's own accuracy mode, 4x slower, was 0.2-0.6 px from the truth on these views)."""
+    camera = BrownCamera(640, 480, c=330.0, xp=320.0, yp=240.0, aspect=1.0, k1=-0.45, k2=0.12, k3=-0.015,
+                         p1=0.0, p2=0.0)
+    board = BoardSpec.parse("chessboard:9x6:0.03")
+    poses = [board_views(camera, board, 150, 0.3, np.random.default_rng(3))[k] for k in (35, 87, 131)]
+    images = render_board_views(camera, board, poses, rng=np.random.default_rng(3), noise_sigma=2.0)
+    for (rvec, tvec), image in zip(poses, images, strict=True):
+        classic, _ = cv2.findChessboardCorners(image, (9, 6), flags=cv2.CALIB_CB_ADAPTIVE_THRESH
+                                               | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        assert not classic  # so the fallback is what is tested
+        detection = board.detect(image)
+        assert detection is not None
+        truth = camera.project(board.object_points(), rvec, tvec)
+        # a 9x6 board turned by 180 degrees is the same board: either numbering is a valid view
+        rms = min(np.sqrt(np.mean(np.sum((detection.image_points[::step] - truth) ** 2, axis=1))) for step in (1, -1))
+        assert rms < 0.15

@@ -12,7 +12,7 @@ import struct
 import sys
 import tempfile
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -86,9 +86,10 @@ def header_size(data: bytes) -> tuple[int, int] | None:
     return None
 
 
-def read_image(path: Path) -> tuple[np.ndarray | None, str]:
-    """Decode an image file; a truncated JPEG is refused rather than measured half-grey, and a header that
-    declares an absurd size is refused before decoding."""
+def read_image(path: Path, grey: bool = False) -> tuple[np.ndarray | None, str]:
+    """Decode an image file (`grey`: to one channel, which for a JPEG skips its colour entirely); a truncated
+    JPEG is refused rather than measured half-grey, and a header that declares an absurd size is refused
+    before decoding."""
     try:
         data = path.read_bytes()
     except OSError as exc:
@@ -103,14 +104,14 @@ def read_image(path: Path) -> tuple[np.ndarray | None, str]:
         if min(width, height) < MIN_IMAGE_SIDE:
             return None, f"is {width}x{height} pixels, too small to hold a board or targets"
     if data[:2] != JPEG_START:
-        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
         return (None, "is not an image OpenCV can decode") if image is None else (image, "")
     if not data.rstrip(b"\0\r\n ").endswith(b"\xff\xd9"):
         return None, "is a truncated JPEG (no end-of-image marker)"
     problem = jpeg_structure_problem(data)
     if problem:
         return None, f"is a corrupt JPEG ({problem})"
-    image, warning = _decode_jpeg(data)
+    image, warning = _decode_jpeg(data, grey)
     if image is None:
         return None, "is not an image OpenCV can decode"
     if warning:
@@ -167,7 +168,7 @@ def jpeg_structure_problem(data: bytes) -> str | None:
     return "no end-of-image marker"
 
 
-def _decode_jpeg(data: bytes) -> tuple[np.ndarray | None, str]:
+def _decode_jpeg(data: bytes, grey: bool = False) -> tuple[np.ndarray | None, str]:
     """Decode a JPEG and catch what libjpeg prints to stderr (at most one warning per image): OpenCV decodes a
     corrupt scan without an error, so its warning is the only sign. The capture swaps file descriptor 2 for
     the few milliseconds of the decode."""
@@ -176,7 +177,7 @@ def _decode_jpeg(data: bytes) -> tuple[np.ndarray | None, str]:
         saved = os.dup(2)
         try:
             os.dup2(capture.fileno(), 2)
-            image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)
+            image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
         finally:
             os.dup2(saved, 2)
             os.close(saved)
@@ -289,25 +290,34 @@ def _bag_frame(path: Path, frame) -> Frame:
 
 
 def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: str | None = None,
-                frame_range: tuple[int, int] | None = None) -> Iterator[Frame]:
+                frame_range: tuple[int, int] | None = None, grey: bool = False) -> Iterator[Frame]:
     """Every frame of the inputs; unreadable ones come with image None and the reason. `frame_range`
-    (start, stop): only those frames of a video or bag (one input)."""
+    (start, stop): only those frames of a video or bag (one input). `grey`: every image in one channel (what
+    a board's detection looks at; an image file is then decoded without its colour)."""
     start, stop = frame_range if frame_range is not None else (0, None)
     for path in expand_inputs(paths):
         suffix = path.suffix.lower()
         if is_bag(path):
-            yield from iter_bag(path, image_topic, start, stop)
+            yield from _greyed(iter_bag(path, image_topic, start, stop), grey)
         elif suffix in VIDEO_SUFFIXES:
-            yield from iter_video(path, video_step, start, stop)
+            yield from _greyed(iter_video(path, video_step, start, stop), grey)
         elif suffix in IMAGE_SUFFIXES:
-            image, problem = read_image(path)
+            image, problem = read_image(path, grey)
             yield Frame(path.name, image, problem)
         else:
             # unknown extension: try as an image, then as a video, before giving up
-            image, problem = read_image(path)
+            image, problem = read_image(path, grey)
             if image is not None:
                 yield Frame(path.name, image)
             elif video_frame_count(path) > 0:
-                yield from iter_video(path, video_step)
+                yield from _greyed(iter_video(path, video_step), grey)
             else:
                 yield Frame(path.name, None, "is neither an image nor a video")
+
+
+def _greyed(frames: Iterator[Frame], grey: bool) -> Iterator[Frame]:
+    for frame in frames:
+        if grey and frame.image is not None and frame.image.ndim == 3:
+            code = cv2.COLOR_BGRA2GRAY if frame.image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
+            frame = replace(frame, image=cv2.cvtColor(frame.image, code))
+        yield frame

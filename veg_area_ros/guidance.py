@@ -120,7 +120,8 @@ class CalibrationGuide:
             return Verdict(False, f"motion blur (edges {stats.edge_width_px:.1f} px wide, the sharp views' "
                                   f"{limit / BLUR_FACTOR if len(self.kept) >= 3 else limit:.1f} px): hold the "
                                   "board still", "blurred", stats)
-        nearest = min((float(np.linalg.norm(signature - s)) for s in self.signatures), default=math.inf)
+        nearest = (float(np.linalg.norm(np.asarray(self.signatures) - signature, axis=1).min())
+                   if self.signatures else math.inf)
         if nearest < NEW_POSE_DISTANCE and not (cells & ~self.covered).any():
             return Verdict(False, "too similar to a kept view", "similar", stats)
         return Verdict(True, "", "kept", stats)
@@ -223,22 +224,30 @@ def _corner_quality(grey: np.ndarray, points: np.ndarray, samples: int = 24) -> 
     chosen = points[np.linspace(0, len(points) - 1, min(samples, len(points))).round().astype(int)]
     spacing = nearest_spacing(points) if len(points) > 1 else 20.0
     half = int(np.clip(0.35 * spacing, 3, 40))
-    widths, clipped, total = [], 0, 0
-    for x, y in chosen:
-        x0, y0 = round(float(x)) - half, round(float(y)) - half
-        if x0 < 1 or y0 < 1 or x0 + 2 * half + 1 >= grey.shape[1] - 1 or y0 + 2 * half + 1 >= grey.shape[0] - 1:
-            continue
-        raw = grey[y0:y0 + 2 * half + 1, x0:x0 + 2 * half + 1]
-        clipped += cv2.countNonZero((raw >= CLIP_LEVEL).astype(np.uint8))
-        total += raw.size
-        # lightly smoothed, so that the sensor's noise neither widens the contrast nor steepens an edge
-        window = cv2.blur(raw.astype(np.float32), (3, 3))
-        low, high, _, _ = cv2.minMaxLoc(window)
-        gx = cv2.Sobel(window, cv2.CV_32F, 1, 0, ksize=3) / 8
-        gy = cv2.Sobel(window, cv2.CV_32F, 0, 1, ksize=3) / 8
-        # the steepest gradient along each of four directions: motion smears the edges across its direction
-        # only, so the widest of the four sees it (a sharp board turned 45 degrees reads at most 1.4x)
-        steepest = min(float(np.abs(g).max()) for g in (gx, gy, (gx + gy) * SQRT_HALF, (gx - gy) * SQRT_HALF))
-        if high - low > 20 and steepest > 0:
-            widths.append((high - low) / steepest)
-    return (float(np.median(widths)) if widths else math.inf), (clipped / total if total else 0.0)
+    side = 2 * half + 1
+    # every window at once, with a 2 px rim so that the mean and the gradients see real neighbours
+    corners = np.round(chosen).astype(int) - half - 2
+    inside = ((corners >= 0).all(axis=1) & (corners[:, 0] + side + 4 <= grey.shape[1])
+              & (corners[:, 1] + side + 4 <= grey.shape[0]))
+    if not inside.any():
+        return math.inf, 0.0
+    corners = corners[inside]
+    rimmed = np.lib.stride_tricks.sliding_window_view(grey, (side + 4, side + 4))[corners[:, 1], corners[:, 0]]
+    raw = rimmed[:, 2:-2, 2:-2]
+    clipped = float(np.count_nonzero(raw >= CLIP_LEVEL)) / raw.size
+    # lightly smoothed, so that the sensor's noise neither widens the contrast nor steepens an edge
+    rimmed = rimmed.astype(np.float32)
+    mean = sum(rimmed[:, dy:dy + side + 2, dx:dx + side + 2] for dy in range(3) for dx in range(3)) / 9
+    window = mean[:, 1:-1, 1:-1]
+    contrast = window.max(axis=(1, 2)) - window.min(axis=(1, 2))
+    rows = mean[:, :-2] + 2 * mean[:, 1:-1] + mean[:, 2:]  # Sobel's smoothing across x's derivative
+    cols = mean[:, :, :-2] + 2 * mean[:, :, 1:-1] + mean[:, :, 2:]
+    gx = (rows[:, :, 2:] - rows[:, :, :-2]) / 8
+    gy = (cols[:, 2:, :] - cols[:, :-2, :]) / 8
+    # the steepest gradient along each of four directions: motion smears the edges across its direction
+    # only, so the widest of the four sees it (a sharp board turned 45 degrees reads at most 1.4x)
+    steepest = np.min([np.abs(g).max(axis=(1, 2)) for g in (gx, gy, (gx + gy) * SQRT_HALF, (gx - gy) * SQRT_HALF)],
+                      axis=0)
+    usable = (contrast > 20) & (steepest > 0)
+    widths = contrast[usable] / steepest[usable]
+    return (float(np.median(widths)) if len(widths) else math.inf), clipped

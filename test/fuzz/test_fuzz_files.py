@@ -95,6 +95,32 @@ def test_real_jpegs_are_not_called_corrupt(workspace, tmp_path):
         assert read_image(real)[1] == "", real
 
 
+def test_grey_decoding_refuses_what_colour_decoding_refuses_and_reads_the_same_picture(workspace, tmp_path):
+    """`veg-area calibrate` decodes its photos in grey (a JPEG's colour skipped): a damaged file must be refused
+    there exactly as in colour, and a good one read as the colour picture's grey."""
+    good = (workspace / "cube.jpg").read_bytes()
+    refused = 0
+    for length in (16, 64, 300):
+        for seed in range(40):
+            path = tmp_path / f"s{length}_{seed}.jpg"
+            path.write_bytes(scrambled_jpeg(good, seed, length))
+            colour, grey = read_image(path)[1], read_image(path, grey=True)[1]
+            assert grey == colour, path.name
+            refused += bool(grey)
+    assert refused >= 60  # the comparison covered refusals, not only clean reads
+    # tinted as a flume's water tints it, so that a channel taken for the grey would show (26 DN off)
+    frame = (cv2.imread(str(workspace / "cube.png")) * np.array([1.0, 0.85, 0.55])).astype(np.uint8)
+    for name, params in {"baseline": [], "progressive": [cv2.IMWRITE_JPEG_PROGRESSIVE, 1],
+                         "restarts": [cv2.IMWRITE_JPEG_RST_INTERVAL, 3]}.items():
+        cv2.imwrite(str(tmp_path / f"{name}.jpg"), frame, params)
+        colour, grey = read_image(tmp_path / f"{name}.jpg")[0], read_image(tmp_path / f"{name}.jpg", grey=True)[0]
+        difference = np.abs(grey.astype(int) - cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY).astype(int))
+        assert grey.ndim == 2 and difference.mean() < 0.25, name  # a few DN only where the colour changes
+    cv2.imwrite(str(tmp_path / "cube.png"), frame)
+    lossless = read_image(tmp_path / "cube.png", grey=True)[0].astype(int)
+    assert np.abs(lossless - cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)).max() <= 1  # OpenCV's own rounding
+
+
 def test_an_existing_csv_is_kept_when_nothing_is_measured(workspace, tmp_path, capsys):
     csv_path = tmp_path / "areas.csv"
     csv_path.write_text("frame,area_m2\nyesterday,0.0105\n")

@@ -81,7 +81,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
 
     # frames searched by two threads (OpenCV releases Python's lock), judged here in their order; a video's
     # frames also decoded in a thread of their own
-    frames = iter_frames(files, step)
+    frames = iter_frames(files, step, grey=True)  # the board is found in grey: colour would only cost time
     if decodable_ahead(files):
         frames = prefetched(frames, depth=2 * DETECT_WORKERS)
     for frame, detection in ordered_map(detect, frames, workers=DETECT_WORKERS):
