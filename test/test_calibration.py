@@ -38,7 +38,8 @@ def test_real_images_match_or_beat_opencv():
     assert len(views) == 13
     result = calibrate(views, (640, 480), outlier_sigma=None)  # every point, as OpenCV uses
     assert result.rms_px <= OPENCV_REFERENCE_RMS * 1.01
-    assert result.rms_px <= result.opencv_rms_px * 1.01  # OpenCV on the very same detections
+    assert result.opencv_rms_views == 13  # OpenCV's estimate saw every view: the very same detections
+    assert result.rms_px <= result.opencv_rms_px * 1.01
     assert all(0 < result.std[name] < np.inf for name in PARAM_NAMES)
     assert result.std["fx"] < 2.0 and result.std["cx"] < 2.0
     # same camera as OpenCV's reference to within a few of our standard deviations

@@ -74,12 +74,13 @@ class CalibrationResult:
     views: list[ViewReport]
     rejected_views: dict[str, str]  # name -> reason
     warnings: list[str]
-    opencv_rms_px: float
+    opencv_rms_px: float  # OpenCV's initial estimate: calibrateCamera on opencv_rms_views views, every point
     sigma0_px: float  # a posteriori standard deviation of one image coordinate
     iterations: int
     seconds: float
     coverage: float  # fraction of an 8x6 grid over the image that holds detected points
     radial_profile: list[dict] = field(default_factory=list)  # per ring: mean radial residual, rms (radial_profile())
+    opencv_rms_views: int = 0  # the views OpenCV's initial estimate used (all of at most INIT_VIEWS)
     converged: bool = True  # every bundle adjustment converged (none stopped at its iteration limit)
     std_covariance: dict[str, float] = field(default_factory=dict)  # from the covariance, corner errors independent
     std_views: dict[str, float] = field(default_factory=dict)  # from resampling views (infinitesimal jackknife)
@@ -103,6 +104,7 @@ class CalibrationResult:
             "max_residual_px": self.max_residual_px,
             "sigma0_px": self.sigma0_px,
             "opencv_rms_px": self.opencv_rms_px,
+            "opencv_rms_views": self.opencv_rms_views,
             "views_used": self.views_used,
             "views_rejected": len(self.rejected_views),
             "rejected": dict(self.rejected_views),
@@ -337,26 +339,33 @@ def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], 
         difference = projected - every_observed
         return float(difference @ difference)
 
-    def evaluate(x: np.ndarray) -> tuple[list[np.ndarray], list[tuple[np.ndarray, np.ndarray]]]:
-        """Each view's residuals and Jacobian blocks (camera A, pose B)."""
-        residuals, blocks = [], []
+    rows = 2 * max(len(p) for p in object_points)  # every view's rows padded with zeros to the longest view's
+    camera_jacobian = np.zeros((views, rows, N_INTRINSIC))
+    pose_jacobian = np.zeros((views, rows, 6))
+    residuals = np.zeros((views, rows))
+
+    def evaluate(x: np.ndarray) -> None:
+        """Each view's residuals and Jacobian blocks (camera A, pose B), into the padded arrays (zero rows add
+        nothing to the normal equations)."""
         for v in range(views):
             uv, jac = _project_with_jacobian(x[:N_INTRINSIC], x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6],
                                              object_points[v])
-            residuals.append(uv - observed[v])
-            blocks.append((jac[:, 6:6 + N_INTRINSIC], jac[:, :6]))
-        return residuals, blocks
+            n = len(uv)
+            residuals[v, :n] = uv - observed[v]
+            camera_jacobian[v, :n] = jac[:, 6:6 + N_INTRINSIC]
+            pose_jacobian[v, :n] = jac[:, :6]
 
-    residuals, blocks = evaluate(x)
-    cost = sum(float(r @ r) for r in residuals)
+    evaluate(x)
+    cost = float(np.sum(residuals**2))
     damping = 1e-3
     for iteration in range(1, LM_MAX_ITERATIONS + 1):
         # per view: camera block A, pose block B; all views' small matrices at once (views x 9 x 6, ...)
-        cross = np.array([a.T @ b for a, b in blocks])
-        pose_normal = np.array([b.T @ b for _, b in blocks])
-        pose_gradient = np.array([b.T @ r for (_, b), r in zip(blocks, residuals, strict=True)])
-        camera_normal = sum(a.T @ a for a, _ in blocks)
-        camera_gradient = sum(a.T @ r for (a, _), r in zip(blocks, residuals, strict=True))
+        cross = camera_jacobian.transpose(0, 2, 1) @ pose_jacobian
+        pose_normal = pose_jacobian.transpose(0, 2, 1) @ pose_jacobian
+        pose_gradient = np.einsum("vri,vr->vi", pose_jacobian, residuals)
+        stacked = camera_jacobian.reshape(-1, N_INTRINSIC)
+        camera_normal = stacked.T @ stacked
+        camera_gradient = stacked.T @ residuals.ravel()
         diagonal = np.einsum("vii->vi", pose_normal)
         while True:
             damped = camera_normal + damping * np.diag(np.diag(camera_normal))
@@ -381,7 +390,7 @@ def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], 
                 damping = max(damping / 3, 1e-15)
                 if small_step or small_gain:
                     return x, True, iteration
-                residuals, blocks = evaluate(x)
+                evaluate(x)
                 break
             damping *= 4
             if damping > 1e12:  # no step lowers the cost: at the minimum to machine precision
@@ -469,26 +478,38 @@ def distinct_views(views: Sequence[View]) -> tuple[list[View], dict[str, str]]:
     in a video, adds no information but would shrink the std as if it did (15 copies of one photo: fx +77 %
     with a std of 21 px)."""
     kept: list[View] = []
-    centres: list[np.ndarray] = []
+    centres = np.empty((0, 2))
+    by_ids: dict[bytes, tuple[list[int], list[np.ndarray]]] = {}  # kept views with the very same point ids
     repeated: dict[str, str] = {}
     for view in views:
         ids, pixels = np.asarray(view.detection.ids).ravel(), view.detection.image_points.reshape(-1, 2)
         centre = pixels.mean(axis=0)
         # only views whose points lie about where these do can repeat it (a cheap test before the ids' match)
-        near = [k for k, other in enumerate(centres) if np.hypot(*(other - centre)) < SAME_VIEW_NEAR_PX]
-        for earlier in (kept[k] for k in near):
-            shared, mine, theirs = np.intersect1d(ids, np.asarray(earlier.detection.ids).ravel(),
-                                                  return_indices=True)
-            if len(shared) < 0.9 * max(len(ids), len(earlier.detection.ids)):
+        near = np.flatnonzero(np.hypot(*(centres - centre).T) < SAME_VIEW_NEAR_PX)
+        near_views = near.tolist()
+        moved: dict[int, float] = {}
+        same_ids = by_ids.get(ids.tobytes())
+        if same_ids is not None and near_views:  # e.g. a whole chessboard: the points in the same order
+            indices, stacks = same_ids
+            gaps = np.hypot(*(np.asarray(stacks) - pixels).transpose(2, 0, 1)).mean(axis=1)
+            moved = dict(zip(indices, gaps.tolist(), strict=True))
+        for k in near_views:
+            if k in moved:
                 continue
-            moved = float(np.mean(np.hypot(*(pixels[mine] - earlier.detection.image_points.reshape(-1, 2)[theirs]).T)))
-            if moved < SAME_VIEW_PX:
-                repeated[view.name] = (f"the same view as {earlier.name} (its corners {moved:.3f} px apart on "
-                                       "average): counted once")
-                break
-        else:
-            kept.append(view)
-            centres.append(centre)
+            earlier = kept[k].detection
+            shared, mine, theirs = np.intersect1d(ids, np.asarray(earlier.ids).ravel(), return_indices=True)
+            if len(shared) >= 0.9 * max(len(ids), len(earlier.ids)):
+                moved[k] = float(np.mean(np.hypot(*(pixels[mine] - earlier.image_points.reshape(-1, 2)[theirs]).T)))
+        first = next((k for k in near_views if moved.get(k, math.inf) < SAME_VIEW_PX), None)
+        if first is not None:
+            repeated[view.name] = (f"the same view as {kept[first].name} (its corners {moved[first]:.3f} px apart "
+                                   "on average): counted once")
+            continue
+        indices, stacks = by_ids.setdefault(ids.tobytes(), ([], []))
+        indices.append(len(kept))
+        stacks.append(pixels)
+        kept.append(view)
+        centres = np.vstack([centres, centre])
     return kept, repeated
 
 
@@ -519,7 +540,8 @@ def calibrate(
     # OpenCV's estimate from at most INIT_VIEWS views spread over the set (its cost grows with the views; the
     # joint refinement uses them all), then every view's pose from that camera
     chosen = np.unique(np.linspace(0, len(views) - 1, min(len(views), INIT_VIEWS)).round().astype(int))
-    say(f"initial estimate (OpenCV) from {len(chosen)} of {len(views)} views")
+    initial_views = len(chosen)
+    say(f"initial estimate (OpenCV) from {initial_views} of {len(views)} views")
     try:
         opencv_rms, K, dist, _, _ = cv2.calibrateCamera(
             [object_points[v].astype(np.float32) for v in chosen], [image_points[v].astype(np.float32) for v in chosen],
@@ -667,6 +689,7 @@ def calibrate(
         camera=camera, std=dict(zip(PARAM_NAMES, map(float, std_values), strict=True)), correlation=correlation,
         rms_px=float(np.sqrt(np.mean(err**2))), mean_px=float(err.mean()), max_residual_px=float(err.max()),
         views=reports, rejected_views=rejected_views, warnings=warnings, opencv_rms_px=float(opencv_rms),
+        opencv_rms_views=initial_views,
         sigma0_px=sigma0, iterations=iterations, seconds=time.perf_counter() - started, coverage=coverage,
         converged=not unconverged, radial_profile=profile,
         std_covariance=dict(zip(PARAM_NAMES, map(float, covariance_std), strict=True)),

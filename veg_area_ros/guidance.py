@@ -91,11 +91,14 @@ class CalibrationGuide:
         if self.covered is None:
             self.covered = np.zeros((GRID[1], GRID[0]), bool)
 
-    def offer(self, detection: Detection, image: np.ndarray, keep: bool = False) -> Verdict:
+    def offer(self, detection: Detection, image: np.ndarray, keep: bool = False,
+              stats: ViewStats | None = None) -> Verdict:
         """Judge a view: kept (it adds variety and is sharp and well exposed) or rejected with its reason.
         `keep`: count it among the kept views whatever the verdict (a set of photos chosen by hand: the
-        verdict is then advice)."""
-        stats = view_stats(detection, image, self.board, self.image_size)
+        verdict is then advice). `stats`: the view's `view_stats`, where they were computed already (beside
+        the board's search, on another thread)."""
+        if stats is None:
+            stats = view_stats(detection, image, self.board, self.image_size)
         signature = pose_signature(detection.image_points, self.image_size)
         cells = coverage_grid([detection.image_points], *self.image_size, *GRID)
         verdict = self._judge(stats, signature, cells)
@@ -139,8 +142,9 @@ class CalibrationGuide:
             return {name: 0.0 for name in GOALS}
         def span(values: list[float]) -> float:
             return float(max(values) - min(values))
-        rolls = [s.roll for s in self.kept]
-        roll_span = max((min(abs(a - b) % 180, 180 - abs(a - b) % 180) for a in rolls for b in rolls), default=0.0)
+        rolls = np.array([s.roll for s in self.kept])
+        apart = np.abs(rolls[:, None] - rolls[None, :]) % 180  # every pair, on the circle of directions mod 180
+        roll_span = float(np.minimum(apart, 180 - apart).max())
         return {"x": span([s.position[0] for s in self.kept]), "y": span([s.position[1] for s in self.kept]),
                 "size": span([s.size for s in self.kept]), "tilt_h": span([s.tilt_h for s in self.kept]),
                 "tilt_v": span([s.tilt_v for s in self.kept]), "roll": float(roll_span),

@@ -70,21 +70,25 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
     still over several frames counts once."""
     from ..calibration import View, same_pose
     from ..frames import decodable_ahead, iter_frames
-    from ..guidance import CalibrationGuide
+    from ..guidance import CalibrationGuide, view_stats
     from ..pipeline import ordered_map, prefetched
 
     found = BoardViews(image_size=image_size)
     last_kept: dict[str, object] = {}  # per video: the last view kept
 
     def detect(frame):
-        return None if frame.image is None else board.detect(frame.image)
+        """The board, and the numbers the guidance judges the view by (on the worker, beside the search)."""
+        detection = None if frame.image is None else board.detect(frame.image)
+        if detection is None:
+            return None, None
+        return detection, view_stats(detection, frame.image, board, frame.image.shape[1::-1])
 
     # frames searched by two threads (OpenCV releases Python's lock), judged here in their order; a video's
     # frames also decoded in a thread of their own
     frames = iter_frames(files, step, grey=True)  # the board is found in grey: colour would only cost time
     if decodable_ahead(files):
         frames = prefetched(frames, depth=2 * DETECT_WORKERS)
-    for frame, detection in ordered_map(detect, frames, workers=DETECT_WORKERS):
+    for frame, (detection, stats) in ordered_map(detect, frames, workers=DETECT_WORKERS):
         found.seen += 1
         seen = found.seen
         if frame.image is None:
@@ -113,7 +117,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
         found.views.append(View(frame.name, detection))
         if found.guide is None:
             found.guide = CalibrationGuide(board, found.image_size)
-        verdict = found.guide.offer(detection, frame.image, keep=True)  # the user chose them: advice only
+        verdict = found.guide.offer(detection, frame.image, keep=True, stats=stats)  # the user chose them: advice
         advice = f" ({verdict.reason})" if not verdict.kept and verdict.kind != "similar" else ""
         say(f"[{seen}] {frame.name}: {len(detection)} board points{advice}")
     if found.guide is not None:
