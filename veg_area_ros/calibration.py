@@ -241,11 +241,14 @@ def pose_signature(points: np.ndarray, image_size: tuple[int, int]) -> np.ndarra
     width, height = image_size
     centre = points.mean(axis=0)
     spread = points - centre
-    _, s, vt = np.linalg.svd(spread, full_matrices=False)
-    angle = math.atan2(vt[0, 1], vt[0, 0])
-    size = math.sqrt(max(s[0] * s[1], 1e-9) / len(points)) / width
-    return np.array([centre[0] / width, centre[1] / height, 2 * size, 0.25 * math.cos(2 * angle),
-                     0.25 * math.sin(2 * angle), s[1] / max(s[0], 1e-9) * 0.3])
+    # the spread's principal axes from its 2x2 scatter matrix (what an SVD of the points gives, without one)
+    (a, b), (_, d) = spread.T @ spread
+    half_gap = math.hypot((a - d) / 2, b)
+    major, minor = math.sqrt((a + d) / 2 + half_gap), math.sqrt(max((a + d) / 2 - half_gap, 0.0))
+    doubled = math.atan2(2 * b, a - d)  # twice the major axis's direction
+    size = math.sqrt(max(major * minor, 1e-9) / len(points)) / width
+    return np.array([centre[0] / width, centre[1] / height, 2 * size, 0.25 * math.cos(doubled),
+                     0.25 * math.sin(doubled), minor / max(major, 1e-9) * 0.3])
 
 
 HELD_POSE_FRACTION = 0.01  # board points moving less than this share of the image diagonal: the same pose

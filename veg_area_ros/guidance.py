@@ -8,6 +8,7 @@ No ROS here.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import Counter
 from dataclasses import dataclass, field
@@ -86,6 +87,7 @@ class CalibrationGuide:
     signatures: list[np.ndarray] = field(default_factory=list)
     rejected: Counter = field(default_factory=Counter)
     covered: np.ndarray | None = None
+    kept_widths: list[float] = field(default_factory=list)  # the kept views' edge widths, sorted (their median)
 
     def __post_init__(self) -> None:
         if self.covered is None:
@@ -104,6 +106,7 @@ class CalibrationGuide:
         verdict = self._judge(stats, signature, cells)
         if verdict.kept or keep:
             self.kept.append(stats)
+            bisect.insort(self.kept_widths, stats.edge_width_px)
             self.signatures.append(signature)
             self.covered |= cells
         else:
@@ -132,8 +135,11 @@ class CalibrationGuide:
     def blur_limit(self) -> float:
         """The widest edges a kept view may have: BLUR_FACTOR times the kept views' median, or an absolute
         limit (scaled with the image width) until three views are kept."""
-        if len(self.kept) >= 3:
-            return BLUR_FACTOR * float(np.median([s.edge_width_px for s in self.kept]))
+        if len(self.kept_widths) >= 3:
+            middle = len(self.kept_widths) // 2
+            median = (self.kept_widths[middle] if len(self.kept_widths) % 2
+                      else (self.kept_widths[middle - 1] + self.kept_widths[middle]) / 2)
+            return BLUR_FACTOR * float(median)
         return MAX_EDGE_WIDTH_PX * max(1.0, self.image_size[0] / 640)
 
     def spans(self) -> dict[str, float]:
@@ -239,15 +245,14 @@ def _corner_quality(grey: np.ndarray, points: np.ndarray, samples: int = 24) -> 
     rimmed = np.lib.stride_tricks.sliding_window_view(grey, (side + 4, side + 4))[corners[:, 1], corners[:, 0]]
     raw = rimmed[:, 2:-2, 2:-2]
     clipped = float(np.count_nonzero(raw >= CLIP_LEVEL)) / raw.size
-    # lightly smoothed, so that the sensor's noise neither widens the contrast nor steepens an edge
-    rimmed = rimmed.astype(np.float32)
-    mean = sum(rimmed[:, dy:dy + side + 2, dx:dx + side + 2] for dy in range(3) for dx in range(3)) / 9
-    window = mean[:, 1:-1, 1:-1]
+    # lightly smoothed, so that the sensor's noise neither widens the contrast nor steepens an edge; the windows
+    # filtered as one image stacked from them (a window's 2 px rim keeps its neighbours out of what is used)
+    mosaic = cv2.blur(rimmed.reshape(-1, side + 4).astype(np.float32), (3, 3))
+    inner = (slice(None), slice(2, -2), slice(2, -2))
+    window = mosaic.reshape(rimmed.shape)[inner]
     contrast = window.max(axis=(1, 2)) - window.min(axis=(1, 2))
-    rows = mean[:, :-2] + 2 * mean[:, 1:-1] + mean[:, 2:]  # Sobel's smoothing across x's derivative
-    cols = mean[:, :, :-2] + 2 * mean[:, :, 1:-1] + mean[:, :, 2:]
-    gx = (rows[:, :, 2:] - rows[:, :, :-2]) / 8
-    gy = (cols[:, 2:, :] - cols[:, :-2, :]) / 8
+    gx = cv2.Sobel(mosaic, cv2.CV_32F, 1, 0, ksize=3).reshape(rimmed.shape)[inner] / 8
+    gy = cv2.Sobel(mosaic, cv2.CV_32F, 0, 1, ksize=3).reshape(rimmed.shape)[inner] / 8
     # the steepest gradient along each of four directions: motion smears the edges across its direction
     # only, so the widest of the four sees it (a sharp board turned 45 degrees reads at most 1.4x)
     steepest = np.min([np.abs(g).max(axis=(1, 2)) for g in (gx, gy, (gx + gy) * SQRT_HALF, (gx - gy) * SQRT_HALF)],
