@@ -197,3 +197,24 @@ def test_a_symmetric_circle_grid_calibrates():
     assert len(views) >= 10
     result = calibrate(views, ENDOSCOPE.image_size)
     assert abs(result.camera.fx / ENDOSCOPE.fx - 1) < 0.005 and result.rms_px < 0.2
+
+
+def test_repeats_are_found_whether_a_view_has_the_same_points_or_most_of_them():
+    """A repeat of a whole board (the very same point ids: compared all at once) and of a partial ChArUco view
+    (most ids shared: matched id by id) are both counted once; a board moved by 5 px is a view of its own."""
+    from veg_area_ros.calibration import distinct_views
+
+    rng = np.random.default_rng(0)
+    ids = np.arange(24)
+    pixels = rng.uniform(100, 500, (24, 2))
+    objects = np.column_stack([rng.uniform(0, 0.2, (24, 2)), np.zeros(24)])
+    first = View("first.png", Detection(pixels, objects, ids))
+    views = [first,
+             View("moved.png", Detection(pixels + 5.0, objects, ids)),
+             View("copy.png", Detection(pixels + 0.01, objects, ids)),
+             View("partial.png", Detection(pixels[1:] - 0.02, objects[1:], ids[1:])),
+             View("other_half.png", Detection(pixels[12:], objects[12:], ids[12:]))]
+    kept, repeated = distinct_views(views)
+    assert [v.name for v in kept] == ["first.png", "moved.png", "other_half.png"]
+    assert set(repeated) == {"copy.png", "partial.png"}
+    assert all("the same view as first.png" in reason for reason in repeated.values())

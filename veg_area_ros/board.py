@@ -197,17 +197,19 @@ class BoardSpec:
 
 
 def board_in_view(grey: np.ndarray, size: tuple[int, int]) -> bool:
-    """OpenCV's quick check for a chessboard of `size` inner corners: first on a half-size copy (a quarter of
-    the cost, which on a 1280x720 frame was more than the detection's own) and, where that sees none, at full
-    size, so that no board the full-size check sees is missed."""
-    if min(grey.shape[:2]) >= HALF_SIZE_CHECK_MIN_SIDE:
-        half = cv2.resize(grey, (grey.shape[1] // 2, grey.shape[0] // 2), interpolation=cv2.INTER_AREA)
-        if cv2.checkChessboard(half, size):
-            return True
+    """OpenCV's quick check for a chessboard of `size` inner corners, on a quarter-size copy, then a half-size
+    one, then the frame itself, until one sees a board: a reduced copy costs a fraction of the full check (which
+    on a 1280x720 frame cost more than the detection itself), and the full-size check misses boards whose
+    squares are large (82 of 454 frames of a real phone video that the detector finds, 5 at a quarter size)."""
+    for factor in (4, 2):
+        if min(grey.shape[:2]) // factor >= MIN_CHECK_SIDE:
+            reduced = cv2.resize(grey, (grey.shape[1] // factor, grey.shape[0] // factor), interpolation=cv2.INTER_AREA)
+            if cv2.checkChessboard(reduced, size):
+                return True
     return bool(cv2.checkChessboard(grey, size))
 
 
-HALF_SIZE_CHECK_MIN_SIDE = 480  # smaller frames are checked at full size only (the check is cheap there)
+MIN_CHECK_SIDE = 180  # a reduced copy smaller than this is not checked (a board's squares would be a few pixels)
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:
