@@ -171,9 +171,9 @@ class BoardSpec:
         flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
         found, corners = cv2.findChessboardCorners(grey, size, flags=flags)
         if not found:
-            # the sector-based detector copes better with blur, strong distortion and a board cut by the frame's
-            # edge; its accuracy mode costs 4x the time and places corners no closer to the truth than the
-            # saddle refinement below (renders under blur and motion; real frames' residuals)
+            # the sector-based detector copes better with strong distortion and a board cut by the frame's edge;
+            # its accuracy mode costs 4x the time and was no closer to the truth than the saddle refinement
+            # below (renders of a distorted lens and under moderate blur; real frames' residuals)
             found, corners = cv2.findChessboardCornersSB(grey, size)
             if not found:
                 return None
