@@ -488,8 +488,7 @@ def distinct_views(views: Sequence[View]) -> tuple[list[View], dict[str, str]]:
         ids, pixels = np.asarray(view.detection.ids).ravel(), view.detection.image_points.reshape(-1, 2)
         centre = pixels.mean(axis=0)
         # only views whose points lie about where these do can repeat it (a cheap test before the ids' match)
-        near = np.flatnonzero(np.hypot(*(centres - centre).T) < SAME_VIEW_NEAR_PX)
-        near_views = near.tolist()
+        near_views = np.flatnonzero(np.hypot(*(centres - centre).T) < SAME_VIEW_NEAR_PX).tolist()
         moved: dict[int, float] = {}
         same_ids = by_ids.get(ids.tobytes())
         if same_ids is not None and near_views:  # e.g. a whole chessboard: the points in the same order

@@ -103,15 +103,16 @@ def read_image(path: Path, grey: bool = False) -> tuple[np.ndarray | None, str]:
             return None, f"declares {width}x{height} pixels, more than any camera here ({MAX_IMAGE_PIXELS} at most)"
         if min(width, height) < MIN_IMAGE_SIDE:
             return None, f"is {width}x{height} pixels, too small to hold a board or targets"
+    mode = cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR
     if data[:2] != JPEG_START:
-        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), mode)
         return (None, "is not an image OpenCV can decode") if image is None else (image, "")
     if not data.rstrip(b"\0\r\n ").endswith(b"\xff\xd9"):
         return None, "is a truncated JPEG (no end-of-image marker)"
     problem = jpeg_structure_problem(data)
     if problem:
         return None, f"is a corrupt JPEG ({problem})"
-    image, warning = _decode_jpeg(data, grey)
+    image, warning = _decode_jpeg(data, mode)
     if image is None:
         return None, "is not an image OpenCV can decode"
     if warning:
@@ -168,7 +169,7 @@ def jpeg_structure_problem(data: bytes) -> str | None:
     return "no end-of-image marker"
 
 
-def _decode_jpeg(data: bytes, grey: bool = False) -> tuple[np.ndarray | None, str]:
+def _decode_jpeg(data: bytes, mode: int = cv2.IMREAD_COLOR) -> tuple[np.ndarray | None, str]:
     """Decode a JPEG and catch what libjpeg prints to stderr (at most one warning per image): OpenCV decodes a
     corrupt scan without an error, so its warning is the only sign. The capture swaps file descriptor 2 for
     the few milliseconds of the decode."""
@@ -177,7 +178,7 @@ def _decode_jpeg(data: bytes, grey: bool = False) -> tuple[np.ndarray | None, st
         saved = os.dup(2)
         try:
             os.dup2(capture.fileno(), 2)
-            image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
+            image = cv2.imdecode(np.frombuffer(data, np.uint8), mode)
         finally:
             os.dup2(saved, 2)
             os.close(saved)
@@ -316,8 +317,8 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
 
 
 def _greyed(frames: Iterator[Frame], grey: bool) -> Iterator[Frame]:
+    """The frames in one channel where `grey` (videos and bags give BGR or mono8)."""
     for frame in frames:
         if grey and frame.image is not None and frame.image.ndim == 3:
-            code = cv2.COLOR_BGRA2GRAY if frame.image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
-            frame = replace(frame, image=cv2.cvtColor(frame.image, code))
+            frame = replace(frame, image=cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY))
         yield frame
