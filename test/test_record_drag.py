@@ -120,14 +120,14 @@ def test_record_command_duration_all_and_a_mistyped_topic(tmp_path):
     mistyped, everything = result["mistyped"], result["all"]
     assert mistyped["exit"] == 1 and "never seen on the graph, not recorded: /image_rwa" in mistyped["stderr"]
     assert everything["exit"] == 0, everything["stderr"]
-    assert everything["seconds"] < 30  # --duration 3 stopped it (start-up aside)
+    assert everything["seconds"] < 40  # --duration 8 stopped it (start-up aside)
     info = yaml.safe_load((Path(everything["bag"]) / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
     topics = {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
-    assert topics.get("/image_raw", 0) >= 5 and "/rosout" not in topics, (topics, everything["stderr"])
+    assert "/image_raw" in topics and "/rosout" not in topics, (topics, everything["stderr"])
     # discovery takes seconds: the recorder says what it missed of the 5 Hz camera before its first frame
     said = re.search(r"/image_raw: not recorded in the first ([\d.]+) s after the command, about (\d+) messages",
                      everything["stderr"])
-    assert said, everything["stderr"]
+    assert said, (topics, everything["stderr"])
     gap, missed = float(said.group(1)), int(said.group(2))
     # the estimate is the gap times the camera's rate as the bag shows it (a loaded machine may run the 5 Hz
     # camera slower): the frames stamped within the first recorded second
@@ -135,6 +135,9 @@ def test_record_command_duration_all_and_a_mistyped_topic(tmp_path):
         images = [c for c in reader.connections if c.topic == "/image_raw"]
         stamps = [decode_image(data).header.nanoseconds for _, _, data in reader.messages(connections=images)]
     rate = sum(1 for s in stamps if s - stamps[0] <= 1_000_000_000) - 1
+    # the recording runs until the duration's end, however late discovery found the camera: the 8 s timer starts
+    # after the command, so at least 8 s - gap remain after the first frame (2 s allowed for a slow camera)
+    assert (stamps[-1] - stamps[0]) / 1e9 >= 8 - gap - 2, (gap, len(stamps), (stamps[-1] - stamps[0]) / 1e9)
     assert 0 < gap < 30 and 0 < rate <= 6 and abs(missed - gap * rate) <= 1, (gap, missed, rate)
 
 
