@@ -4,7 +4,16 @@ import pytest
 from helpers import OPENCV_LEFT, OPENCV_REFERENCE_RMS, render_views, shared
 
 from veg_area_ros.board import BoardSpec, Detection
-from veg_area_ros.calibration import PARAM_NAMES, CalibrationError, View, _uncertainty_warnings, calibrate
+from veg_area_ros.calibration import (
+    LM_DAMPING_COLD,
+    LM_DAMPING_WARM,
+    PARAM_NAMES,
+    CalibrationError,
+    View,
+    _bundle_lm,
+    _uncertainty_warnings,
+    calibrate,
+)
 from veg_area_ros.sim.synthetic import ENDOSCOPE, FlatPort
 
 
@@ -218,3 +227,27 @@ def test_repeats_are_found_whether_a_view_has_the_same_points_or_most_of_them():
     assert [v.name for v in kept] == ["first.png", "moved.png", "other_half.png"]
     assert set(repeated) == {"copy.png", "partial.png"}
     assert all("the same view as first.png" in reason for reason in repeated.values())
+
+
+def test_a_refit_from_a_converged_solution_needs_few_iterations_and_finds_the_same_minimum():
+    """An outlier round refits after a few points are dropped: it starts from the converged solution at
+    Gauss-Newton-like damping, and lands where a fit started afresh at Marquardt's usual damping lands."""
+    board = BoardSpec.parse("chessboard:9x6:1")
+    detections = [board.detect(cv2.imread(str(path))) for path in sorted(OPENCV_LEFT.glob("*.jpg"))]
+    objects = [d.object_points.astype(np.float64) for d in detections]
+    pixels = [d.image_points.astype(np.float64) for d in detections]
+    _, K, dist, rvecs, tvecs = cv2.calibrateCamera([o.astype(np.float32) for o in objects],
+                                                   [p.astype(np.float32) for p in pixels], (640, 480), None, None)
+    start = np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], np.ravel(dist)[:5]]
+                           + [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs, strict=True)])
+    converged, ok, _ = _bundle_lm(objects, pixels, start)
+    assert ok
+    rng = np.random.default_rng(3)
+    keep = [rng.random(len(o)) > 0.05 for o in objects]  # a twentieth of the points condemned
+    objects, pixels = [o[k] for o, k in zip(objects, keep, strict=True)], [p[k] for p, k in zip(pixels, keep,
+                                                                                                  strict=True)]
+    warm, warm_ok, warm_iterations = _bundle_lm(objects, pixels, converged, LM_DAMPING_WARM)
+    cold, cold_ok, cold_iterations = _bundle_lm(objects, pixels, converged, LM_DAMPING_COLD)
+    assert warm_ok and cold_ok and warm_iterations <= 5 and warm_iterations < cold_iterations, (
+        warm_iterations, cold_iterations)
+    assert np.allclose(warm[:9], cold[:9], rtol=1e-7, atol=1e-9), warm[:9] - cold[:9]
