@@ -108,9 +108,10 @@ def test_a_sequence_never_rolled_asks_for_a_90_degree_roll():
 
 def test_too_few_views_ask_for_more(varied):
     guide, _ = varied
-    few = CalibrationGuide(BOARD_SPEC, ENDOSCOPE.image_size, min_views=40)
-    few.kept, few.covered = guide.kept, guide.covered
+    few = CalibrationGuide(BOARD_SPEC, ENDOSCOPE.image_size, min_views=40, kept=list(guide.kept),
+                           covered=guide.covered.copy())
     assert few.still_needed().endswith(f"(kept {len(guide.kept)} of 40)")
+    assert few.blur_limit() == guide.blur_limit()  # a guide made from kept views judges blur by their widths
 
 
 def test_motion_blur_and_over_exposure_are_rejected_with_their_reasons(varied):

@@ -87,11 +87,13 @@ class CalibrationGuide:
     signatures: list[np.ndarray] = field(default_factory=list)
     rejected: Counter = field(default_factory=Counter)
     covered: np.ndarray | None = None
-    kept_widths: list[float] = field(default_factory=list)  # the kept views' edge widths, sorted (their median)
+    # the kept views' edge widths, sorted (their median at hundreds of views); kept up to date by offer()
+    kept_widths: list[float] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.covered is None:
             self.covered = np.zeros((GRID[1], GRID[0]), bool)
+        self.kept_widths = sorted(s.edge_width_px for s in self.kept)
 
     def offer(self, detection: Detection, image: np.ndarray, keep: bool = False,
               stats: ViewStats | None = None) -> Verdict:
