@@ -199,8 +199,10 @@ class BoardSpec:
 def board_in_view(grey: np.ndarray, size: tuple[int, int]) -> bool:
     """OpenCV's quick check for a chessboard of `size` inner corners, on a quarter-size copy, then a half-size
     one, then the frame itself, until one sees a board: a reduced copy costs a fraction of the full check (which
-    on a 1280x720 frame cost more than the detection itself), and the full-size check misses boards whose
-    squares are large (82 of 454 frames of a real phone video that the detector finds, 5 at a quarter size)."""
+    on a 1280x720 frame cost more than the detection itself), and the full-size check misses printed boards
+    whose black squares stop short of the grid: their white squares touch across the corners by bridges a few
+    pixels wide, which its one-pixel erosion does not cut (82 of 454 frames of a real phone video that the
+    detector finds; 5 at a quarter size, where the bridges are under a pixel)."""
     for factor in (4, 2):
         if min(grey.shape[:2]) // factor >= MIN_CHECK_SIDE:
             reduced = cv2.resize(grey, (grey.shape[1] // factor, grey.shape[0] // factor), interpolation=cv2.INTER_AREA)
