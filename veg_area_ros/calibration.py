@@ -584,8 +584,9 @@ def calibrate(
         x_active = np.concatenate([x[:N_INTRINSIC]] + [x[pose_of(v)] for v in active])
         say(f"bundle adjustment: {len(active)} views, {sum(len(o) for o in active_objects)} points")
         if robust_loss == "linear":
+            refit = iterations > 0  # x holds a converged (or stopped) fit already
             solution, converged, nfev = _bundle_lm(active_objects, active_images, x_active,
-                                                   LM_DAMPING_WARM if iterations else LM_DAMPING_COLD)
+                                                   LM_DAMPING_WARM if refit else LM_DAMPING_COLD)
         else:  # robust losses: scipy's trust region on the sparse Jacobian
             problem = _Problem(active_objects, active_images)
             fit = least_squares(problem.residuals, x_active, jac=problem.jacobian, method="trf", x_scale="jac",
