@@ -27,7 +27,7 @@ def numbers(line: str) -> list[float]:
 
 
 def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
-    out = run_bench("area_speed.py", "--repeats", "1", "--video-frames", "30")
+    out = run_bench("area_speed.py", "--repeats", "1", "--video-frames", "30", "--video-runs", "2")
     cores = [line for line in out.splitlines() if "area core" in line]
     assert len(cores) == 4, out  # count and sub-pixel mode at each size
     for line in cores:
@@ -37,8 +37,11 @@ def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
         assert "sub-pixel" in line and numbers(line.split("copy,")[1])[0] > 0, line  # its cost against count's
     noisy = [line for line in out.splitlines() if "DN: sub-pixel core" in line]
     assert len(noisy) == 6 and all(re.search(r"rebuilt \d+ of \d+ frames", line) for line in noisy), out
-    video = next(line for line in out.splitlines() if "veg-area measure of a 30-frame" in line)
-    assert numbers(video.split("(")[-1])[0] > 0, video
+    videos = [line for line in out.splitlines() if "veg-area measure of a 30-frame" in line]
+    assert len(videos) == 2 and all(numbers(video.split("(")[-1])[0] > 0 for video in videos), out
+    spread = re.search(r"over 2 run\(s\): min ([\d.]+)x, median ([\d.]+)x, max ([\d.]+)x; at most 3x in (\d) of 2", out)
+    ratios = sorted(numbers(video.split("(")[-1])[0] for video in videos)
+    assert spread and float(spread[1]) == round(ratios[0], 2) and float(spread[3]) == round(ratios[1], 2), out
 
 
 def test_calibration_speed_ours_fits_no_worse_than_opencv():

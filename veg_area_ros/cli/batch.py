@@ -10,6 +10,7 @@ import os
 import queue
 import signal
 import statistics
+import threading
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
@@ -159,19 +160,27 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
     context = multiprocessing.get_context("spawn")  # workers start clean (OpenCV threads, no forked state)
     say = progress(job.quiet)
     say(f"batch: {len(inputs)} inputs, {workers} at a time")
-    with context.Manager() as manager, ProcessPoolExecutor(workers, mp_context=context,
-                                                           initializer=_ignore_ctrl_c) as pool:
-        progress_queue, stopping = manager.Queue(), manager.Event()
-        pending = {}
-        for k, source in enumerate(inputs):
-            pending[pool.submit(_measure_one, input_job(job, source, csv_paths[k]), k, progress_queue,
-                                stopping)] = k
-        done_frames: dict[int, tuple[int, int]] = {}
-        summaries: dict[int, dict] = {}
-        last_line = 0.0
-        interrupted = False
-        try:
-            while pending:
+    # Ctrl-C and SIGTERM set a flag that the loop reads between its steps: raised as KeyboardInterrupt they could
+    # land inside a call to the manager (its reply half read), and the next call on that connection would hang
+    stop = threading.Event()
+    handlers = catch_stop_signals(stop)
+    summaries: dict[int, dict] = {}
+    interrupted = False
+    # Ctrl-C held back while the manager and the workers start: they inherit the mask, so they never see it (a
+    # worker interrupted before its initializer ran would break the pool); here it arrives once they run
+    unblocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        with context.Manager() as manager, ProcessPoolExecutor(workers, mp_context=context,
+                                                               initializer=_ignore_ctrl_c) as pool:
+            progress_queue, stopping = manager.Queue(), manager.Event()
+            pending = {}
+            for k, source in enumerate(inputs):
+                pending[pool.submit(_measure_one, input_job(job, source, csv_paths[k]), k, progress_queue,
+                                    stopping)] = k
+            signal.pthread_sigmask(signal.SIG_SETMASK, unblocked)  # every worker is started by its submit
+            done_frames: dict[int, tuple[int, int]] = {}
+            last_line = 0.0
+            while pending and not stop.is_set():
                 finished, _ = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
                 for future in finished:
                     k = pending.pop(future)
@@ -188,11 +197,27 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
                     say(f"batch: {len(summaries)}/{len(inputs)} inputs done; {frames} of {total} frames "
                         "measured in the inputs begun")
                     last_line = time.monotonic()
-        except KeyboardInterrupt:  # the workers stop after their current frame and keep what they measured
-            interrupted = True
-            stopping.set()
-            for future in pending:
-                future.cancel()
-            for future, k in pending.items():
-                summaries[k] = _outcome(future, inputs[k], csv_paths[k])
+            if pending:  # stopped: the workers stop after their current frame and keep what they measured
+                interrupted = True
+                stopping.set()
+                for future in pending:
+                    future.cancel()
+                for future, k in pending.items():
+                    summaries[k] = _outcome(future, inputs[k], csv_paths[k])
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, unblocked)
+        restore_signals(handlers)
     return finish_batch(job, folder, [summaries[k] for k in range(len(inputs))], interrupted)
+
+
+def catch_stop_signals(stop: threading.Event) -> dict:
+    """SIGINT and SIGTERM set `stop` (in the main thread; elsewhere they stay as they are); the handlers they
+    replace, for `restore_signals`."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {number: signal.signal(number, lambda *_: stop.set()) for number in (signal.SIGINT, signal.SIGTERM)}
+
+
+def restore_signals(handlers: dict) -> None:
+    for number, handler in handlers.items():
+        signal.signal(number, handler)

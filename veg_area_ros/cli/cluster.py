@@ -6,13 +6,12 @@ write); this client writes each input's CSV and plot, batch_summary.csv and the 
 
 from __future__ import annotations
 
-import signal
 import threading
 import time
 from dataclasses import replace
 from pathlib import Path
 
-from .batch import _summary, check_batch, finish_batch, input_job, input_summary
+from .batch import _summary, catch_stop_signals, check_batch, finish_batch, input_job, input_summary, restore_signals
 from .common import EXIT_FAILED, EXIT_OK, CliError, progress, write_csv
 from .measure_job import CSV_COLUMNS, MeasureJob, csv_row, frames_lost, measure, no_object_anywhere, plot_series
 
@@ -105,7 +104,7 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
     # Ctrl-C and SIGTERM set a flag that the loop reads between results: raised as KeyboardInterrupt they can
     # land inside Dask's own code (a Future's __del__ swallows it), and the interrupt would be lost
     stop = threading.Event()
-    handlers = _catch_signals(stop)
+    handlers = catch_stop_signals(stop)
     try:
         while not counting.is_empty() and not stop.is_set():
             if not counting.has_ready():
@@ -148,21 +147,9 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
             client.cancel(list(pending))
     finally:
         client.close()
-        _restore_signals(handlers)
+        restore_signals(handlers)
     return finish_batch(job, folder, [summaries.get(k) or _summary(inputs[k], "", "interrupted before it finished")
                                       for k in range(len(inputs))], interrupted)
-
-
-def _catch_signals(stop: threading.Event) -> dict:
-    """SIGINT and SIGTERM set `stop` (in the main thread; elsewhere they stay as they are)."""
-    if threading.current_thread() is not threading.main_thread():
-        return {}
-    return {number: signal.signal(number, lambda *_: stop.set()) for number in (signal.SIGINT, signal.SIGTERM)}
-
-
-def _restore_signals(handlers: dict) -> None:
-    for number, handler in handlers.items():
-        signal.signal(number, handler)
 
 
 def _reason(exc: BaseException) -> str:
