@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from helpers import calibrated_endoscope, shared
 
-from veg_area_ros import markers
+from veg_area_ros import area, markers
 from veg_area_ros.area import SCALE_TOLERANCE, AreaMeasurer
 from veg_area_ros.classify import Classifier, otsu_level
 from veg_area_ros.markers import RETRACK_AGREEMENT_PX, detect_markers, retrack_marker, track_markers
@@ -86,6 +86,37 @@ def test_weights_are_reused_while_the_targets_stay_and_rebuilt_when_they_move(wa
     assert measurer.rebuilds == 1
     measurer.measure(render_scene(ENDOSCOPE, CUBE, 0.72, FlatPort(), roll_deg=2.0))  # the camera was bumped
     assert measurer.rebuilds == 2
+
+
+def _same_weights(a, b) -> bool:
+    return (a.window == b.window and np.array_equal(a.roi, b.roi) and np.array_equal(a.levels, b.levels)
+            and np.array_equal(a.level_area, b.level_area))
+
+
+@pytest.mark.parametrize("margin", [area.GEOMETRY_MARGIN_PX, -20])
+def test_pixel_geometry_over_the_rois_window_gives_the_whole_frames_weights(water_camera, monkeypatch, margin):
+    """The raw pixels' geometry is computed over the window that can hold the ROI (its raw bounding box),
+    and the weights are bit for bit those of the whole frame's geometry; a ROI that leaves the window (the
+    camera closer) gets the whole frame's; a window too small (a negative margin, which never happens) is
+    caught and replaced by the whole frame."""
+    monkeypatch.setattr(area, "GEOMETRY_MARGIN_PX", margin)
+    height, width = ENDOSCOPE.image_size[1], ENDOSCOPE.image_size[0]
+    windowed = AreaMeasurer(water_camera, targets(), Classifier(threshold=120))
+    whole = AreaMeasurer(water_camera, targets(), Classifier(threshold=120))
+    whole._geometry = area._Geometry.build(water_camera, height, width, 0, height, 0, width)
+    for distance in (0.7, 0.6):
+        frame = render_scene(ENDOSCOPE, CUBE, distance, FlatPort(), tilt_deg=6.0)
+        a, b = windowed.measure(frame), whole.measure(frame)
+        assert _same_weights(windowed._weights, whole._weights)
+        assert a.area_m2 == b.area_m2
+        if distance == 0.7:
+            assert windowed._geometry.full == (margin < 0)
+            if margin > 0:  # the ROI's own raw window and the margin around it, and the pixel the lookup may round over
+                geometry, (rows, columns) = windowed._geometry, windowed._weights.window
+                assert rows.start - margin - 4 <= geometry.top and geometry.bottom <= rows.stop + margin + 4
+                assert columns.start - margin - 4 <= geometry.left and geometry.right <= columns.stop + margin + 4
+        else:
+            assert windowed._geometry.full
 
 
 @pytest.mark.parametrize("sigma", [2.0, 4.0])

@@ -110,3 +110,29 @@ def test_markers_that_did_not_move_are_not_retracked_and_a_bumped_camera_is(monk
     moved = skipping[20].target_pixels["marker 0"] - skipping[19].target_pixels["marker 0"]
     expected = every[20].target_pixels["marker 0"] - every[19].target_pixels["marker 0"]
     assert np.hypot(*moved) > 2.5 and np.max(np.abs(moved - expected)) < 0.1
+
+
+def test_a_frame_whose_markers_did_not_move_keeps_the_last_fit_and_gives_the_rows_of_fitting_again():
+    """The scale is fitted again only when a marker was re-tracked (here: the first frame and the bump); every
+    row equals a run that forgets the last fit before each frame and so fits every frame."""
+    clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0)
+    bumped = cv2.warpAffine(clean, np.float32([[1, 0, 2.6], [0, 1, -1.3]]), ENDOSCOPE.image_size,
+                            borderMode=cv2.BORDER_REPLICATE)
+    rng = np.random.default_rng(1)
+    frames = [np.clip((clean if k < 12 else bumped) + rng.normal(0, 4, clean.shape), 0, 255).astype(np.uint8)
+              for k in range(24)]
+    keeping = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
+    kept = [keeping.measure(frame) for frame in frames]
+    refitting = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
+    refitted = []
+    for frame in frames:
+        refitting._last_located = refitting._carried = None  # forget the last fit: fit this frame's corners
+        refitted.append(refitting.measure(frame))
+
+    def fits(results) -> int:  # distinct scale fits among the frames
+        return len({id(result.scale) for result in results})
+
+    assert fits(refitted) == len(frames)
+    assert 2 <= fits(kept) <= 4  # the first frame and the bump (a re-track just after it allowed)
+    assert kept[11].scale is not kept[12].scale  # the bump is fitted
+    assert [result.summary() for result in kept] == [result.summary() for result in refitted]

@@ -62,6 +62,7 @@ INTERIOR_PX = 3  # a class's interior: this far inside it, a blurred edge (1 px 
 MAX_INTERIOR_PX = 30  # ... or deeper while the levels still move (a DSLR's turbid water: 7 px sd), up to this
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
 WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per frame
+GEOMETRY_MARGIN_PX = 16  # raw px around the ROI's window: a small move of the ROI needs no new geometry
 ROI_TOLERANCE_PX = 0.5  # targets moved further than this (idealized px) since the weights were built: rebuild
 NO_CALIBRATION_FOR_OFFSET = ("an object plane offset needs a calibration (the camera's pinhole); measure with "
                              "one, or put the targets in the object's plane")
@@ -139,6 +140,68 @@ class _Located:
     missing: list[int]
     holes: list[np.ndarray]  # marker squares (enlarged) to cut out of the default ROI
     offsets: list[np.ndarray]  # found markers' corners relative to their centre
+
+
+@dataclass
+class _Geometry:
+    """Raw pixels' positions in the idealized image (float32 maps) and the idealized-image area each covers, over
+    the raw window [top:bottom, left:right]."""
+    top: int
+    left: int
+    ideal_u: np.ndarray
+    ideal_v: np.ndarray
+    area: np.ndarray
+    frame_shape: tuple[int, int]  # (height, width) of the raw frame
+
+    @classmethod
+    def build(cls, camera: BrownCamera | None, height: int, width: int, top: int, bottom: int, left: int,
+              right: int) -> _Geometry:
+        ideal_u = np.empty((bottom - top, right - left), np.float32)
+        ideal_v, area = np.empty_like(ideal_u), np.ones_like(ideal_u)
+        u = np.arange(left, right, dtype=float)
+        if camera is None:  # the raw frame is the idealized image
+            ideal_u[:] = u
+            ideal_v[:] = np.arange(top, bottom, dtype=np.float32)[:, None]
+        else:
+            for first in range(top, bottom, 256):
+                rows = np.arange(first, min(first + 256, bottom), dtype=float)
+                uv = np.column_stack([np.tile(u, len(rows)), np.repeat(rows, len(u))])
+                ideal, block_area = camera.pixels_to_ideal(uv)
+                block = slice(first - top, first - top + len(rows))
+                ideal_u[block] = ideal[:, 0].reshape(len(rows), len(u))
+                ideal_v[block] = ideal[:, 1].reshape(len(rows), len(u))
+                area[block] = block_area.reshape(len(rows), len(u))
+        return cls(top, left, ideal_u, ideal_v, area, (height, width))
+
+    @property
+    def full(self) -> bool:
+        """The window is the whole frame."""
+        return (self.top, self.left, *self.ideal_u.shape) == (0, 0, *self.frame_shape)
+
+    @property
+    def bottom(self) -> int:
+        return self.top + self.ideal_u.shape[0]
+
+    @property
+    def right(self) -> int:
+        return self.left + self.ideal_u.shape[1]
+
+    def covers(self, top: int, bottom: int, left: int, right: int) -> bool:
+        return self.top <= top and bottom <= self.bottom and self.left <= left and right <= self.right
+
+    def roi(self, roi_ideal: np.ndarray) -> tuple[np.ndarray, tuple[int, int, int, int]]:
+        """The ROI over the window's raw pixels and its bounding box there (x, y, w, h)."""
+        roi_raw = cv2.remap(roi_ideal, self.ideal_u, self.ideal_v, cv2.INTER_NEAREST,
+                            borderMode=cv2.BORDER_CONSTANT)
+        return roi_raw, cv2.boundingRect(roi_raw)
+
+    def reaches_inner_edge(self, x: int, y: int, w: int, h: int) -> bool:
+        """Whether a box (in the window) touches an edge of the window that is not an edge of the frame: the
+        ROI may go on beyond it."""
+        height, width = self.ideal_u.shape
+        return ((x == 0 and self.left > 0) or (y == 0 and self.top > 0)
+                or (x + w == width and self.right < self.frame_shape[1])
+                or (y + h == height and self.bottom < self.frame_shape[0]))
 
 
 @dataclass
@@ -254,9 +317,12 @@ class AreaMeasurer:
         self._hand_pixels = self._idealize_points(np.array([p for p, _ in targets.points]).reshape(-1, 2))
         self._markers: dict[int, DetectedMarker] = {}  # raw-frame markers of the previous frame
         self.skip_unmoved_markers = True  # markers whose windows did not move keep their corners (markers.unmoved)
-        self._geometry: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._geometry: _Geometry | None = None  # over the ROI's raw window, or the whole frame
         self._weights: _Weights | None = None
         self._last_scale: PlaneScale | None = None  # the last frame's fit: where a hidden marker should be
+        # the last frame's markers (the same objects when none moved) and what they located: kept, not refitted
+        self._last_located: tuple[list[DetectedMarker], _Located] | None = None
+        self._carried: tuple[PlaneScale, tuple[_Weights, float, float]] | None = None  # the last fit's weights
         self.rebuilds = 0  # how often the weights were (re)built: once for a steady camera
         self.light_fits = 0  # how often the flat field and levels were found: every LIGHT_REFRESH_FRAMES, or a drift
         self._light: _Light | None = None  # the light and levels found and carried (sub-pixel mode)
@@ -266,6 +332,7 @@ class AreaMeasurer:
         measured as a first frame. A long input measured in segments gives the same rows whether its segments
         run one after another or on different workers."""
         self._markers, self._weights, self._last_scale, self._light = {}, None, None, None
+        self._last_located = self._carried = None
 
     def _idealize_points(self, raw_pixels: np.ndarray) -> np.ndarray:
         """Raw-frame pixels -> the idealized image."""
@@ -303,6 +370,10 @@ class AreaMeasurer:
             self._markers = track_markers(frame, self.targets.dictionary, self._markers, set(self.targets.markers),
                                           self._hidden_marker_guesses(), skip_unmoved=self.skip_unmoved_markers)
             found = [marker_id for marker_id in self.targets.markers if marker_id in self._markers]
+            tracked = [self._markers[marker_id] for marker_id in found]
+            if self._last_located is not None and len(tracked) == len(self._last_located[0]) and all(
+                    now is before for now, before in zip(tracked, self._last_located[0], strict=True)):
+                return self._last_located[1]  # no marker moved: the same corners give the same fit
             located.missing = [marker_id for marker_id in self.targets.markers if marker_id not in self._markers]
             raw_corners = np.array([self._markers[marker_id].corners for marker_id in found]).reshape(-1, 2)
             for marker_id, corners in zip(found, self._idealize_points(raw_corners).reshape(-1, 4, 2), strict=True):
@@ -326,6 +397,8 @@ class AreaMeasurer:
                                        self.targets.pixel_std, offset,
                                        self.idealizer.ideal.camera_matrix if offset is not None else None)
         self._last_scale = located.scale
+        if self.targets.markers:
+            self._last_located = tracked, located
         return located
 
     def _roi_polygon(self, located: _Located) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -352,26 +425,46 @@ class AreaMeasurer:
             roi &= self.idealizer.valid_mask()  # never count the black border the remap leaves
         return roi, polygon
 
-    def _pixel_geometry(self, height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Every raw pixel's position in the idealized image (u, v float32 maps) and the idealized-image area
-        it covers; once per camera, in row blocks to bound the memory of a 10-megapixel frame."""
-        if self._geometry is None:
-            ideal_u = np.empty((height, width), np.float32)
-            ideal_v, area = np.empty_like(ideal_u), np.ones_like(ideal_u)
-            u = np.arange(width, dtype=float)
-            if self.camera is None:  # the raw frame is the idealized image
-                ideal_u[:] = u
-                ideal_v[:] = np.arange(height, dtype=np.float32)[:, None]
-            else:
-                for top in range(0, height, 256):
-                    rows = np.arange(top, min(top + 256, height), dtype=float)
-                    uv = np.column_stack([np.tile(u, len(rows)), np.repeat(rows, width)])
-                    ideal, block_area = self.camera.pixels_to_ideal(uv)
-                    ideal_u[top:top + len(rows)] = ideal[:, 0].reshape(len(rows), width)
-                    ideal_v[top:top + len(rows)] = ideal[:, 1].reshape(len(rows), width)
-                    area[top:top + len(rows)] = block_area.reshape(len(rows), width)
-            self._geometry = ideal_u, ideal_v, area
+    def _pixel_geometry(self, height: int, width: int, roi_ideal: np.ndarray) -> _Geometry:
+        """The raw pixels' positions in the idealized image and the areas they cover, over a window holding
+        the raw pixels of this ROI (`_raw_window`; the first ROI's window with a margin, the whole frame once
+        a later ROI leaves it), in row blocks to bound the memory of a 10-megapixel frame."""
+        geometry = self._geometry
+        if geometry is not None and geometry.frame_shape != (height, width):  # frames of another size (no camera)
+            geometry = self._geometry = None
+        if geometry is not None and geometry.full:
+            return geometry
+        top, bottom, left, right = self._raw_window(height, width, roi_ideal)
+        if geometry is not None and geometry.covers(top, bottom, left, right):
+            return geometry
+        if geometry is not None:  # a second window: the ROI moves, so the whole frame once for all
+            top, bottom, left, right = 0, height, 0, width
+        self._geometry = _Geometry.build(self.camera, height, width, top, bottom, left, right)
         return self._geometry
+
+    def _raw_window(self, height: int, width: int, roi_ideal: np.ndarray) -> tuple[int, int, int, int]:
+        """Rows and columns (top, bottom, left, right; ends excluded) of the raw frame whose pixels can land in
+        the ROI: the raw image of the ROI's bounding box (widened by a pixel for the nearest-pixel lookup,
+        its edges taken every half pixel) with GEOMETRY_MARGIN_PX around it, within the frame. The lens maps
+        the box's inside inside its edges' image; `_build_weights` checks that the ROI did not reach the
+        window's edge."""
+        x, y, w, h = cv2.boundingRect(roi_ideal)
+        if w == 0 or h == 0 or self.camera is None:
+            return 0, height, 0, width
+        x0, y0, x1, y1 = x - 1.0, y - 1.0, x + w + 0.0, y + h + 0.0
+        across = np.linspace(x0, x1, int(2 * (x1 - x0)) + 2)
+        down = np.linspace(y0, y1, int(2 * (y1 - y0)) + 2)
+        edges = np.vstack([np.column_stack([across, np.full_like(across, y0)]),
+                           np.column_stack([across, np.full_like(across, y1)]),
+                           np.column_stack([np.full_like(down, x0), down]),
+                           np.column_stack([np.full_like(down, x1), down])])
+        raw = self._ideal_to_raw(edges)
+        if not np.all(np.isfinite(raw)):
+            return 0, height, 0, width
+        (u0, v0), (u1, v1) = raw.min(axis=0), raw.max(axis=0)
+        margin = GEOMETRY_MARGIN_PX
+        return (int(np.clip(np.floor(v0) - margin, 0, height)), int(np.clip(np.ceil(v1) + margin + 1, 0, height)),
+                int(np.clip(np.floor(u0) - margin, 0, width)), int(np.clip(np.ceil(u1) + margin + 1, 0, width)))
 
     def _check_layout(self, located: _Located, roi_polygon: np.ndarray) -> None:
         """TargetsError when the targets file cannot describe the detected markers (`marker_layout_problem`)."""
@@ -384,18 +477,21 @@ class AreaMeasurer:
 
     def _build_weights(self, frame: np.ndarray, located: _Located) -> _Weights:
         height, width = frame.shape[:2]
-        ideal_u, ideal_v, ideal_area = self._pixel_geometry(height, width)
         roi_ideal, polygon = self._roi_ideal(frame.shape, located)
         self._check_layout(located, polygon)
-        roi_raw = cv2.remap(roi_ideal, ideal_u, ideal_v, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT)
-        x, y, w, h = cv2.boundingRect(roi_raw)
+        geometry = self._pixel_geometry(height, width, roi_ideal)
+        roi_raw, (x, y, w, h) = geometry.roi(roi_ideal)
+        if w > 0 and h > 0 and geometry.reaches_inner_edge(x, y, w, h):  # the window was too small: never here
+            self._geometry = geometry = _Geometry.build(self.camera, height, width, 0, height, 0, width)
+            roi_raw, (x, y, w, h) = geometry.roi(roi_ideal)
         if w == 0 or h == 0:
             raise ClassifyError("the region of interest is empty")
-        window = (slice(y, y + h), slice(x, x + w))
-        roi = np.ascontiguousarray(roi_raw[window])
+        local = (slice(y, y + h), slice(x, x + w))  # in the geometry's window
+        window = (slice(y + geometry.top, y + geometry.top + h), slice(x + geometry.left, x + geometry.left + w))
+        roi = np.ascontiguousarray(roi_raw[local])
         inside = roi > 0
-        uv = np.column_stack([ideal_u[window][inside], ideal_v[window][inside]])
-        exact = ideal_area[window][inside] * located.scale.pixel_area(uv)
+        uv = np.column_stack([geometry.ideal_u[local][inside], geometry.ideal_v[local][inside]])
+        exact = geometry.area[local][inside] * located.scale.pixel_area(uv)
         low, high = exact.min(), exact.max()
         step = (high - low) / (WEIGHT_LEVELS - 1) if high > low else 1.0
         level = np.rint((exact - low) / step).astype(np.uint8)
@@ -422,6 +518,8 @@ class AreaMeasurer:
         built afresh carry that same frame's fit error, so carrying is no worse in kind; the carried error
         enters the scale std (in quadrature) and the bound."""
         weights = self._weights
+        if self._carried is not None and self._carried[0] is located.scale and self._carried[1][0] is weights:
+            return self._carried[1]  # the same fit as the last frame's (no marker moved)
         if (weights is not None and weights.labels == located.labels
                 and np.max(np.abs(weights.pixels - np.array(located.pixels))) <= ROI_TOLERANCE_PX):
             # a scale change is a ratio of two linear-fractional functions: extreme at the ROI's corners
@@ -429,9 +527,11 @@ class AreaMeasurer:
             ratio = located.scale.pixel_area(points) / weights.scale.pixel_area(points)
             uneven = float(np.max(np.abs(ratio / ratio[0] - 1)))
             if uneven <= max(SCALE_TOLERANCE, CARRY_SHARE * weights.relative_scale_std):
-                return weights, float(ratio[0]), uneven
+                self._carried = located.scale, (weights, float(ratio[0]), uneven)
+                return self._carried[1]
         self._weights = self._build_weights(frame, located)
-        return self._weights, 1.0, 0.0
+        self._carried = located.scale, (self._weights, 1.0, 0.0)
+        return self._carried[1]
 
     def _levels(self, estimator: LevelEstimator, threshold: float) -> Levels | None:
         """The object/background levels at this threshold: estimated from the ROI's band histogram, or the
@@ -544,7 +644,7 @@ class AreaMeasurer:
             area_m2=area, area_std_m2=float(np.sqrt(scale_std**2 + threshold_std**2 + edge.discretisation**2
                                                     + edge.levels**2 + offset_std**2)),
             pixel_count=count, threshold=threshold, calibrated=self.camera is not None, scale=located.scale,
-            scale_std_m2=scale_std, threshold_std_m2=threshold_std, missing_targets=located.missing, sweep=sweep,
+            scale_std_m2=scale_std, threshold_std_m2=threshold_std, missing_targets=list(located.missing), sweep=sweep,
             target_pixels=dict(zip(located.labels, located.pixels, strict=True)),
             weight_error_bound=weights.error_bound + carried, area_mode=self.area_mode, levels=levels,
             subpixel_applied=applied,

@@ -28,6 +28,7 @@ from scipy.optimize import least_squares
 
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")  # plumb_bob order
 PARAM_NAMES = ("fx", "fy", "cx", "cy", *DIST_NAMES)  # OpenCV's names, the order calibration fits them
+NEWTON_TOLERANCE = 1e-14  # normalized units: ~1e-11 px, the inverse distortion's round trip
 
 
 def distort(xy: np.ndarray, k1: float, k2: float, p1: float, p2: float, k3: float) -> np.ndarray:
@@ -138,17 +139,25 @@ class BrownCamera:
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
         target = np.column_stack([(uv[:, 0] - self.xp) / self.fx, (uv[:, 1] - self.yp) / self.fy])
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
-        xy = cv2.undistortPoints(
-            uv.reshape(-1, 1, 2), self.camera_matrix, self.dist, criteria=criteria)
-        xy = xy.reshape(-1, 2).copy()
+        xy = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.camera_matrix, self.dist, criteria=criteria)
+        return self._newton(xy.reshape(-1, 2).copy(), target)
+
+    def _newton(self, xy: np.ndarray, target: np.ndarray) -> np.ndarray:
+        """Newton steps on distort(xy) = target, in place, each point until it is within NEWTON_TOLERANCE (or
+        eight steps): a point's result depends on it alone, not on the others computed with it."""
+        active = np.arange(len(xy))
         for _ in range(8):
-            error = self.distort_normalized(xy) - target
-            if np.max(np.abs(error)) < 1e-14:
+            here = xy[active]
+            error = self.distort_normalized(here) - target[active]
+            moving = ~(np.max(np.abs(error), axis=1, initial=0.0) < NEWTON_TOLERANCE)
+            if not moving.any():
                 break
-            a, b, c, d = self._distortion_jacobian(xy)
+            active, here, error = active[moving], here[moving], error[moving]
+            a, b, c, d = self._distortion_jacobian(here)
             det = a * d - b * c
-            xy[:, 0] -= (d * error[:, 0] - b * error[:, 1]) / det
-            xy[:, 1] -= (a * error[:, 1] - c * error[:, 0]) / det
+            here[:, 0] -= (d * error[:, 0] - b * error[:, 1]) / det
+            here[:, 1] -= (a * error[:, 1] - c * error[:, 0]) / det
+            xy[active] = here
         return xy
 
     def pixels_to_ideal(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -156,7 +156,9 @@ def with_reference(frame: np.ndarray, marker: DetectedMarker) -> DetectedMarker:
                        [float((gx * gy).sum()), float((gy * gy).sum())]])
     if np.linalg.det(normal) <= 1e-6 * max(np.trace(normal), 1e-12) ** 2:
         return marker  # no texture to tell a shift by
-    return replace(marker, reference=(grey, left, top, gx, gy, np.linalg.inv(normal)))
+    mean, std = cv2.meanStdDev(grey)
+    return replace(marker, reference=(grey, left, top, gx.ravel(), gy.ravel(), np.linalg.inv(normal),
+                                      float(mean[0, 0]), float(std[0, 0])))
 
 
 def unmoved(frame: np.ndarray, marker: DetectedMarker) -> bool:
@@ -166,21 +168,22 @@ def unmoved(frame: np.ndarray, marker: DetectedMarker) -> bool:
     of it changes them)."""
     if marker.reference is None:
         return False
-    grey, left, top, gx, gy, inverse = marker.reference
+    grey, left, top, gx, gy, inverse, ref_mean, ref_std = marker.reference
     bottom, right = top + grey.shape[0], left + grey.shape[1]
     if bottom > frame.shape[0] or right > frame.shape[1]:
         return False
     patch = frame[top:bottom, left:right]
-    now = (patch if patch.ndim == 2 else cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)).astype(np.float32)
+    now = patch if patch.ndim == 2 else cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)
     # the light's change over the window (gain and offset) taken out: a brighter frame has not moved a marker
     now_mean, now_std = cv2.meanStdDev(now)
-    ref_mean, ref_std = cv2.meanStdDev(grey)
     if now_std[0, 0] < 1e-6:
         return False
-    diff = (now - now_mean[0, 0]) * np.float32(ref_std[0, 0] / now_std[0, 0]) + np.float32(ref_mean[0, 0]) - grey
-    if float(np.abs(diff).mean()) > STEADY_MEAN_DN:
+    gain = ref_std / now_std[0, 0]
+    diff = cv2.addWeighted(now, gain, grey, -1.0, ref_mean - gain * now_mean[0, 0], dtype=cv2.CV_32F)
+    if cv2.norm(diff, cv2.NORM_L1) / diff.size > STEADY_MEAN_DN:
         return False
-    shift = -inverse @ np.array([float((diff * gx).sum()), float((diff * gy).sum())])
+    diff = diff.ravel()
+    shift = -inverse @ np.array([float(diff @ gx), float(diff @ gy)])
     return bool(np.hypot(*shift) < STEADY_SHIFT_PX)
 
 
