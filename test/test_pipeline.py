@@ -136,3 +136,25 @@ def test_a_frame_whose_markers_did_not_move_keeps_the_last_fit_and_gives_the_row
     assert 2 <= fits(kept) <= 4  # the first frame and the bump (a re-track just after it allowed)
     assert kept[11].scale is not kept[12].scale  # the bump is fitted
     assert [result.summary() for result in kept] == [result.summary() for result in refitted]
+
+
+@pytest.mark.parametrize("classifier", [Classifier(threshold=120), Classifier(threshold=120, channel="red"),
+                                        Classifier(threshold=168, object="green")])
+def test_a_frame_measured_with_its_grey_made_beside_the_decoding_gives_the_same_row(classifier):
+    """`measure(frame, grey=...)` (the grey made in the reader thread, `frames.with_grey`) reads the markers and
+    a grey band from it: every row as without it, for a grey band, one channel and the excess-green index."""
+    from veg_area_ros.frames import Frame, with_grey
+
+    clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0).astype(float)
+    clean *= [0.85, 1.0, 1.1]  # tinted: grey, red and green differ
+    if classifier.object == "green":  # the dark cube made green (ExG 168 = grey 120)
+        clean[..., 1] += 2 * (120 - clean[..., 1]).clip(0)
+    clean = np.clip(clean, 0, 255)
+    rng = np.random.default_rng(2)
+    frames = [Frame(f"f{k}", np.clip(clean + rng.normal(0, 3, clean.shape), 0, 255).astype(np.uint8))
+              for k in range(6)]
+    plain = AreaMeasurer(ENDOSCOPE, scene_targets(), classifier)
+    with_its_grey = AreaMeasurer(ENDOSCOPE, scene_targets(), classifier)
+    for frame in with_grey(iter(frames)):
+        assert frame.grey is not None and frame.grey.shape == frame.image.shape[:2]
+        assert with_its_grey.measure(frame.image, grey=frame.grey).summary() == plain.measure(frame.image).summary()

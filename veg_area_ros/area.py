@@ -326,6 +326,7 @@ class AreaMeasurer:
         self.rebuilds = 0  # how often the weights were (re)built: once for a steady camera
         self.light_fits = 0  # how often the flat field and levels were found: every LIGHT_REFRESH_FRAMES, or a drift
         self._light: _Light | None = None  # the light and levels found and carried (sub-pixel mode)
+        self._pure: tuple[Levels, float | None, Levels | None] | None = None  # carried levels as `_levels` gives them
 
     def start_segment(self) -> None:
         """Forget what is carried from frame to frame (tracked markers, weights, light): the next frame is
@@ -545,8 +546,11 @@ class AreaMeasurer:
                     else levels.with_unevenness(unevenness))
 
         if light is not None and light.levels is not None and self.given_levels is None:
-            pure = with_light(light.levels)
-            return pure if pure.resolvable() else None
+            # the carried levels at every threshold of the sweep: made once for these levels and this light
+            if self._pure is None or self._pure[0] is not light.levels or self._pure[1] != unevenness:
+                pure = with_light(light.levels)
+                self._pure = light.levels, unevenness, pure if pure.resolvable() else None
+            return self._pure[2]
         estimated = estimator.at(threshold)
         if estimated is not None:
             estimated = with_light(estimated)
@@ -558,15 +562,20 @@ class AreaMeasurer:
         given = Levels(object_level, background_level, *spreads, estimated=False)
         return given if given.resolvable() else None
 
-    def measure(self, frame: np.ndarray, keep_images: bool = False) -> AreaResult:
+    def measure(self, frame: np.ndarray, keep_images: bool = False, grey: np.ndarray | None = None) -> AreaResult:
         """Af of one raw frame. `keep_images` also returns the idealized frame, its ROI and the object mask
-        in it (for overlays and the node's image topics; costs a remap)."""
+        in it (for overlays and the node's image topics; costs a remap). `grey`: a colour frame's grey
+        conversion (cv2.COLOR_BGR2GRAY) where it was made already, beside the decoding: the markers and a grey
+        band are read from it, with the same result."""
         self._check_size(frame)
+        if grey is not None and grey.shape != frame.shape[:2]:
+            raise ValueError(f"the grey frame is {grey.shape}, the frame {frame.shape[:2]}")
         if self.background_band is not None:
             check_background_frame(self.background_band, frame.shape)
-        located = self._locate(frame)
+        looked_at = frame if grey is None else grey  # what the markers are found in
+        located = self._locate(looked_at)
         weights, factor, carried = self._weights_for(frame, located)
-        raw_band = self.classifier.index_image(frame[weights.window])
+        raw_band = self.classifier.index_image(frame[weights.window], None if grey is None else grey[weights.window])
         object_is_high = self.classifier.object != "dark"
         band, threshold, light, histogram = self._evened(raw_band, weights, fresh=False)
         roi_count = histogram.sum(axis=1)
@@ -656,7 +665,7 @@ class AreaMeasurer:
             # each edge pixel next to the clipping may be off by up to half a pixel, all the same way
             result.exposure_std_m2 = result.exposure["affected_area_m2"] * 0.5 / np.sqrt(3)
             result.area_std_m2 = float(np.hypot(result.area_std_m2, result.exposure_std_m2))
-        result.edge_widths = self._edge_widths(frame, mask, roi_count, weights, levels)
+        result.edge_widths = self._edge_widths(looked_at, mask, roi_count, weights, levels)
         result.warnings = self._warnings(result, mask, weights, located)
         absent = estimator.no_object(threshold)
         if absent is not None:  # never a large number from the background's noise or texture

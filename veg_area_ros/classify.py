@@ -29,6 +29,7 @@ MAX_MORPHOLOGY_PX = 100  # an opening or closing radius; specks and pin-holes ar
 PURE_ZONE_SPREADS = 4.0  # band values within this many spreads of a level are taken as pure, not mixed
 MIN_SPREAD_DN = 0.5  # the spread of a level is at least the band's quantisation
 BAND_VALUES = np.arange(256, dtype=float)
+BAND_POWERS = BAND_VALUES[None, :] ** np.arange(3)[:, None]  # 1, v, v² for the levels' moments
 MAX_PURE_ZONES = 0.5  # both pure zones together may cover at most this share of the contrast
 MIN_PURE_PIXELS = 50  # a class's interior must hold this many pixels to give its level
 LEVEL_ERROR_FLOOR = 0.15  # an estimated level may be off by this share of its spread however many pixels it has
@@ -66,8 +67,11 @@ class Classifier:
             raise ClassifyError(f"morphology radii must be at most {MAX_MORPHOLOGY_PX} px, got "
                                 f"{max(self.open_px, self.close_px)}")
 
-    def index_image(self, image: np.ndarray) -> np.ndarray:
-        """The single-band image the threshold acts on, uint8, larger = more object-like for 'bright'."""
+    def index_image(self, image: np.ndarray, grey: np.ndarray | None = None) -> np.ndarray:
+        """The single-band image the threshold acts on, uint8, larger = more object-like for 'bright'. `grey`:
+        the colour image's grey conversion where it was made already."""
+        if grey is not None and image.ndim == 3 and self.object != "green" and self.channel == "grey":
+            return np.ascontiguousarray(grey)
         if image.ndim == 2:
             if self.object == "green":
                 raise ClassifyError("the excess-green index needs a colour (BGR) image")
@@ -187,8 +191,10 @@ class LevelEstimator:
         counts = np.asarray(counts, float)
         self.counts = counts
         self.object_is_high = object_is_high
-        zero = np.zeros(1)
-        self._sums = [np.concatenate([zero, np.cumsum(counts * BAND_VALUES**power)]).tolist() for power in range(3)]
+        sums = np.zeros((3, 257))
+        np.cumsum(counts * BAND_POWERS, axis=1, out=sums[:, 1:])
+        self._sums = sums.tolist()
+        self._levels_at: dict[int, Levels | None] = {}  # by split: the drift check, the empty check and the sweep
 
     def _sum(self, power: int, first: int, last: int) -> float:
         """Σ counts * value**power over values first..last (inclusive)."""
@@ -221,12 +227,17 @@ class LevelEstimator:
         """The levels with the classes split at `threshold` (low class: band <= threshold); None when either
         class is empty (nothing to take a level from)."""
         split = min(max(math.floor(threshold), -1), 255)
-        low = self._class(0, split, -1, background=self.object_is_high)
-        high = self._class(split + 1, 255, +1, background=not self.object_is_high)
-        if low is None or high is None:
-            return None
-        (obj, obj_spread, obj_error), (bg, bg_spread, bg_error) = (high, low) if self.object_is_high else (low, high)
-        return Levels(obj, bg, obj_spread, bg_spread, object_error=obj_error, background_error=bg_error)
+        if split not in self._levels_at:
+            low = self._class(0, split, -1, background=self.object_is_high)
+            high = self._class(split + 1, 255, +1, background=not self.object_is_high)
+            if low is None or high is None:
+                self._levels_at[split] = None
+            else:
+                (obj, obj_spread, obj_error), (bg, bg_spread, bg_error) = ((high, low) if self.object_is_high
+                                                                           else (low, high))
+                self._levels_at[split] = Levels(obj, bg, obj_spread, bg_spread, object_error=obj_error,
+                                                background_error=bg_error)
+        return self._levels_at[split]
 
 
     def no_object(self, threshold: float) -> str | None:

@@ -38,6 +38,7 @@ class Frame:
     camera_info: object | None = None  # a bag frame's latest recorded CameraInfoFields
     lost: int = 0  # frames of the input this entry stands for that could not be read (damage); 1 for any unreadable
     position: int | None = None  # a video's frame index or a bag's image message index; None for an image file
+    grey: np.ndarray | None = None  # a colour image in grey, where made beside the decoding (`with_grey`)
 
     def __post_init__(self) -> None:
         if self.image is None and self.lost == 0:
@@ -314,6 +315,15 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
                 yield from _greyed(iter_video(path, video_step), grey)
             else:
                 yield Frame(path.name, None, "is neither an image nor a video")
+
+
+def with_grey(frames: Iterator[Frame]) -> Iterator[Frame]:
+    """The frames with each colour image's grey conversion beside it (`Frame.grey`): made where the frames are
+    decoded (a reader thread), what the markers and a grey band are read from."""
+    for frame in frames:
+        if frame.image is not None and frame.image.ndim == 3:
+            frame = replace(frame, grey=cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY))
+        yield frame
 
 
 def _greyed(frames: Iterator[Frame], grey: bool) -> Iterator[Frame]:

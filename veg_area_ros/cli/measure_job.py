@@ -108,6 +108,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         is_bag,
         iter_frames,
         video_frame_count,
+        with_grey,
     )
     from ..idealize import FrameSizeError
     from ..light import LightError
@@ -200,8 +201,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     try:
         # the next frames decoded while this one is measured (same frames, same order)
         frames = iter_frames(files, job.video_step, job.image_topic, job.frame_range)
-        if decodable_ahead(files):
-            frames = prefetched(frames)
+        if decodable_ahead(files):  # each frame's grey made there too, off this thread
+            frames = prefetched(with_grey(frames))
         for index, frame in enumerate(frames, 1):
             row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
             line = ""
@@ -226,7 +227,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                     if recorded != camera or measurer is None:
                         camera = recorded
                         measurer = new_measurer(camera)
-                result = measurer.measure(frame.image, keep_images=bool(job.overlay or job.idealized))
+                result = measurer.measure(frame.image, keep_images=bool(job.overlay or job.idealized),
+                                          grey=frame.grey)
             except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
                 row["error"] = str(exc)
                 say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
