@@ -164,14 +164,14 @@ def video_case(targets: TargetsSpec, count: int, runs: int = 1) -> None:
                                  "--csv", str(Path(folder) / "areas.csv")])
             assert code == 0
 
-        def loop(overlapped: bool) -> None:  # the measurement over the video, decoding overlapped or not
-            from veg_area_ros.frames import iter_video
+        def loop(overlapped: bool) -> None:  # the measurement over the video, decoding (and grey) overlapped or not
+            from veg_area_ros.frames import iter_video, with_grey
             from veg_area_ros.pipeline import prefetched
 
             measurer = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120))
             frames = iter_video(video)
-            for frame in prefetched(frames) if overlapped else frames:
-                measurer.measure(frame.image)
+            for frame in prefetched(with_grey(frames)) if overlapped else frames:
+                measurer.measure(frame.image, grey=frame.grey)
 
         ratios = []
         for run in range(1, runs + 1):
