@@ -12,7 +12,7 @@ import pytest
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.classify import Classifier
-from veg_area_ros.frames import iter_video
+from veg_area_ros.frames import iter_video, with_grey
 from veg_area_ros.pipeline import ordered_map, prefetched
 from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets
 
@@ -69,11 +69,14 @@ def test_a_video_measured_with_decoding_overlapped_gives_the_plain_loops_rows(tm
         writer.write(np.clip(clean + rng.normal(0, 3, clean.shape), 0, 255).astype(np.uint8))
     writer.release()
 
-    def areas(frames) -> list[float]:
+    def rows(frames) -> list[dict]:
         measurer = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
-        return [measurer.measure(frame.image).area_m2 for frame in frames]
+        return [measurer.measure(frame.image, grey=frame.grey).summary() for frame in frames]
 
-    assert areas(prefetched(iter_video(video))) == areas(iter_video(video))
+    plain = rows(iter_video(video))
+    assert len(plain) == 20
+    assert rows(prefetched(iter_video(video))) == plain
+    assert rows(prefetched(with_grey(iter_video(video)))) == plain  # as `veg-area measure` reads a video
 
 
 def test_markers_that_did_not_move_are_not_retracked_and_a_bumped_camera_is(monkeypatch):
@@ -143,7 +146,7 @@ def test_a_frame_whose_markers_did_not_move_keeps_the_last_fit_and_gives_the_row
 def test_a_frame_measured_with_its_grey_made_beside_the_decoding_gives_the_same_row(classifier):
     """`measure(frame, grey=...)` (the grey made in the reader thread, `frames.with_grey`) reads the markers and
     a grey band from it: every row as without it, for a grey band, one channel and the excess-green index."""
-    from veg_area_ros.frames import Frame, with_grey
+    from veg_area_ros.frames import Frame
 
     clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0).astype(float)
     clean *= [0.85, 1.0, 1.1]  # tinted: grey, red and green differ

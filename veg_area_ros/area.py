@@ -278,7 +278,8 @@ def _centroid(mask: np.ndarray) -> np.ndarray:
 
 
 class AreaMeasurer:
-    """Measures the frames of one camera: per-pixel geometry once per camera, weights once per target layout."""
+    """Measures the frames of one camera: per-pixel geometry once per camera (over the ROI's
+    raw window, or the whole frame once the ROI moves out of it), weights once per target layout."""
 
     def __init__(self, camera: BrownCamera | None, targets: TargetsSpec, classifier: Classifier,
                  roi: np.ndarray | None = None, threshold_delta: float = 5.0, area_mode: str = "subpixel",
