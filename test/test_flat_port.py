@@ -198,3 +198,16 @@ def test_the_explicit_model_holds_where_the_absorbed_one_drifts():
         assert abs(row.air_only_error_pct) > 0.5, row  # the comparison: no port model at all
     near = [r for r in rows if r.distance_m == 0.4]
     assert all(abs(r.absorbed_error_pct) > abs(r.explicit_error_pct) for r in near), near
+
+
+def test_a_frame_measured_with_its_grey_gives_the_same_result_through_the_port():
+    """`veg-area measure` hands each frame's grey (made beside the decoding) to the measurer: through a port
+    the plane's pose and the markers are found in it, with the result of the colour frame alone."""
+    scene, targets = _scene(0.7)
+    lens = calibrated_camera("endoscope", "air")
+    frames = [render_scene(ENDOSCOPE, scene, 0.7, UNDERWATER, seed=seed) for seed in range(3)]
+    plain = PortAreaMeasurer(FlatPortCamera(lens, UNDERWATER), targets, Classifier(threshold=120))
+    given = PortAreaMeasurer(FlatPortCamera(lens, UNDERWATER), targets, Classifier(threshold=120))
+    for frame in frames:
+        grey = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        assert given.measure(frame, grey=grey).summary() == plain.measure(frame).summary()

@@ -1103,12 +1103,14 @@ class PortAreaMeasurer:
         """As AreaMeasurer.start_segment; the plane's pose through the port is found anew too."""
         self._inner, self._rebuilds_seen = None, 0
 
-    def measure(self, frame: np.ndarray, keep_images: bool = False) -> AreaResult:
+    def measure(self, frame: np.ndarray, keep_images: bool = False, grey: np.ndarray | None = None) -> AreaResult:
+        """As AreaMeasurer.measure (`grey` too: the markers found in it)."""
+        looked_at = frame if grey is None else grey
         if self._inner is None:
-            self._build(frame)
-        result = self._inner.measure(frame, keep_images)
+            self._build(looked_at)
+        result = self._inner.measure(frame, keep_images, grey)
         if self._inner.rebuilds > max(self._rebuilds_seen, 1):  # the targets moved: find their plane again
-            self._build(frame)
-            result = self._inner.measure(frame, keep_images)
+            self._build(looked_at)
+            result = self._inner.measure(frame, keep_images, grey)
         self._rebuilds_seen = self._inner.rebuilds
         return result
