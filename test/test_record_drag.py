@@ -207,7 +207,9 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
 def test_drag_node_recovers_a_known_drag_coefficient(tmp_path):
     result = run_scenario("drag", tmp_path, cd=1.05, area_m2=0.0105, velocity_m_s=0.3, seconds=4.0)
     received = np.array(result["received"])
-    assert len(received) >= 30
+    answered = {tuple(stamp) for stamp in result["received_stamps"]}
+    unanswered = [k for k, stamp in enumerate(result["area_stamps"]) if tuple(stamp) not in answered]
+    assert len(received) >= 30, f"no Cd for Af messages {unanswered} of {len(result['area_stamps'])}"
     cd, cd_std, velocity = received[:, 0], received[:, 1], received[:, 2]
     assert np.all(np.abs(cd / result["true_cd"] - 1) <= 0.005), cd
     assert np.allclose(velocity, 0.3) and np.all(cd_std > 0)
