@@ -103,7 +103,7 @@ def test_pixel_geometry_over_the_rois_window_gives_the_whole_frames_weights(wate
     height, width = ENDOSCOPE.image_size[1], ENDOSCOPE.image_size[0]
     windowed = AreaMeasurer(water_camera, targets(), Classifier(threshold=120))
     whole = AreaMeasurer(water_camera, targets(), Classifier(threshold=120))
-    whole._geometry = area._Geometry.build(water_camera, height, width, 0, height, 0, width)
+    whole._geometry = area._Geometry.build(water_camera, height, width)
     for distance in (0.7, 0.6):
         frame = render_scene(ENDOSCOPE, CUBE, distance, FlatPort(), tilt_deg=6.0)
         a, b = windowed.measure(frame), whole.measure(frame)

@@ -79,18 +79,24 @@ def test_a_video_measured_with_decoding_overlapped_gives_the_plain_loops_rows(tm
     assert rows(prefetched(with_grey(iter_video(video)))) == plain  # as `veg-area measure` reads a video
 
 
+def bumped_camera_frames(count: int, bump_at: int, seed: int) -> list[np.ndarray]:
+    """A steady camera's frames of the cube under 4 DN of fresh noise, bumped at frame `bump_at` (2.6 px right,
+    1.3 px up)."""
+    clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0)
+    bumped = cv2.warpAffine(clean, np.float32([[1, 0, 2.6], [0, 1, -1.3]]), ENDOSCOPE.image_size,
+                            borderMode=cv2.BORDER_REPLICATE)
+    rng = np.random.default_rng(seed)
+    return [np.clip((clean if k < bump_at else bumped) + rng.normal(0, 4, clean.shape), 0, 255).astype(np.uint8)
+            for k in range(count)]
+
+
 def test_markers_that_did_not_move_are_not_retracked_and_a_bumped_camera_is(monkeypatch):
     """A steady camera bumped halfway (2.6 px right, 1.3 px up) under 4 DN of noise: skipping the re-tracking of
     unmoved markers gives every frame's Af within the two runs' weight error bounds of re-tracking each frame,
     re-tracks at the bump (the markers' positions follow it), and re-tracks far less often."""
     from veg_area_ros import markers
 
-    clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0)
-    bumped = cv2.warpAffine(clean, np.float32([[1, 0, 2.6], [0, 1, -1.3]]), ENDOSCOPE.image_size,
-                            borderMode=cv2.BORDER_REPLICATE)
-    rng = np.random.default_rng(0)
-    frames = [np.clip((clean if k < 20 else bumped) + rng.normal(0, 4, clean.shape), 0, 255).astype(np.uint8)
-              for k in range(40)]
+    frames = bumped_camera_frames(40, 20, seed=0)
     calls = {"retrack": 0}
     real = markers.retrack_marker
 
@@ -118,12 +124,7 @@ def test_markers_that_did_not_move_are_not_retracked_and_a_bumped_camera_is(monk
 def test_a_frame_whose_markers_did_not_move_keeps_the_last_fit_and_gives_the_rows_of_fitting_again():
     """The scale is fitted again only when a marker was re-tracked (here: the first frame and the bump); every
     row equals a run that forgets the last fit before each frame and so fits every frame."""
-    clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0)
-    bumped = cv2.warpAffine(clean, np.float32([[1, 0, 2.6], [0, 1, -1.3]]), ENDOSCOPE.image_size,
-                            borderMode=cv2.BORDER_REPLICATE)
-    rng = np.random.default_rng(1)
-    frames = [np.clip((clean if k < 12 else bumped) + rng.normal(0, 4, clean.shape), 0, 255).astype(np.uint8)
-              for k in range(24)]
+    frames = bumped_camera_frames(24, 12, seed=1)
     keeping = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
     kept = [keeping.measure(frame) for frame in frames]
     refitting = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))

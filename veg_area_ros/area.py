@@ -154,8 +154,10 @@ class _Geometry:
     frame_shape: tuple[int, int]  # (height, width) of the raw frame
 
     @classmethod
-    def build(cls, camera: BrownCamera | None, height: int, width: int, top: int, bottom: int, left: int,
-              right: int) -> _Geometry:
+    def build(cls, camera: BrownCamera | None, height: int, width: int,
+              window: tuple[int, int, int, int] | None = None) -> _Geometry:
+        """Over `window` (top, bottom, left, right) of a height x width frame; None: the whole frame."""
+        top, bottom, left, right = window if window is not None else (0, height, 0, width)
         ideal_u = np.empty((bottom - top, right - left), np.float32)
         ideal_v, area = np.empty_like(ideal_u), np.ones_like(ideal_u)
         u = np.arange(left, right, dtype=float)
@@ -436,12 +438,11 @@ class AreaMeasurer:
             geometry = self._geometry = None
         if geometry is not None and geometry.full:
             return geometry
-        top, bottom, left, right = self._raw_window(height, width, roi_ideal)
-        if geometry is not None and geometry.covers(top, bottom, left, right):
+        window = self._raw_window(height, width, roi_ideal)
+        if geometry is not None and geometry.covers(*window):
             return geometry
-        if geometry is not None:  # a second window: the ROI moves, so the whole frame once for all
-            top, bottom, left, right = 0, height, 0, width
-        self._geometry = _Geometry.build(self.camera, height, width, top, bottom, left, right)
+        # the first ROI's window; a second one (the ROI moves): the whole frame, once for all
+        self._geometry = _Geometry.build(self.camera, height, width, window if geometry is None else None)
         return self._geometry
 
     def _raw_window(self, height: int, width: int, roi_ideal: np.ndarray) -> tuple[int, int, int, int]:
@@ -484,7 +485,7 @@ class AreaMeasurer:
         geometry = self._pixel_geometry(height, width, roi_ideal)
         roi_raw, (x, y, w, h) = geometry.roi(roi_ideal)
         if w > 0 and h > 0 and geometry.reaches_inner_edge(x, y, w, h):  # the window was too small: never here
-            self._geometry = geometry = _Geometry.build(self.camera, height, width, 0, height, 0, width)
+            self._geometry = geometry = _Geometry.build(self.camera, height, width)
             roi_raw, (x, y, w, h) = geometry.roi(roi_ideal)
         if w == 0 or h == 0:
             raise ClassifyError("the region of interest is empty")
