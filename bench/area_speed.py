@@ -55,7 +55,7 @@ def main() -> int:
         measurer.measure(frame)  # pixel geometry and weights built once, as in the node
         subpixel = AreaMeasurer(camera, targets, Classifier(threshold=120), area_mode="subpixel")
         subpixel.measure(frame)
-        weights = measurer._weights
+        weights = measurer.carried.weights.weights
         band = cv2.cvtColor(frame[weights.window], cv2.COLOR_BGR2GRAY)
         stream = itertools.cycle(frames)
 

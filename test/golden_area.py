@@ -22,10 +22,11 @@ sys.path[:0] = [str(Path(__file__).resolve().parents[1]), str(Path(__file__).res
 from board_photos import board_photos, calibrated  # noqa: E402
 from helpers import OPENCV_LEFT, TEST_DATA, calibrated_camera  # noqa: E402
 
-from veg_area_ros.area import AreaMeasurer, PortAreaMeasurer  # noqa: E402
+from veg_area_ros.area import AreaMeasurer  # noqa: E402
 from veg_area_ros.camera_model import BrownCamera  # noqa: E402
 from veg_area_ros.classify import Classifier  # noqa: E402
 from veg_area_ros.flat_port import FlatPort, FlatPortCamera  # noqa: E402
+from veg_area_ros.port_area import PortAreaMeasurer  # noqa: E402
 from veg_area_ros.sim.reproduction import CONDITIONS, SETUPS, distance_scene  # noqa: E402
 from veg_area_ros.sim.synthetic import (  # noqa: E402
     DISTANCE_M,

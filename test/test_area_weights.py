@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 from helpers import calibrated_endoscope, shared
 
-from veg_area_ros import area, markers
-from veg_area_ros.area import SCALE_TOLERANCE, AreaMeasurer
+from veg_area_ros import markers, weights
+from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.classify import Classifier, otsu_level
 from veg_area_ros.markers import RETRACK_AGREEMENT_PX, detect_markers, retrack_marker, track_markers
 from veg_area_ros.sim.synthetic import DSLR, ENDOSCOPE, FlatPort, bush_scene, cube_scene, render_scene
 from veg_area_ros.targets import TargetsSpec
+from veg_area_ros.weights import SCALE_TOLERANCE, PixelGeometry
 
 CUBE, BUSH = cube_scene(), bush_scene(seed=1)
 
@@ -93,30 +94,31 @@ def _same_weights(a, b) -> bool:
             and np.array_equal(a.level_area, b.level_area))
 
 
-@pytest.mark.parametrize("margin", [area.GEOMETRY_MARGIN_PX, -20])
+@pytest.mark.parametrize("margin", [weights.GEOMETRY_MARGIN_PX, -20])
 def test_pixel_geometry_over_the_rois_window_gives_the_whole_frames_weights(water_camera, monkeypatch, margin):
     """The raw pixels' geometry is computed over the window that can hold the ROI (its raw bounding box),
     and the weights are bit for bit those of the whole frame's geometry; a ROI that leaves the window (the
     camera closer) gets the whole frame's; a window too small (a negative margin, which never happens) is
     caught and replaced by the whole frame."""
-    monkeypatch.setattr(area, "GEOMETRY_MARGIN_PX", margin)
+    monkeypatch.setattr(weights, "GEOMETRY_MARGIN_PX", margin)
     height, width = ENDOSCOPE.image_size[1], ENDOSCOPE.image_size[0]
     windowed = AreaMeasurer(water_camera, targets(), Classifier(threshold=120))
     whole = AreaMeasurer(water_camera, targets(), Classifier(threshold=120))
-    whole._geometry = area._Geometry.build(water_camera, height, width)
+    whole.carried.weights.geometry = PixelGeometry.build(water_camera, height, width)
     for distance in (0.7, 0.6):
         frame = render_scene(ENDOSCOPE, CUBE, distance, FlatPort(), tilt_deg=6.0)
         a, b = windowed.measure(frame), whole.measure(frame)
-        assert _same_weights(windowed._weights, whole._weights)
+        assert _same_weights(windowed.carried.weights.weights, whole.carried.weights.weights)
         assert a.area_m2 == b.area_m2
         if distance == 0.7:
-            assert windowed._geometry.full == (margin < 0)
+            assert windowed.carried.weights.geometry.full == (margin < 0)
             if margin > 0:  # the ROI's own raw window and the margin around it, and the pixel the lookup may round over
-                geometry, (rows, columns) = windowed._geometry, windowed._weights.window
+                memory = windowed.carried.weights
+                geometry, (rows, columns) = memory.geometry, memory.weights.window
                 assert rows.start - margin - 4 <= geometry.top and geometry.bottom <= rows.stop + margin + 4
                 assert columns.start - margin - 4 <= geometry.left and geometry.right <= columns.stop + margin + 4
         else:
-            assert windowed._geometry.full
+            assert windowed.carried.weights.geometry.full
 
 
 @pytest.mark.parametrize("sigma", [2.0, 4.0])
@@ -133,7 +135,7 @@ def test_weights_survive_sensor_noise_within_their_stated_bound(water_camera, si
         noise = rng.normal(0, sigma, clean.shape[:2])[..., None]
         frame = np.clip(np.rint(clean + noise), 0, 255).astype(np.uint8)
         rebuilt = copy.deepcopy(measurer)
-        rebuilt._weights = None  # the same markers and fit, weights built for this frame
+        rebuilt.carried.weights.weights = None  # the same markers and fit, weights built for this frame
         fresh = rebuilt.measure(frame)
         carried = measurer.measure(frame)
         bound = (carried.weight_error_bound + fresh.weight_error_bound) * fresh.area_m2

@@ -12,12 +12,13 @@ import pytest
 import yaml
 from helpers import calibrated_camera, calibration_result, run_cli
 
-from veg_area_ros.area import AreaMeasurer, PortAreaMeasurer
+from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
 from veg_area_ros.calib_io import read_calibration, write_calibration
 from veg_area_ros.camera_model import PARAM_NAMES
 from veg_area_ros.classify import Classifier
 from veg_area_ros.flat_port import FlatPort, FlatPortCamera, PortError, fit_port
+from veg_area_ros.port_area import PortAreaMeasurer
 from veg_area_ros.sim.reproduction import distance_scene, port_rows
 from veg_area_ros.sim.synthetic import (
     DSLR,

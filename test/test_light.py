@@ -19,6 +19,7 @@ from veg_area_ros.board import BoardSpec
 from veg_area_ros.calibration import View, calibrate
 from veg_area_ros.classify import Classifier, ClassifyError
 from veg_area_ros.light import EVEN_SHARE, LightError, fit_background_surface, flat_field
+from veg_area_ros.light_levels import interior_levels, levels_inside
 from veg_area_ros.sim.synthetic import (
     ENDOSCOPE,
     FlatPort,
@@ -117,14 +118,14 @@ def test_levels_are_read_deeper_only_where_a_blur_pulls_them():
     ring = (radius > 90) & (radius < 150)
     blurred = cv2.GaussianBlur(np.where(ring, 40.0, 200.0), (0, 0), 7) + noise
     textured = np.where(ring, np.where(np.abs(radius - 120) < 15, 70.0, 40.0), 200.0) + noise
-    measurer = AreaMeasurer(ENDOSCOPE, targets_for(cube_scene()), Classifier(threshold=120))
+    classifier = Classifier(threshold=120)
     roi = np.full(radius.shape, 255, np.uint8)
     for image, deepened in ((blurred, True), (textured, False)):
         band = np.clip(np.rint(image), 0, 255).astype(np.uint8)
-        levels, reach, _ = measurer._interior_levels(band, roi, 120)
+        levels, reach, _ = interior_levels(band, roi, 120, classifier)
         assert (reach > 3) == deepened, (reach, levels)
         classes = [(band <= 120).astype(np.uint8), (band > 120).astype(np.uint8)]
-        shallow = AreaMeasurer._levels_inside(band, classes, 3)
+        shallow = levels_inside(band, classes, 3)
         if deepened:
             assert shallow.object > 45 and abs(levels.object - 40) < 1 and abs(levels.background - 200) < 1
             assert levels.object_error < 0.3  # settled: a deeper reading agreed
@@ -134,7 +135,7 @@ def test_levels_are_read_deeper_only_where_a_blur_pulls_them():
     # and that move joins its error (45.5 DN read, truly 40: an error of 0.25 DN would be a false claim)
     narrow = (radius > 105) & (radius < 135)
     band = np.clip(np.rint(cv2.GaussianBlur(np.where(narrow, 40.0, 200.0), (0, 0), 7) + noise), 0, 255)
-    levels, reach, _ = measurer._interior_levels(band.astype(np.uint8), roi, 120)
+    levels, reach, _ = interior_levels(band.astype(np.uint8), roi, 120, classifier)
     assert reach > 3 and levels.object - 40 > 3 and levels.object_error > 1, levels
 
 
@@ -180,19 +181,19 @@ def test_a_steady_cameras_light_is_carried_and_found_again_when_it_changes():
         frame = render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, seed=k, light_direction_deg=30.0,
                              **FLUME)
         errors.append(measurer.measure(frame).area_m2 / scene.true_area_m2 - 1)
-        ages.append(measurer._light.age)
+        ages.append(measurer.carried.light.light.age)
     assert max(ages) >= 2 and ages[-1] > 0, ages  # carried from frame to frame
     rebuilds = measurer.rebuilds
     darker = render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, seed=4, light_direction_deg=30.0,
                           gain=0.8, **FLUME)  # a cloud over the flume: the same scene 20 % darker
     errors.append(measurer.measure(darker).area_m2 / scene.true_area_m2 - 1)
-    assert measurer.rebuilds == rebuilds and measurer._light.age == 0  # the light changed: found afresh
+    assert measurer.rebuilds == rebuilds and measurer.carried.light.light.age == 0  # the light changed: found afresh
     fits = measurer.light_fits
     for k in range(5, 9):  # the cloud stays: the light found in its first frame is carried again
         frame = render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, seed=k, light_direction_deg=30.0,
                              gain=0.8, **FLUME)
         errors.append(measurer.measure(frame).area_m2 / scene.true_area_m2 - 1)
-    assert measurer.light_fits == fits and measurer._light.age == 4, (measurer.light_fits, fits)
+    assert measurer.light_fits == fits and measurer.carried.light.light.age == 4, (measurer.light_fits, fits)
     assert max(abs(e) for e in errors) <= 0.003, errors
 
 

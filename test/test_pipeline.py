@@ -109,7 +109,7 @@ def test_markers_that_did_not_move_are_not_retracked_and_a_bumped_camera_is(monk
     for skip in (False, True):
         calls["retrack"] = 0
         measurer = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
-        measurer.skip_unmoved_markers = skip
+        measurer.locator.skip_unmoved_markers = skip
         runs[skip] = ([measurer.measure(frame) for frame in frames], calls["retrack"])
     (every, every_calls), (skipping, skipping_calls) = runs[False], runs[True]
     for a, b in zip(every, skipping, strict=True):
@@ -130,7 +130,8 @@ def test_a_frame_whose_markers_did_not_move_keeps_the_last_fit_and_gives_the_row
     refitting = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
     refitted = []
     for frame in frames:
-        refitting._last_located = refitting._carried = None  # forget the last fit: fit this frame's corners
+        refitting.carried.tracking.last_located = None  # forget the last fit: fit this frame's corners
+        refitting.carried.weights.carried = None
         refitted.append(refitting.measure(frame))
 
     def fits(results) -> int:  # distinct scale fits among the frames

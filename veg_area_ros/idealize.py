@@ -42,3 +42,45 @@ class Idealizer:
             self._valid = self(ones, cv2.INTER_NEAREST)
             self._valid.setflags(write=False)
         return self._valid
+
+
+class IdealView:
+    """The raw frame and the idealized image of one camera, point by point: a calibrated camera's idealization,
+    or none (the raw frame is then the idealized image). Every stage that maps between the two asks this."""
+
+    def __init__(self, camera: BrownCamera | None):
+        self.camera = camera
+        self.idealizer = Idealizer(camera) if camera is not None else None
+
+    @property
+    def calibrated(self) -> bool:
+        return self.camera is not None
+
+    @property
+    def ideal_matrix(self) -> np.ndarray:
+        """The ideal camera's matrix (a calibrated view only)."""
+        return self.idealizer.ideal.camera_matrix
+
+    def check_size(self, frame: np.ndarray) -> None:
+        if self.idealizer is not None:
+            self.idealizer.check(frame)
+
+    def to_ideal(self, raw_pixels: np.ndarray) -> np.ndarray:
+        """Raw-frame pixels -> the idealized image."""
+        if self.camera is None or len(raw_pixels) == 0:
+            return raw_pixels
+        return self.idealizer.ideal.normalized_to_pixels(self.camera.pixels_to_normalized(raw_pixels))
+
+    def to_raw(self, ideal_pixels: np.ndarray) -> np.ndarray:
+        """Idealized-image pixels -> the raw frame (the inverse of `to_ideal`)."""
+        if self.camera is None or len(ideal_pixels) == 0:
+            return ideal_pixels
+        return self.camera.normalized_to_pixels(self.idealizer.ideal.pixels_to_normalized(ideal_pixels))
+
+    def image(self, frame: np.ndarray, interpolation: int = cv2.INTER_LINEAR) -> np.ndarray:
+        """The frame remapped to the idealized image (itself without a calibration)."""
+        return self.idealizer(frame, interpolation) if self.idealizer is not None else frame
+
+    def valid_mask(self) -> np.ndarray | None:
+        """The idealized image's pixels that come from inside the raw frame; None: all of them."""
+        return self.idealizer.valid_mask() if self.idealizer is not None else None

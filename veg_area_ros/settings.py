@@ -10,10 +10,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .area import AreaMeasurer, PortAreaMeasurer
+from .area import AreaMeasurer
 from .camera_model import BrownCamera
 from .classify import AREA_MODES, Classifier, ClassifyError, check_levels, check_polygon
 from .flat_port import FlatPortCamera
+from .port_area import PortAreaMeasurer
 from .targets import TargetsSpec
 
 THRESHOLD_MODES = ("fixed", "otsu")

@@ -94,7 +94,6 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     input (a cluster task): the rows only, no file written and no verdict on the run."""
     import cv2
 
-    from ..area import NO_CALIBRATION_FOR_OFFSET, draw_overlay
     from ..bags import BagError, bag_image_count
     from ..calib_io import CalibrationFileError, read_calibration, write_calibration
     from ..camera_info import info_to_camera
@@ -112,6 +111,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     )
     from ..idealize import FrameSizeError
     from ..light import LightError
+    from ..locate import NO_CALIBRATION_FOR_OFFSET
+    from ..overlay import draw_overlay
     from ..pipeline import prefetched
     from ..targets import TargetsError, TargetsSpec
 

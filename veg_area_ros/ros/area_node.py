@@ -25,7 +25,6 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 
-from ..area import draw_overlay
 from ..calib_io import read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, decode_image, stamp_ns, unstamped
@@ -34,6 +33,7 @@ from ..frames import read_image
 from ..idealize import FrameSizeError
 from ..latest import FrameTally
 from ..light import LightError
+from ..overlay import draw_overlay
 from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, MeasurementSettings
 from ..sources import default_targets
 from ..targets import TargetsError, TargetsSpec

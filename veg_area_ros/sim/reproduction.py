@@ -19,11 +19,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..area import AreaMeasurer, PortAreaMeasurer
+from ..area import AreaMeasurer
 from ..board import BoardSpec
 from ..calibration import View, calibrate
 from ..camera_model import BrownCamera
 from ..classify import Classifier
+from ..port_area import PortAreaMeasurer
 from ..targets import TargetsSpec
 from .synthetic import (
     BOARD,

@@ -1,0 +1,80 @@
+"""The measurement as named stages (locate, region, weights, light_levels, area_terms, checks): a frame's path
+through `AreaMeasurer.measure` calls each stage once or twice, in order; what a stage carries from frame to frame
+is its own object (`AreaMeasurer.carried`), not an attribute of the orchestrator; the orchestrator is short and
+every stage module under 400 lines. The results themselves are held by test_golden_area.py."""
+
+from __future__ import annotations
+
+import ast
+import sys
+from collections import Counter
+
+import numpy as np
+from helpers import REPO
+
+from veg_area_ros.area import AreaMeasurer
+from veg_area_ros.classify import Classifier
+from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets
+
+STAGES = ("locate", "region", "weights", "light_levels", "area_terms", "checks")
+PACKAGE = REPO / "veg_area_ros"
+
+
+def _calls_from_measure(measurer: AreaMeasurer, frame: np.ndarray) -> list[str]:
+    """The package modules of the Python functions `measure` itself calls, in order."""
+    called = []
+
+    def profile(frame_, event, _arg):
+        if event == "call" and frame_.f_back is not None and frame_.f_back.f_code is AreaMeasurer.measure.__code__:
+            path = frame_.f_code.co_filename
+            if path.startswith(str(PACKAGE)) or "/veg_area_ros/" in path:
+                called.append(path.rsplit("/", 1)[-1].removesuffix(".py"))
+
+    sys.setprofile(profile)
+    try:
+        measurer.measure(frame)
+    finally:
+        sys.setprofile(None)
+    return called
+
+
+def test_a_frame_calls_each_stage_once_or_twice_in_order():
+    frames = [render_scene(ENDOSCOPE, cube_scene(), 0.7, seed=seed, light_gradient=0.2) for seed in range(2)]
+    for area_mode in ("subpixel", "count"):
+        measurer = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120), area_mode=area_mode)
+        for frame in frames:  # the first frame builds what the second one carries
+            called = _calls_from_measure(measurer, frame)
+            visits = Counter(module for module in called if module in STAGES)
+            assert set(visits) == {"locate", "weights", "light_levels", "area_terms", "checks"}, called
+            assert max(visits.values()) <= 2, visits
+            first = [module for k, module in enumerate(called) if module in STAGES and module not in called[:k]]
+            assert first == ["locate", "weights", "light_levels", "area_terms", "checks"], called
+
+
+def test_what_a_stage_carries_is_its_own_object_and_start_segment_forgets_it():
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
+    measurer = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
+    first = measurer.measure(frame)
+    carried = measurer.carried
+    assert carried.tracking.markers and carried.weights.weights is not None and carried.light.light is not None
+    assert not [name for name in vars(measurer) if name.startswith("_")]  # no cache of a stage on the orchestrator
+    geometry = carried.weights.geometry
+    measurer.start_segment()
+    assert not carried.tracking.markers and carried.tracking.last_located is None
+    assert carried.weights.weights is None and carried.light.light is None
+    assert carried.weights.geometry is geometry  # the camera's own, kept across segments
+    assert measurer.measure(frame).summary() == first.summary()  # a first frame again: the same row
+
+
+def _class_lines(path, name: str) -> int:
+    tree = ast.parse(path.read_text())
+    node = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == name)
+    return node.end_lineno - node.lineno + 1
+
+
+def test_the_orchestrator_is_short_and_each_stage_module_is_under_400_lines():
+    assert _class_lines(PACKAGE / "area.py", "AreaMeasurer") < 150
+    for stage in STAGES:
+        text = (PACKAGE / f"{stage}.py").read_text()
+        assert len(text.splitlines()) < 400, stage
+        assert "exists because" in text.split('"""')[1] or "exists apart" in text.split('"""')[1], stage

@@ -1,0 +1,221 @@
+"""Stage 5 of a frame's measurement, the checks: everything that makes this Af less trustworthy, said in the
+result itself: clipped exposure near the object's edges (and what it may do to Af), an object cut by the
+ROI's border, a threshold sweep that does not settle, edges blurred beyond the printed markers', targets
+missing, a calibration used outside its conditions, and no object at all.
+
+It exists because trust is judged after the number is made, from the same frame, mask and terms, and each
+check is one rule a reader can find here. Takes the measured `AreaResult` with the frame's band, mask, weights
+and targets; fills its `exposure`, `edge_widths` and `warnings` (and zeroes Af where no object was found).
+Carries nothing from frame to frame but the markers' edge width, which it keeps on the layout's `Weights`.
+
+No ROS here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .area_result import AreaResult
+from .classify import BAND_VALUES, Classifier, LevelEstimator, Levels
+from .idealize import IdealView
+from .light_levels import INTERIOR_PX
+from .locate import Located
+from .markers import DetectedMarker
+from .weights import Weights
+
+CLIP_HIGH, CLIP_LOW = 250, 5  # band values a sensor or JPEG has clipped: whites burnt out, shadows crushed
+CLIP_REACH_PX = 2  # blooming and the lens's blur carry a clipped pixel's light this far into its neighbours
+CLIP_EDGE_SHARE = 0.10  # clipping next to this share of the object's edge pixels matters (real photos: 17 %, Af -1.2 %)
+BORDER_TOUCH_SHARE = 0.01  # object pixels on the ROI's border, as a share of the object's: the area is cut
+SWEEP_UNSETTLED = 0.02  # Af moving this much (relative) per sweep step around the threshold: no stable edge
+EDGE_ZONE = 0.15  # an edge's pixels: between the two levels' outer 15 % (noise stays out at any contrast)
+BLUR_RATIO = 2.0  # the object's edges this much (and a pixel) wider than the markers': blurred on its own
+DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
+
+# warnings about an object's edges, levels or extent: void where no object was found
+OBJECT_WARNINGS = ("counted whole pixels", "object touches the ROI's border", "threshold sweep does not settle",
+                   "edges wider than the markers'")
+
+
+@dataclass
+class CheckSettings:
+    """What the checks need to know of the measurement's settings."""
+    classifier: Classifier
+    area_mode: str
+    threshold_delta: float
+    view: IdealView
+    calibration_conditions: dict | None  # the calibration file's medium and distance
+
+
+def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, mask: np.ndarray,
+          looked_at: np.ndarray, roi_count: np.ndarray, weights: Weights, factor: float, located: Located,
+          markers: dict[int, DetectedMarker], estimator: LevelEstimator) -> np.ndarray:
+    """Fills the result's exposure (adding what clipping may do to its std), edge widths and warnings; where no
+    object was found, Af becomes 0 with its reason. Returns the object mask over the weights' window."""
+    result.exposure = _exposure(raw_band, mask, weights, factor, settings.classifier)
+    if result.exposure is not None and result.exposure["matters"]:
+        # each edge pixel next to the clipping may be off by up to half a pixel, all the same way
+        result.exposure_std_m2 = result.exposure["affected_area_m2"] * 0.5 / np.sqrt(3)
+        result.area_std_m2 = float(np.hypot(result.area_std_m2, result.exposure_std_m2))
+    result.edge_widths = _edge_widths(looked_at, mask, roi_count, weights, result.levels, markers)
+    result.warnings = _warnings(result, mask, weights, located, settings)
+    absent = estimator.no_object(result.threshold)
+    if absent is not None:  # never a large number from the background's noise or texture
+        mask = np.zeros_like(mask)
+        result.area_m2 = result.count_area_m2 = result.area_std_m2 = 0.0
+        result.pixel_count, result.subpixel_applied = 0, False
+        result.warnings = [f"no object found: {absent}; Af is 0"] + [
+            w for w in result.warnings if w.split(":", 1)[0] not in OBJECT_WARNINGS]
+    return mask
+
+
+def _outline(mask: np.ndarray) -> int:
+    """The pixels of a class (uint8 mask) that touch the other class: its one-pixel outline."""
+    return cv2.countNonZero(cv2.subtract(mask, cv2.erode(mask, np.ones((3, 3), np.uint8))))
+
+
+def _marker_edge_width(frame: np.ndarray, markers) -> float | None:
+    """The printed markers' edge width in px (median over the markers): in each marker's box, the pixels
+    between its black's and white's outer 15 % per pixel of the outline at their midpoint."""
+    widths = []
+    height, width = frame.shape[:2]
+    for marker in markers:
+        (x0, y0), (x1, y1) = marker.corners.min(axis=0), marker.corners.max(axis=0)
+        grow = 0.2 * max(x1 - x0, y1 - y0)  # the white quiet zone around the black square
+        left, top = max(int(x0 - grow), 0), max(int(y0 - grow), 0)
+        right, bottom = min(int(np.ceil(x1 + grow)), width), min(int(np.ceil(y1 + grow)), height)
+        patch = frame[top:bottom, left:right]
+        if patch.size == 0:
+            continue
+        grey = patch if patch.ndim == 2 else cv2.cvtColor(patch, cv2.COLOR_BGR2GRAY)
+        low, high = np.percentile(grey, (5, 95))
+        if high - low < 20:
+            continue
+        outline = _outline((grey <= (low + high) / 2).astype(np.uint8))
+        mixed = np.count_nonzero(np.abs(grey - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low))
+        if outline:
+            widths.append(mixed / outline)
+    return float(np.median(widths)) if widths else None
+
+
+def _exposure(raw_band: np.ndarray, mask: np.ndarray, weights: Weights, factor: float, classifier: Classifier
+              ) -> dict | None:
+    """Clipped highlights or crushed shadows where they matter: next to the object's edge pixels (within
+    CLIP_REACH_PX: blooming and blur carry the lost light there) and among the pure pixels a level is read
+    from. None when nothing in the ROI is clipped (one min/max over the ROI: no cost on a good exposure)."""
+    low, high, _, _ = cv2.minMaxLoc(raw_band, weights.roi)
+    if high < CLIP_HIGH and low > CLIP_LOW:
+        return None
+    kernel = np.ones((3, 3), np.uint8)
+    edge = cv2.morphologyEx(mask, cv2.MORPH_GRADIENT, kernel) & weights.roi  # both sides of the boundary
+    edges = max(cv2.countNonZero(edge), 1)
+    reach = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * CLIP_REACH_PX + 1,) * 2)
+    interior = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * INTERIOR_PX + 1,) * 2)
+    object_is_bright = classifier.object != "dark"
+    found = {"matters": False, "affected_area_m2": 0.0}
+    for side, clipped in (("highlights", raw_band >= CLIP_HIGH), ("shadows", raw_band <= CLIP_LOW)):
+        clipped = clipped.astype(np.uint8) * 255
+        if not cv2.countNonZero(clipped & weights.roi):
+            continue
+        touched = edge & cv2.dilate(clipped, reach)
+        share = cv2.countNonZero(touched) / edges
+        # the class on the clipped side: the background for a dark object's highlights
+        clipped_is_object = object_is_bright == (side == "highlights")
+        members = mask if clipped_is_object else cv2.subtract(weights.roi, mask)
+        pure = cv2.erode(members, interior)
+        level_share = cv2.countNonZero(pure & clipped) / max(cv2.countNonZero(pure), 1)
+        area = weights.mask_area(touched, factor)[0]
+        matters = share >= CLIP_EDGE_SHARE
+        found[side] = {"edge_share": share, "level_share": level_share, "affected_area_m2": area,
+                       "clipped_class": "object" if clipped_is_object else "background",
+                       "reads": "high" if clipped_is_object else "low", "matters": matters}
+        if matters:
+            found["matters"] = True
+            found["affected_area_m2"] += area
+    return found if len(found) > 2 else None
+
+
+def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: Located, settings: CheckSettings
+              ) -> list[str]:
+    """Everything that makes this Af less trustworthy, one line each, said in the result itself."""
+    said = []
+    for side in ("highlights", "shadows"):
+        clip = (result.exposure or {}).get(side)
+        if clip and clip["matters"]:
+            said.append(f"clipped {side}: {100 * clip['edge_share']:.0f} % of the object's edge pixels lie "
+                        f"next to {'burnt-out' if side == 'highlights' else 'crushed'} pixels "
+                        f"({100 * clip['level_share']:.1f} % of the {clip['clipped_class']}'s pure pixels are "
+                        f"clipped): Af reads {clip['reads']} (1.5-5 % on real photos); the std has "
+                        f"{100 * result.exposure_std_m2 / max(result.area_m2, 1e-300):.1f} % for it; "
+                        f"{'shorten the exposure' if side == 'highlights' else 'lengthen the exposure'}")
+    if settings.area_mode == "subpixel" and not result.subpixel_applied:
+        said.append("counted whole pixels: the object's and the background's levels could not be told apart "
+                    "well enough for sub-pixel shares (uneven light or texture); the std is the count's")
+    if located.missing:
+        said.append(f"targets missing: marker(s) {located.missing} not found; the scale comes from the others "
+                    "and the ROI places the missing ones by their fit")
+    border = weights.border()
+    touching = cv2.countNonZero(mask & border)
+    if touching >= max(5, BORDER_TOUCH_SHARE * max(result.pixel_count, 1)):
+        said.append(f"object touches the ROI's border: {touching} of its pixels lie on it, so Af is cut there "
+                    "(widen the ROI, or move the targets)")
+    if result.area_m2 > 0 and result.threshold_std_m2 / result.area_m2 > SWEEP_UNSETTLED:
+        said.append(f"threshold sweep does not settle: Af changes by "
+                    f"{100 * result.threshold_std_m2 / result.area_m2:.1f} % per {settings.threshold_delta:g} grey "
+                    "levels around the threshold (no clear edge there)")
+    widths = result.edge_widths
+    if widths and widths["object_px"] > BLUR_RATIO * widths["markers_px"] + 1.0:
+        said.append(f"edges wider than the markers': the object's edges are {widths['object_px']:.1f} px wide, "
+                    f"the printed markers' {widths['markers_px']:.1f} px (a plant moving in the current, or "
+                    "out of focus): its edge shares are blurred together and Af is less certain")
+    said.extend(_condition_warnings(located, settings))
+    return said
+
+
+def _edge_widths(frame: np.ndarray, mask: np.ndarray, counts: np.ndarray, weights: Weights,
+                 levels: Levels | None, markers: dict[int, DetectedMarker]) -> dict | None:
+    """How wide (px) the object's edges are, against the printed markers' in the same frame, each as the
+    pixels between the two levels' outer 15 % per pixel of outline. Blur of the water or the lens widens
+    both alike; a plant moving in the current (or out of focus) widens only its own. The markers' width is
+    found once per target layout."""
+    if levels is None or not markers:
+        return None
+    low, high = sorted((levels.object, levels.background))
+    if high - low < 20:
+        return None
+    inside = np.abs(BAND_VALUES - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low)
+    outline = _outline(mask)
+    if outline == 0:
+        return None
+    if not weights.marker_edge_found:  # printed edges: once per target layout
+        weights.marker_edge_px = _marker_edge_width(frame, markers.values())
+        weights.marker_edge_found = True
+    found = weights.marker_edge_px
+    if found is None:
+        return None
+    return {"object_px": float(counts[inside].sum()) / outline, "markers_px": found}
+
+
+def _condition_warnings(located: Located, settings: CheckSettings) -> list[str]:
+    """A calibration used outside its conditions (the calibration file's metadata): another distance of the
+    targets' plane, or no medium recorded. A plumb_bob calibration absorbs refraction at one distance only."""
+    conditions = settings.calibration_conditions
+    if not conditions or not settings.view.calibrated:
+        return []
+    said = []
+    if conditions.get("medium") == "unspecified":
+        said.append("calibration medium unspecified: a calibration holds only in the medium it was made in "
+                    "(recalibrate with --medium air|water)")
+    calibrated_at = conditions.get("calibration_distance_m")
+    if calibrated_at and located.scale.kind != "distance":
+        focal = float(settings.view.ideal_matrix[0, 0])
+        distance = located.scale.metres_per_pixel * focal
+        if abs(distance / calibrated_at - 1) > DISTANCE_TOLERANCE:
+            said.append(f"calibrated at {calibrated_at:g} m, measuring at about {distance:.2f} m"
+                        f"{' in ' + conditions['medium'] if conditions.get('medium') == 'water' else ''}: "
+                        "refraction is absorbed at the calibration's distance only (errors of a few percent); "
+                        "calibrate at this distance or use the flat-port model")
+    return said

@@ -1,0 +1,90 @@
+"""Af through a lens calibrated in air behind a flat port: the plane's pose found through the exact refraction
+model, then the measurement of `AreaMeasurer` with the plumb_bob camera that images the targets' and the
+object's planes as the lens and port do. It exists apart from `area` because it wraps the whole measurement,
+not a stage of it: it only decides when the stand-in camera is made again (the targets moved).
+
+No ROS here.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .area import AreaMeasurer
+from .area_result import AreaResult
+from .classify import Classifier
+from .flat_port import FlatPortCamera, PortError, absorbed_camera, estimate_pose
+from .markers import detect_markers
+from .targets import TargetsError, TargetsSpec
+
+
+class PortAreaMeasurer:
+    """Af through a lens calibrated in air behind a flat port (`flat_port.FlatPortCamera`). The targets' plane
+    pose comes from the markers through the exact refraction model; the object's plane (the targets' one, or
+    `object_plane_offset_m` farther along the optical axis) and the targets' then get the plumb_bob camera that
+    images them as the lens and port do (`flat_port.absorbed_camera`, fitted around the targets), and the
+    measurement is the calibrated one of `AreaMeasurer` with that camera. The plane is found again when the
+    targets move."""
+
+    def __init__(self, camera: FlatPortCamera, targets: TargetsSpec, classifier: Classifier, **options):
+        if len(targets.markers) + len(targets.points) < 4:
+            raise TargetsError("a flat-port measurement needs 4 or more targets (the plane's pose through the port)")
+        self.camera, self.targets, self.classifier, self.options = camera, targets, classifier, options
+        self._inner: AreaMeasurer | None = None
+        self._rebuilds_seen = 0
+        self.absorbed_residual_px = float("nan")  # the plumb_bob stand-in's largest misfit around the targets
+        self.plane_pose: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def rebuilds(self) -> int:
+        return 0 if self._inner is None else self._inner.rebuilds
+
+    def _plane_pose(self, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        markers = detect_markers(frame, self.targets.dictionary) if self.targets.markers else {}
+        found = [i for i in self.targets.markers if i in markers]
+        pixels = [markers[i].centre for i in found] + [pixel for pixel, _ in self.targets.points]
+        planes = [self.targets.markers[i] for i in found] + [plane for _, plane in self.targets.points]
+        if len(pixels) < 4:
+            raise TargetsError(f"only {len(pixels)} target(s) found; the plane's pose through the port needs 4")
+        try:
+            return estimate_pose(self.camera, np.array(planes), np.array(pixels))
+        except PortError as exc:
+            raise TargetsError(str(exc)) from exc
+
+    def _targets_box(self, rvec: np.ndarray, tvec: np.ndarray) -> tuple[float, float, float, float]:
+        """The raw-image box of every listed target (seen or not), widened by 15 % of the image a side: where
+        the default ROI and the targets are."""
+        planes = self.targets.all_planes()
+        pixels = self.camera.project_pose(np.column_stack([planes, np.zeros(len(planes))]), rvec, tvec)
+        width, height = self.camera.image_size
+        (u0, v0), (u1, v1) = pixels.min(axis=0), pixels.max(axis=0)
+        return (max(0.0, u0 - 0.15 * width), max(0.0, v0 - 0.15 * height),
+                min(width - 1.0, u1 + 0.15 * width), min(height - 1.0, v1 + 0.15 * height))
+
+    def _build(self, frame: np.ndarray) -> None:
+        rvec, tvec = self._plane_pose(frame)
+        self.plane_pose = (rvec, tvec)
+        offset = self.targets.object_plane_offset_m or 0.0
+        object_tvec = np.asarray(tvec, float) + np.array([0.0, 0.0, offset])
+        # one stand-in for both planes: the targets' (their centres make the scale) and the object's (its
+        # pixels' footprints); through a port they are not one pinhole's, so each alone would bias the other
+        absorbed, self.absorbed_residual_px = absorbed_camera(
+            self.camera, rvec, object_tvec, box=self._targets_box(rvec, tvec),
+            more_tvecs=(np.asarray(tvec, float),) if offset else ())
+        self._inner = AreaMeasurer(absorbed, self.targets, self.classifier, **self.options)
+
+    def start_segment(self) -> None:
+        """As AreaMeasurer.start_segment; the plane's pose through the port is found anew too."""
+        self._inner, self._rebuilds_seen = None, 0
+
+    def measure(self, frame: np.ndarray, keep_images: bool = False, grey: np.ndarray | None = None) -> AreaResult:
+        """As AreaMeasurer.measure (`grey` too: the markers found in it)."""
+        looked_at = frame if grey is None else grey
+        if self._inner is None:
+            self._build(looked_at)
+        result = self._inner.measure(frame, keep_images, grey)
+        if self._inner.rebuilds > max(self._rebuilds_seen, 1):  # the targets moved: find their plane again
+            self._build(looked_at)
+            result = self._inner.measure(frame, keep_images, grey)
+        self._rebuilds_seen = self._inner.rebuilds
+        return result
