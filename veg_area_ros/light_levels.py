@@ -18,7 +18,16 @@ from dataclasses import dataclass, replace
 import cv2
 import numpy as np
 
-from .classify import MIN_SPREAD_DN, Classifier, ClassifyError, LevelEstimator, Levels, check_levels, pure_level
+from .classify import (
+    MIN_SPREAD_DN,
+    Classifier,
+    ClassifyError,
+    LevelEstimator,
+    Levels,
+    check_levels,
+    otsu_level,
+    pure_level,
+)
 from .light import FlatField, check_background_frame, flat_field
 from .weights import Weights
 
@@ -155,10 +164,18 @@ def _flat_field(band: np.ndarray, weights: Weights, threshold: float, settings: 
     pixels at least `reach` - 1 pixels from any pixel of the object's class (blurred edges stay out)."""
     if settings.background_band is not None:
         return flat_field(band, weights.roi, background_band=settings.background_band[weights.window])
-    background = ~settings.classifier.object_side(band, threshold)
     size = 2 * (reach - 1) + 1
-    background = cv2.erode(background.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
-    return flat_field(band, weights.roi, background)
+    found = None
+    for split in (threshold, otsu_level(np.bincount(band[weights.roi > 0], minlength=256))):
+        # the user's threshold classifies; where the light is uneven enough that it leaves too little
+        # background to fit (a real photo's dim whites on the object's side of 150), Otsu's split of this band
+        # finds the background the light is fitted to, and the user's threshold still classifies
+        background = ~settings.classifier.object_side(band, split)
+        background = cv2.erode(background.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
+        found = flat_field(band, weights.roi, background)
+        if found is not None or settings.classifier.threshold == "otsu":
+            break
+    return found
 
 
 def _evened(raw_band: np.ndarray, weights: Weights, settings: LightSettings, memory: LightMemory, fresh: bool
@@ -174,8 +191,12 @@ def _evened(raw_band: np.ndarray, weights: Weights, settings: LightSettings, mem
         if fresh or light is None or light.weights is not weights or light.age >= LIGHT_REFRESH_FRAMES:
             raw_threshold, reach, start = threshold, INTERIOR_PX, INTERIOR_PX
             memory.fits += 1
+            nearer = None
             for _ in range(2):  # again, the background kept as far from the edges as they are wide
-                found = _flat_field(raw_band, weights, raw_threshold, settings, reach)
+                # where the deeper background holds too few cells for a surface (a chessboard's white squares
+                # eroded by wide edges), the nearer one's flat field stands: no flat field at all left a real
+                # photo's 25 % shading in the shares (Af +6.5 % instead of +0.2 %)
+                found = nearer = _flat_field(raw_band, weights, raw_threshold, settings, reach) or nearer
                 light = Light(weights, None if found is None else found.unevenness,
                               found if found is not None and found.needed else None)
                 band, threshold = raw_band, raw_threshold

@@ -1,0 +1,80 @@
+"""Af on real JPEG photos of a printed board (test/data/opencv-left: OpenCV's 13 sample photos, the copies of
+../shared/data/opencv-left), measured as test/board_photos.py sets them up: the black area of the print inside
+the rectangle through the outer squares' centres, the four outer inner corners as hand-picked targets, the
+camera calibrated on the same photos. The photos with under 1 % of the board's pixels at 250 or more are held
+to the set's spread and to their reported std; the ink's gain shifts all photos of one print alike, so the
+spread between photos is what is judged, with the mean's offset only bounded."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from board_photos import board_photos, calibrated
+from helpers import OPENCV_LEFT
+
+from veg_area_ros.area import AreaMeasurer
+from veg_area_ros.classify import Classifier
+
+BOARD = "chessboard:9x6:1"
+THRESHOLDS = ("otsu", 100, 120, 128, 150)
+
+
+@pytest.fixture(scope="module")
+def camera():
+    return calibrated(str(OPENCV_LEFT), BOARD)
+
+
+@pytest.fixture(scope="module")
+def photos(camera):
+    return board_photos(OPENCV_LEFT, BOARD, camera=camera)
+
+
+def _measure(photo, camera, threshold, area_mode: str = "subpixel"):
+    measurer = AreaMeasurer(camera, photo.targets, Classifier(threshold=threshold), roi=np.array(photo.roi),
+                            area_mode=area_mode)
+    return measurer.measure(photo.frame)
+
+
+def _errors(photos, camera, threshold, area_mode: str = "subpixel") -> tuple[np.ndarray, np.ndarray]:
+    """Each well-exposed photo's relative error and reported relative std."""
+    results = [(_measure(p, camera, threshold, area_mode), p) for p in photos if p.clipped_share < 0.01]
+    return (np.array([r.area_m2 / p.true_area_m2 - 1 for r, p in results]),
+            np.array([r.area_std_m2 / p.true_area_m2 for r, p in results]))
+
+
+def test_the_set_has_the_seven_well_exposed_photos_and_a_known_answer(photos):
+    names = sorted(p.name for p in photos if p.clipped_share < 0.01)
+    assert names == ["left01.jpg", "left02.jpg", "left06.jpg", "left09.jpg", "left11.jpg", "left13.jpg",
+                     "left14.jpg"]
+    assert all(p.true_area_m2 == pytest.approx(27 * 0.025**2) for p in photos)  # half of the 9 x 6 squares
+
+
+@pytest.mark.parametrize("threshold", [128, 150])
+def test_a_shaded_photo_is_evened_whatever_the_threshold(photos, camera, threshold):
+    """left13.jpg has a 25 % shading gradient across the board. At a threshold of 128 the levels were read
+    deeper inside (wide edges), where the eroded white squares held too few cells for a light surface, and
+    the whole flat field was dropped: Af +6.5 % (the std 2.7 %). At 150 the dim whites fell on the object's
+    side and left no background to fit at all: +5.7 %, counted. Both now keep the light evened and agree with
+    Otsu's threshold within 0.3 %."""
+    photo = next(p for p in photos if p.name == "left13.jpg")
+    chosen, otsu = _measure(photo, camera, threshold), _measure(photo, camera, "otsu")
+    assert chosen.flat_field is not None and chosen.flat_field.variation > 0.2
+    assert chosen.subpixel_applied
+    assert abs(chosen.area_m2 / otsu.area_m2 - 1) < 0.003, (chosen.area_m2, otsu.area_m2)
+    assert abs(chosen.area_m2 / photo.true_area_m2 - 1) < 0.01
+
+
+@pytest.mark.parametrize("threshold", THRESHOLDS)
+def test_the_default_mode_holds_on_real_photos_at_any_threshold(photos, camera, threshold):
+    """Sub-pixel mode (the default): the seven photos spread by at most 0.55 % (0.49-0.51 % measured at every
+    threshold here; the goal is 0.5 %), every photo lies within 3 reported std of the set's mean, the mean
+    within 1 % of the print's black area, and at a fixed threshold the spread is well under half the count's
+    (counting reads the photos' shading: 1.9-2.6 %)."""
+    errors, stds = _errors(photos, camera, threshold)
+    assert np.std(errors, ddof=1) <= 0.0055, errors
+    assert np.all(np.abs(errors - errors.mean()) <= 3 * stds), (errors, stds)
+    assert abs(errors.mean()) < 0.01
+    if threshold != "otsu":
+        counted, _ = _errors(photos, camera, threshold, "count")
+        assert np.std(errors, ddof=1) < 0.5 * np.std(counted, ddof=1), (errors, counted)
+        assert np.max(np.abs(errors - errors.mean())) < np.max(np.abs(counted - counted.mean()))
