@@ -150,3 +150,118 @@ def test_a_package_url_points_into_the_installed_share_folder(monkeypatch):
     monkeypatch.setenv("AMENT_PREFIX_PATH", str(REPO / ".venv"))
     assert camera_info_url_to_path("package://veg_area_ros/config/x.yaml") == (
         REPO / ".venv" / "share" / "veg_area_ros" / "config" / "x.yaml")
+
+
+def _filestorage(path: Path) -> dict:
+    """What OpenCV's FileStorage reads of a YAML file: its top-level keys and the metadata block's."""
+    import cv2
+
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    try:
+        metadata = storage.getNode(calib_io.METADATA_KEY)
+        return {"keys": list(storage.root().keys()), "metadata_keys": list(metadata.keys()),
+                "matrix": storage.getNode("camera_matrix").getNode("data"), "storage": storage}
+    except cv2.error as exc:
+        pytest.fail(f"FileStorage cannot read {path.name}: {exc}")
+
+
+def test_opencvs_filestorage_reads_every_calibration_file_the_package_writes(tmp_path):
+    """`veg-area calibrate` on real photos writes the fit's whole metadata (board spec, warnings, per-view
+    residuals, dates): FileStorage (as OpenCV's tools, and yaml-cpp as ROS's parsers, read YAML) reads every key
+    and the same values PyYAML reads. Unquoted, `board: chessboard:9x6:1` stopped it ("Incorrect indentation")."""
+    from helpers import OPENCV_LEFT, run_cli
+
+    path = tmp_path / "left.yaml"
+    done = run_cli("calibrate", str(OPENCV_LEFT), "--board", "chessboard:9x6:1", "--medium", "air", "-o", str(path))
+    assert done.returncode == 0, done.stderr
+    content = yaml.safe_load(path.read_text())
+    read = _filestorage(path)
+    assert read["keys"] == list(content)
+    assert read["metadata_keys"] == list(content[calib_io.METADATA_KEY])
+    metadata = read["storage"].getNode(calib_io.METADATA_KEY)
+    assert metadata.getNode("board").string() == content[calib_io.METADATA_KEY]["board"] == "chessboard:9x6:1"
+    matrix = [read["matrix"].at(k).real() for k in range(9)]
+    assert matrix == content["camera_matrix"]["data"]
+
+
+@pytest.mark.parametrize("text", ["a: b", "x:y", "- a", "null", "true", "No", "0.5", "", "a 'quote' \"and\" more",
+                                  "°, ü and ∑", "#hash", "line\nbreak", "  spaces  "])
+def test_every_string_is_written_so_every_reader_reads_it_back(tmp_path, text):
+    import cv2
+
+    path = tmp_path / "calib.yaml"
+    write_calibration(path, ENDOSCOPE, "endoscope", {"note": text, "list": [text, 1.5, None], "n": {"x": text}})
+    assert read_calibration(path).metadata == {"note": text, "list": [text, 1.5, None], "n": {"x": text}}
+    storage = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
+    note = storage.getNode(calib_io.METADATA_KEY).getNode("note")
+    if text.strip() and "\n" not in text:  # FileStorage's own reading of empty and multi-line strings differs
+        assert note.string() == text
+
+
+OST_INI = """# oST version 5.0 parameters
+
+
+[image]
+
+width
+640
+
+height
+480
+
+[narrow_stereo]
+
+camera matrix
+520.000000 0.000000 326.000000
+0.000000 522.080000 236.500000
+0.000000 0.000000 1.000000
+
+distortion
+-0.320000 0.120000 0.001200 -0.000800 -0.020000
+
+rectification
+1.000000 0.000000 0.000000
+0.000000 1.000000 0.000000
+0.000000 0.000000 1.000000
+
+projection
+520.000000 0.000000 319.500000 0.000000
+0.000000 520.000000 239.500000 0.000000
+0.000000 0.000000 1.000000 0.000000
+"""
+
+
+@pytest.mark.parametrize("name", ["ost.ini", "endoscope.txt"])
+def test_ros1_cameracalibrators_ost_ini_is_read(tmp_path, name):
+    """The INI that ROS 1's cameracalibrator writes beside ost.yaml (any file name: its [image] section says it)."""
+    path = tmp_path / name
+    path.write_text(OST_INI)
+    calibration = read_calibration(path)
+    assert calibration.camera_name == "narrow_stereo"
+    camera = calibration.camera
+    assert (camera.width, camera.height, camera.fx, camera.fy, camera.xp, camera.yp) == (640, 480, 520.0, 522.08,
+                                                                                         326.0, 236.5)
+    assert (camera.k1, camera.k2, camera.p1, camera.p2, camera.k3) == (-0.32, 0.12, 0.0012, -0.0008, -0.02)
+
+
+def test_a_stereo_pairs_ost_ini_is_refused_naming_both_cameras(tmp_path):
+    left = OST_INI.replace("[narrow_stereo]", "[narrow_stereo/left]")
+    right = OST_INI.replace("[narrow_stereo]", "[narrow_stereo/right]").replace("# oST version 5.0 parameters", "")
+    path = tmp_path / "ost.ini"
+    path.write_text(left + right)
+    with pytest.raises(CalibrationFileError, match=r"2 camera sections \(narrow_stereo/left, narrow_stereo/right\)"):
+        read_calibration(path)
+
+
+@pytest.mark.parametrize("edit, problem", [
+    (lambda t: t.replace("width\n640", "width\n640.5"), "one whole 'width'"),
+    (lambda t: t.replace("[image]", "[imagery]"), r"2 camera sections \(imagery, narrow_stereo\)"),
+    (lambda t: "camera matrix\n1 2 3\n" + t, "before any"),
+    (lambda t: t.replace("-0.320000 0.120000", "-0.32 0.12 0.1 0.2 0.3 0.4"), "distortion coefficients"),
+    (lambda t: t.replace("520.000000 0.000000 326.000000\n", ""), "'camera_matrix' should hold 9 numbers, found 6"),
+])
+def test_a_broken_ost_ini_is_refused_with_its_reason(tmp_path, edit, problem):
+    path = tmp_path / "ost.ini"
+    path.write_text(edit(OST_INI))
+    with pytest.raises(CalibrationFileError, match=problem):
+        read_calibration(path)

@@ -22,7 +22,14 @@ from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 
-from .cdr import CameraInfoFields, ImageFields, decode_camera_info, decode_image
+from .cdr import (
+    CameraInfoFields,
+    CompressedImageFields,
+    ImageFields,
+    decode_camera_info,
+    decode_compressed_image,
+    decode_image,
+)
 from .files import write_atomic
 from .strict_yaml import load_text, read_text
 
@@ -260,8 +267,9 @@ def recover_bag(broken: str | Path, output: str | Path) -> Recovery:
 class BagFrame:
     index: int
     timestamp_ns: int  # when the recorder received it
-    image: ImageFields
-    camera_info: CameraInfoFields | None  # the latest camera_info recorded before this frame
+    image: ImageFields | CompressedImageFields
+    camera_info: CameraInfoFields | None  # the latest camera_info of its camera recorded before this frame
+    camera_info_problem: str = ""  # why camera_info is None although one was recorded
 
 
 def _open_reader(path: str | Path) -> Reader:
@@ -278,14 +286,46 @@ def _open_reader(path: str | Path) -> Reader:
     return reader
 
 
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+TRANSPORT_SUFFIXES = ("/compressed", "/compressedDepth", "/theora", "/zstd", "/ffmpeg")
+
+
 def _image_connections(reader: Reader, path: str | Path, image_topic: str | None) -> list:
-    """The connections of the bag's image topic: the named one, else the only sensor_msgs/Image topic."""
-    images = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/Image"]
+    """The connections of the bag's image topic (sensor_msgs/Image, or CompressedImage as image_transport's
+    `compressed` topic records it): the named one, else the only image topic."""
+    images = [c for c in reader.connections if c.msgtype in IMAGE_TYPES]
     chosen = [c for c in images if image_topic is None or c.topic == image_topic]
     if len({c.topic for c in chosen}) != 1:
-        raise BagError(f"{path}: pick the image topic (--image-topic); Image topics in the bag: "
+        raise BagError(f"{path}: pick the image topic (--image-topic); image topics in the bag: "
                        f"{sorted({c.topic for c in images})}")
     return chosen
+
+
+def sibling_camera_info(image_topic: str) -> str:
+    """The camera_info topic that image_transport pairs with an image topic: `camera_info` in the image's
+    namespace (/left/image_raw and /left/image_raw/compressed -> /left/camera_info)."""
+    base = next((image_topic[: -len(s)] for s in TRANSPORT_SUFFIXES if image_topic.endswith(s)), image_topic)
+    namespace = base.rsplit("/", 1)[0]
+    return f"{namespace}/camera_info"
+
+
+def _info_connections(reader: Reader, path: str | Path, image_topic: str) -> list:
+    """The camera_info connections for an image topic: its sibling (`sibling_camera_info`); where the bag has
+    none, its only camera_info topic if there is one (its frame_id is then held to the images'); none when the
+    bag recorded no camera_info. Two or more other camera_info topics and no sibling: refused, naming them."""
+    infos = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/CameraInfo"]
+    sibling = sibling_camera_info(image_topic)
+    paired = [c for c in infos if c.topic == sibling]
+    if paired or not infos:
+        return paired
+    if len({c.topic for c in infos}) == 1:
+        return infos
+    raise BagError(f"{path}: no camera_info beside {image_topic} ({sibling}), and several others "
+                   f"({', '.join(sorted({c.topic for c in infos}))}): which camera's is meant cannot be told")
+
+
+def _decode_image(msgtype: str, data):
+    return decode_compressed_image(data) if msgtype == "sensor_msgs/msg/CompressedImage" else decode_image(data)
 
 
 def bag_image_count(path: str | Path, image_topic: str | None = None) -> int:
@@ -296,22 +336,42 @@ def bag_image_count(path: str | Path, image_topic: str | None = None) -> int:
         reader.close()
 
 
-def iter_bag_frames(path: str | Path, image_topic: str | None = None,
-                    info_topic: str | None = None) -> Iterator[BagFrame]:
-    """The bag's image messages in recording order, each with the camera_info last recorded before it.
-    Without topic names: the only sensor_msgs/Image topic (an error if there are several)."""
+def bag_camera_info(path: str | Path, image_topic: str | None = None) -> tuple[str, CameraInfoFields] | None:
+    """The camera_info topic paired with the bag's image topic and its first message, or None when the bag
+    recorded none for it."""
     reader = _open_reader(path)
     try:
         images = _image_connections(reader, path, image_topic)
-        infos = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/CameraInfo"
-                 and (info_topic is None or c.topic == info_topic)]
+        infos = _info_connections(reader, path, images[0].topic)
+        for connection, _, data in reader.messages(connections=infos[:1]):
+            return connection.topic, decode_camera_info(data)
+        return None
+    finally:
+        reader.close()
+
+
+def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterator[BagFrame]:
+    """The bag's image messages in recording order, each with its camera's camera_info last recorded before it
+    (`_info_connections`). Without a topic name: the only image topic (an error if there are several). An
+    image whose frame_id differs from that camera_info's gets none, and the reason."""
+    reader = _open_reader(path)
+    try:
+        images = _image_connections(reader, path, image_topic)
+        infos = _info_connections(reader, path, images[0].topic)
         camera_info = None
         index = 0
         for connection, timestamp, data in reader.messages(connections=images + infos[:1]):
             if connection.msgtype == "sensor_msgs/msg/CameraInfo":
                 camera_info = decode_camera_info(data)
                 continue
-            yield BagFrame(index, timestamp, decode_image(data), camera_info)
+            image = _decode_image(connection.msgtype, data)
+            info, problem = camera_info, ""
+            if info is not None and image.header.frame_id and info.header.frame_id and (
+                    image.header.frame_id != info.header.frame_id):
+                info, problem = None, (f"the camera_info on {infos[0].topic} is frame {info.header.frame_id!r}, "
+                                       f"the image on {connection.topic} frame {image.header.frame_id!r}: "
+                                       "another camera's calibration")
+            yield BagFrame(index, timestamp, image, info, problem)
             index += 1
     finally:
         reader.close()

@@ -13,6 +13,7 @@ from __future__ import annotations
 import datetime as dt
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ from .camera_info import camera_from_info, camera_info_fields
 from .camera_model import BrownCamera, check_plausible
 from .files import write_atomic
 from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
-from .strict_yaml import StrictYamlError, load_text, read_text
+from .strict_yaml import StrictYamlError, dump_portable, load_text, read_text
 
 METADATA_KEY = "veg_area_ros"
 
@@ -83,9 +84,7 @@ def plain(value: Any) -> Any:
 
 def write_calibration(path: str | os.PathLike, camera: BrownCamera, camera_name: str = "camera",
                       metadata: dict[str, Any] | None = None) -> None:
-    text = yaml.safe_dump(to_camera_info_dict(camera, camera_name, metadata), sort_keys=False,
-                          default_flow_style=None, width=120)
-    write_atomic(path, text)
+    write_atomic(path, dump_portable(to_camera_info_dict(camera, camera_name, metadata)))
 
 
 def _numbers(path: Path, content: dict, key: str, rows: int, cols: int | None) -> np.ndarray:
@@ -131,8 +130,64 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
     return calibration
 
 
+OST_INI_KEYS = {"camera matrix": ("camera_matrix", 3, 3), "distortion": ("distortion_coefficients", 1, None),
+                "rectification": ("rectification_matrix", 3, 3), "projection": ("projection_matrix", 3, 4)}
+
+
+def is_ost_ini(path: Path, text: str) -> bool:
+    """Whether a calibration file is ROS 1 cameracalibrator's INI (`ost.ini`, '# oST version 5.0 parameters')."""
+    return path.suffix.lower() == ".ini" or re.search(r"^\s*\[image\]\s*$", text, re.MULTILINE) is not None
+
+
+def ost_ini_content(text: str, path: Path) -> dict[str, Any]:
+    """The camera_info fields of ROS 1 cameracalibrator's `ost.ini`: an [image] section (width, height) and one
+    camera section (camera matrix, distortion, rectification, projection), each key on its own line and its
+    numbers on the lines below. A stereo pair's file (two camera sections) is refused with their names."""
+    sections: list[tuple[str, dict[str, list[float]]]] = []
+    key = None
+    for number, raw in enumerate(text.splitlines(), 1):
+        line = raw.strip()
+        if not line or line.startswith(("#", ";")):
+            continue
+        if line.startswith("[") and line.endswith("]"):
+            sections.append((line[1:-1].strip(), {}))
+            key = None
+            continue
+        if not sections:
+            raise CalibrationFileError(f"{path}: not an ost.ini calibration: line {number} comes before any [section]")
+        try:
+            values = [float(word) for word in line.split()]
+        except ValueError:
+            key = line.lower()
+            sections[-1][1][key] = []
+            continue
+        if key is None:
+            raise CalibrationFileError(f"{path}: line {number} of ost.ini holds numbers under no key")
+        sections[-1][1][key].extend(values)
+    image = {k: v for name, entries in sections if name == "image" for k, v in entries.items()}
+    cameras = [(name, entries) for name, entries in sections if name != "image"]
+    if len(cameras) != 1:
+        names = ", ".join(name for name, _ in cameras) or "none"
+        raise CalibrationFileError(f"{path}: an ost.ini with {len(cameras)} camera sections ({names}); "
+                                   "measuring needs one camera's (a stereo pair's file holds two: split it)")
+    name, entries = cameras[0]
+    content: dict[str, Any] = {"camera_name": name}
+    for side in ("width", "height"):
+        values = image.get(side, [])
+        if len(values) != 1 or not float(values[0]).is_integer():
+            raise CalibrationFileError(f"{path}: ost.ini's [image] needs one whole '{side}', found {values}")
+        content[f"image_{side}"] = int(values[0])
+    for ini_key, (field_name, rows, cols) in OST_INI_KEYS.items():
+        if ini_key in entries:
+            data = entries[ini_key]
+            content[field_name] = {"rows": rows, "cols": cols or len(data), "data": data}
+    content["distortion_model"] = "plumb_bob" if len(entries.get("distortion", [])) <= 5 else "rational_polynomial"
+    return content
+
+
 def read_calibration(path: str | os.PathLike) -> CalibrationFile:
-    """Read a camera_info YAML; any problem raises CalibrationFileError naming the file and the problem."""
+    """Read a camera_info YAML (or ROS 1's `ost.ini`); any problem raises CalibrationFileError naming the file
+    and the problem."""
     path = Path(path)
     try:
         text = read_text(path)
@@ -142,6 +197,8 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
         raise CalibrationFileError(f"{path}: {exc}") from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibrationFileError(f"{path}: cannot be read ({exc})") from exc
+    if is_ost_ini(path, text):
+        return from_camera_info_dict(ost_ini_content(text, path), path)
     try:
         content = load_text(text)
     except StrictYamlError as exc:

@@ -59,3 +59,20 @@ def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence
 def info_to_camera(msg) -> BrownCamera:
     """The calibrated camera in a sensor_msgs/CameraInfo or CameraInfoFields (the same field names)."""
     return camera_from_info(msg.width, msg.height, msg.distortion_model, msg.d, msg.k)
+
+
+def other_camera(given: BrownCamera, recorded: BrownCamera, fx_std: float | None = None) -> str | None:
+    """Why a calibration file is not the camera whose camera_info a recording carries, or None: another image
+    size, or a focal length beyond the file's own std (3 std, at least 0.5 %: a refit of one camera moves it
+    less) or a principal point more than 2 % of the width away."""
+    if given.image_size != recorded.image_size:
+        return (f"the calibration is for {given.width}x{given.height} images, the recording's camera_info "
+                f"{recorded.width}x{recorded.height}")
+    tolerance = max(3 * (fx_std or 0.0), 0.005 * given.fx)
+    if abs(given.fx - recorded.fx) > tolerance:
+        return (f"the calibration's focal length is {given.fx:.1f} px, the recording's camera_info "
+                f"{recorded.fx:.1f} px (more than {tolerance:.1f} px apart)")
+    if np.hypot(given.xp - recorded.xp, given.yp - recorded.yp) > 0.02 * given.width:
+        return (f"the calibration's principal point is ({given.xp:.0f}, {given.yp:.0f}), the recording's "
+                f"camera_info ({recorded.xp:.0f}, {recorded.yp:.0f})")
+    return None

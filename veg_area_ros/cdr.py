@@ -12,6 +12,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, no options
@@ -217,6 +218,52 @@ def decode_image(buffer) -> ImageFields:
     (step,) = reader.unpack("I")
     (length,) = reader.unpack("I")
     return ImageFields(header, height, width, encoding, is_bigendian, step, reader.take(length))
+
+
+@dataclass(frozen=True)
+class CompressedImageFields:
+    """sensor_msgs/CompressedImage as image_transport's `compressed` plugin writes it: `format` is
+    "<original encoding>; <jpeg|png> compressed <encoding of the compressed data>" (or a bare "jpeg"/"png")."""
+    header: Header
+    format: str
+    data: memoryview  # a view into the CDR buffer
+
+    def pixels(self) -> np.ndarray:
+        """A BGR (H, W, 3) or grey (H, W) uint8 frame, decoded as OpenCV decodes the same JPEG or PNG file."""
+        kind = self.format.lower()
+        if "compresseddepth" in kind.replace(" ", ""):
+            raise ImageMessageError(f"a depth image (format {self.format!r}) holds no grey levels to measure")
+        image = cv2.imdecode(np.frombuffer(self.data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise ImageMessageError(f"the compressed image (format {self.format!r}, {len(self.data)} bytes) cannot "
+                                    "be decoded")
+        if image.dtype != np.uint8:
+            raise ImageMessageError(f"a {image.dtype} compressed image (format {self.format!r}): only 8-bit "
+                                    "images are measured")
+        if image.ndim == 3 and image.shape[2] == 4:
+            image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
+        stored = kind.rsplit("compressed", 1)[-1].strip() if "compressed" in kind else ""
+        if image.ndim == 3 and stored.startswith("rgb"):  # the encoder was given RGB rows as they were
+            image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+        return image
+
+
+def decode_compressed_image(buffer) -> CompressedImageFields:
+    """Serialized sensor_msgs/CompressedImage -> its fields, the data a view (no copy) of `buffer`."""
+    reader = _Reader(buffer)
+    header = reader.header()
+    image_format = reader.string()
+    (length,) = reader.unpack("I")
+    return CompressedImageFields(header, image_format, reader.take(length))
+
+
+def encode_compressed_image(data: bytes, image_format: str, sec: int, nanosec: int, frame_id: str) -> bytes:
+    """Serialized sensor_msgs/CompressedImage bytes of already compressed `data`."""
+    writer = _Writer()
+    writer.header(sec, nanosec, frame_id)
+    writer.string(image_format)
+    writer.blob(memoryview(data).cast("B"))
+    return writer.bytes()
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ class Frame:
     lost: int = 0  # frames of the input this entry stands for that could not be read (damage); 1 for any unreadable
     position: int | None = None  # a video's frame index or a bag's image message index; None for an image file
     grey: np.ndarray | None = None  # a colour image in grey, where made beside the decoding (`with_grey`)
+    camera_info_problem: str = ""  # a bag frame's: why its camera's camera_info is not given (another camera's)
 
     def __post_init__(self) -> None:
         if self.image is None and self.lost == 0:
@@ -288,7 +289,7 @@ def _bag_frame(path: Path, frame) -> Frame:
     except ImageMessageError as exc:
         image, problem = None, str(exc)
     return Frame(f"{path.name}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
-                 frame.camera_info, position=frame.index)
+                 frame.camera_info, position=frame.index, camera_info_problem=frame.camera_info_problem)
 
 
 def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: str | None = None,

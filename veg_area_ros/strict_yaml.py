@@ -1,4 +1,5 @@
-"""The one YAML reader for files users give the package (targets, calibrations). No ROS here.
+"""The one YAML reader for files users give the package (targets, calibrations), and the writer whose YAML
+other tools read whole (`dump_portable`). No ROS here.
 
 Plain PyYAML keeps the last of two equal keys without a word (a calibration with `camera_matrix` twice
 measured Af 5.8 % off) and expands aliases without limit (416 bytes of nested aliases took 9 GB and two
@@ -7,6 +8,7 @@ minutes before a MemoryError). This loader refuses both, and files over MAX_BYTE
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import yaml
@@ -51,3 +53,35 @@ def read_text(path: Path) -> str:
     if size > MAX_BYTES:
         raise StrictYamlError(f"{size} bytes: larger than any such file ({MAX_BYTES} at most)")
     return path.read_text(encoding="utf-8")
+
+
+class _PortableDumper(yaml.SafeDumper):
+    """YAML that OpenCV's FileStorage and yaml-cpp (ROS's camera_calibration_parsers) read whole: every string
+    that is not a plain word double-quoted (an unquoted `board: chessboard:9x6:0.04` stopped FileStorage with
+    "Incorrect indentation"), and every list in flow style (FileStorage refuses a block list at its key's
+    indentation)."""
+
+
+_PLAIN_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
+_RESERVED_WORDS = {"null", "true", "false", "yes", "no", "on", "off", "y", "n", "none"}
+
+
+def _represent_str(dumper: yaml.SafeDumper, text: str) -> yaml.Node:
+    plain = _PLAIN_WORD.match(text) is not None and text.lower() not in _RESERVED_WORDS
+    return dumper.represent_scalar("tag:yaml.org,2002:str", text, style=None if plain else '"')
+
+
+def _represent_list(dumper: yaml.SafeDumper, items: list) -> yaml.Node:
+    return dumper.represent_sequence("tag:yaml.org,2002:seq", items, flow_style=True)
+
+
+_PortableDumper.add_representer(str, _represent_str)
+_PortableDumper.add_representer(list, _represent_list)
+_PortableDumper.add_representer(tuple, _represent_list)
+
+
+def dump_portable(content) -> str:
+    """YAML text of plain data (dicts, lists, strings, numbers) that PyYAML, OpenCV's FileStorage and yaml-cpp
+    all read as it was written; keys in their order."""
+    return yaml.dump(content, Dumper=_PortableDumper, sort_keys=False, default_flow_style=None, width=120,
+                     allow_unicode=True)

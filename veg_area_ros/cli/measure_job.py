@@ -143,6 +143,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError("--calibration bag needs rosbag2 inputs (their recorded camera_info)", EXIT_USAGE)
     try:
         bag_frames = sum(bag_image_count(b, job.image_topic) for b in bags)
+        # a calibration file for another camera than the one a bag's camera_info describes: said in each result
+        other_camera = {} if file_camera is None else {
+            b.name: problem for b in bags if (problem := _other_camera(b, job.image_topic, calibration))}
     except BagError as exc:
         raise CliError(str(exc)) from exc
     total = (sum(video_frame_count(v) // job.video_step for v in videos) + bag_frames
@@ -223,13 +226,15 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                     raise InputError(f"skipped: {frame.problem}")
                 if from_bag:  # as the live area node: the latest camera_info, a new measurer when it changes
                     if frame.camera_info is None:
-                        raise InputError("no camera_info recorded before this frame")
+                        raise InputError(frame.camera_info_problem or "no camera_info recorded before this frame")
                     recorded = info_to_camera(frame.camera_info)
                     if recorded != camera or measurer is None:
                         camera = recorded
                         measurer = new_measurer(camera)
                 result = measurer.measure(frame.image, keep_images=bool(job.overlay or job.idealized),
                                           grey=frame.grey)
+                if frame.name.rsplit("#", 1)[0] in other_camera:
+                    result.warnings.append(other_camera[frame.name.rsplit("#", 1)[0]])
             except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
                 row["error"] = str(exc)
                 say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
@@ -349,3 +354,23 @@ def csv_row(row: dict) -> dict:
     return {**row, "missing_targets": " ".join(map(str, row.get("missing_targets", []))),
             "warnings": " | ".join(row.get("warnings", []))}
 
+
+
+def _other_camera(bag: Path, image_topic: str | None, calibration) -> str:
+    """The warning for a bag measured with a calibration file of another camera than its recorded camera_info
+    describes; '' where they agree or the bag has no calibrated camera_info."""
+    from ..bags import bag_camera_info
+    from ..camera_info import info_to_camera, other_camera
+
+    found = bag_camera_info(bag, image_topic)
+    if found is None:
+        return ""
+    topic, fields = found
+    try:
+        recorded = info_to_camera(fields)
+    except ValueError:  # an uncalibrated camera_info (all zeros) says nothing of the camera
+        return ""
+    std = calibration.metadata.get("std")
+    problem = other_camera(calibration.camera, recorded, std.get("fx") if isinstance(std, dict) else None)
+    return (f"calibration of another camera: {problem} ({topic}); measure with --calibration bag, or with this "
+            "camera's file") if problem else ""

@@ -1,0 +1,185 @@
+"""Bags as other tools write them, written here by `rosbags` (the library behind the rosbag2 format `ros2 bag
+record` writes, independent of this package's recorder): two cameras in one bag, each image topic paired with
+its own camera_info as image_transport pairs them (whatever order the bag lists them in, mcap and sqlite3
+alike); image_transport's `compressed` topics (sensor_msgs/CompressedImage, JPEG) measured as the same JPEG
+files are; and a calibration file of another camera than the bag's camera_info said in the results."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from helpers import run_cli
+from rosbags.rosbag2 import Writer
+from rosbags.rosbag2.enums import StoragePlugin
+from rosbags.typesys import Stores, get_typestore
+
+from veg_area_ros.bags import sibling_camera_info
+from veg_area_ros.calib_io import write_calibration
+from veg_area_ros.camera_info import camera_info_fields
+from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets_content
+
+TYPES = get_typestore(Stores.ROS2_KILTED)
+STORAGE = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+RIGHT = dataclasses.replace(ENDOSCOPE, c=560.0, xp=314.0, k1=-0.22, k2=0.05)  # another endoscope
+FRAMES = 3
+
+
+def _header(k: int, frame_id: str):
+    return TYPES.types["std_msgs/msg/Header"](stamp=TYPES.types["builtin_interfaces/msg/Time"](sec=100 + k, nanosec=0),
+                                              frame_id=frame_id)
+
+
+def _info(camera, k: int, frame_id: str):
+    fields = camera_info_fields(camera)
+    return TYPES.types["sensor_msgs/msg/CameraInfo"](
+        header=_header(k, frame_id), height=camera.height, width=camera.width,
+        distortion_model=fields["distortion_model"], d=np.array(fields["d"], float), k=np.array(fields["k"], float),
+        r=np.array(fields["r"], float), p=np.array(fields["p"], float), binning_x=0, binning_y=0,
+        roi=TYPES.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
+                                                            do_rectify=False))
+
+
+def _image(frame: np.ndarray, k: int, frame_id: str):
+    return TYPES.types["sensor_msgs/msg/Image"](header=_header(k, frame_id), height=frame.shape[0],
+                                                width=frame.shape[1], encoding="bgr8", is_bigendian=0,
+                                                step=3 * frame.shape[1], data=frame.ravel())
+
+
+def _compressed(jpeg: bytes, k: int, frame_id: str):
+    return TYPES.types["sensor_msgs/msg/CompressedImage"](header=_header(k, frame_id),
+                                                          format="bgr8; jpeg compressed bgr8",
+                                                          data=np.frombuffer(jpeg, np.uint8))
+
+
+def write_bag(path: Path, storage: str, topics: list[tuple[str, str, list]]) -> None:
+    """A bag of (topic, msgtype, messages) in that connection order, the messages interleaved by index."""
+    with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=STORAGE[storage]) as writer:
+        connections = [(writer.add_connection(topic, msgtype, typestore=TYPES), msgtype, messages)
+                       for topic, msgtype, messages in topics]
+        for k in range(max(len(messages) for *_, messages in topics)):
+            for slot, (connection, msgtype, messages) in enumerate(connections):
+                if k < len(messages):
+                    writer.write(connection, (100 + k) * 10**9 + slot, TYPES.serialize_cdr(messages[k], msgtype))
+
+
+@pytest.fixture(scope="module")
+def scenes():
+    """The cube seen by the left endoscope and by the right one (another lens)."""
+    return {name: [render_scene(camera, cube_scene(), 0.7, seed=k) for k in range(FRAMES)]
+            for name, camera in (("left", ENDOSCOPE), ("right", RIGHT))}
+
+
+@pytest.fixture
+def workspace(tmp_path):
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    return tmp_path
+
+
+def _measure(workspace: Path, source: Path, *options: str) -> tuple[list[dict], object]:
+    done = run_cli("measure", str(source), "--targets", str(workspace / "targets.yaml"), "--threshold", "120",
+                   "--json", "--csv", str(workspace / f"{source.stem}.csv"), *options, cwd=workspace)
+    rows = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    return rows, done
+
+
+def test_the_sibling_camera_info_is_image_transports():
+    assert sibling_camera_info("/left/image_raw") == "/left/camera_info"
+    assert sibling_camera_info("/left/image_raw/compressed") == "/left/camera_info"
+    assert sibling_camera_info("/robot/cam/image_rect") == "/robot/cam/camera_info"
+    assert sibling_camera_info("/image_raw") == "/camera_info"
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+@pytest.mark.parametrize("right_first", [True, False])
+def test_two_cameras_in_one_bag_each_measured_with_its_own_camera_info(workspace, scenes, storage, right_first):
+    """The right camera's camera_info listed first measured the left images with it (Af +1.1 %, no word)."""
+    cameras = {"left": ENDOSCOPE, "right": RIGHT}
+    topics = []
+    for name in (("right", "left") if right_first else ("left", "right")):
+        topics.append((f"/{name}/camera_info", "sensor_msgs/msg/CameraInfo",
+                       [_info(cameras[name], k, f"{name}_optical") for k in range(FRAMES)]))
+    for name in ("left", "right"):
+        topics.append((f"/{name}/image_raw", "sensor_msgs/msg/Image",
+                       [_image(frame, k, f"{name}_optical") for k, frame in enumerate(scenes[name])]))
+    bag = workspace / f"stereo_{storage}"
+    write_bag(bag, storage, topics)
+    truth = cube_scene().true_area_m2
+    for name in ("left", "right"):
+        rows, done = _measure(workspace, bag, "--calibration", "bag", "--image-topic", f"/{name}/image_raw")
+        assert done.returncode == 0, done.stderr
+        assert len(rows) == FRAMES and all(not row.get("error") for row in rows), rows
+        errors = [row["area_m2"] / truth - 1 for row in rows]
+        assert max(abs(e) for e in errors) < 0.003, (name, errors)
+
+
+def test_a_camera_info_of_another_frame_is_not_used(workspace, scenes):
+    """The only camera_info in the bag is not the image's sibling and names another frame_id: each frame is
+    refused with both names, never measured with it."""
+    bag = workspace / "mismatch"
+    write_bag(bag, "mcap", [
+        ("/right/camera_info", "sensor_msgs/msg/CameraInfo", [_info(RIGHT, k, "right_optical") for k in range(FRAMES)]),
+        ("/left/image_raw", "sensor_msgs/msg/Image",
+         [_image(frame, k, "left_optical") for k, frame in enumerate(scenes["left"])])])
+    rows, done = _measure(workspace, bag, "--calibration", "bag")
+    assert done.returncode != 0
+    assert len(rows) == FRAMES and all("'right_optical'" in row["error"] and "'left_optical'" in row["error"]
+                                       for row in rows), rows
+
+
+def test_several_camera_infos_and_no_sibling_are_refused_naming_them(workspace, scenes):
+    bag = workspace / "ambiguous"
+    write_bag(bag, "mcap", [
+        ("/a/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, 0, "")]),
+        ("/b/camera_info", "sensor_msgs/msg/CameraInfo", [_info(RIGHT, 0, "")]),
+        ("/cam/image_raw", "sensor_msgs/msg/Image", [_image(scenes["left"][0], 0, "")])])
+    _, done = _measure(workspace, bag, "--calibration", "bag")
+    assert done.returncode != 0
+    assert "/a/camera_info, /b/camera_info" in done.stderr and "/cam/camera_info" in done.stderr
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_compressed_images_give_the_jpeg_files_af(workspace, scenes, storage):
+    """image_transport's `compressed` topic (JPEG): found without naming it, and each frame's Af equals the Af
+    of the same JPEG written as a file and measured with the same calibration."""
+    jpegs = [cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 85])[1].tobytes() for frame in scenes["left"]]
+    bag = workspace / f"compressed_{storage}"
+    write_bag(bag, storage, [
+        ("/left/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "left") for k in range(FRAMES)]),
+        ("/left/image_raw/compressed", "sensor_msgs/msg/CompressedImage",
+         [_compressed(jpeg, k, "left") for k, jpeg in enumerate(jpegs)])])
+    folder = workspace / "jpegs"
+    folder.mkdir()
+    for k, jpeg in enumerate(jpegs):
+        (folder / f"frame{k}.jpg").write_bytes(jpeg)
+    write_calibration(workspace / "left.yaml", ENDOSCOPE, "left", {"medium": "air"})
+    from_bag, done = _measure(workspace, bag, "--calibration", "bag")
+    assert done.returncode == 0, done.stderr
+    from_files, done = _measure(workspace, folder, "--calibration", str(workspace / "left.yaml"))
+    assert done.returncode == 0, done.stderr
+    assert [r["area_m2"] for r in from_bag] == [r["area_m2"] for r in from_files]
+    assert abs(from_bag[0]["area_m2"] / cube_scene().true_area_m2 - 1) < 0.005
+
+
+def test_a_calibration_file_of_another_camera_is_said_in_each_result(workspace, scenes):
+    """The bag's camera_info is the right endoscope's, the file the left one's: each result says so (Af was
+    -8 % without a word); the right camera's own file is silent."""
+    bag = workspace / "right"
+    write_bag(bag, "mcap", [
+        ("/right/camera_info", "sensor_msgs/msg/CameraInfo", [_info(RIGHT, k, "right") for k in range(FRAMES)]),
+        ("/right/image_raw", "sensor_msgs/msg/Image",
+         [_image(frame, k, "right") for k, frame in enumerate(scenes["right"])])])
+    write_calibration(workspace / "left.yaml", ENDOSCOPE, "left", {"medium": "air"})
+    write_calibration(workspace / "right.yaml", RIGHT, "right", {"medium": "air"})
+    wrong, done = _measure(workspace, bag, "--calibration", str(workspace / "left.yaml"))
+    assert done.returncode == 0, done.stderr
+    assert all(any(w.startswith("calibration of another camera") and "560.0 px" in w for w in row["warnings"])
+               for row in wrong), wrong
+    right, done = _measure(workspace, bag, "--calibration", str(workspace / "right.yaml"))
+    assert done.returncode == 0, done.stderr
+    assert not any(w.startswith("calibration of another camera") for row in right for w in row["warnings"])
