@@ -56,3 +56,48 @@ def test_a_file_a_message_and_cdr_fields_accept_alike(tmp_path):
     cameras = [read_calibration(path).camera, info_to_camera(msg), info_to_camera(fields)]
     assert all(camera == cameras[0] for camera in cameras)
     assert cameras[0].parameters() == pytest.approx(ENDOSCOPE.parameters(), rel=1e-12)
+
+
+def _fields(camera, binning=(0, 0), roi=(0, 0, 0, 0, False)):
+    from veg_area_ros.camera_info import camera_info_fields
+    from veg_area_ros.cdr import CameraInfoFields, Header
+
+    f = camera_info_fields(camera)
+    return CameraInfoFields(Header(0, 0, "cam"), camera.height, camera.width, f["distortion_model"], f["d"], f["k"],
+                            f["r"], f["p"], binning, roi)
+
+
+def test_binning_and_roi_give_the_camera_of_the_images_they_describe():
+    """A 2x2-binned stream of a calibrated 640x480 endoscope and a cropped one are measured with the camera
+    image_geometry makes of their camera_info (fx / 2, cx' = (cx - x_offset) / 2): Af as the full frame's."""
+    import cv2
+
+    from veg_area_ros.area import AreaMeasurer
+    from veg_area_ros.camera_info import info_to_camera
+    from veg_area_ros.classify import Classifier
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets
+
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
+    truth = cube_scene().true_area_m2
+    full = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame).area_m2
+    binned = info_to_camera(_fields(ENDOSCOPE, binning=(2, 2)))
+    assert (binned.width, binned.height, binned.fx, binned.xp) == (320, 240, ENDOSCOPE.fx / 2, ENDOSCOPE.xp / 2)
+    small = cv2.resize(frame, (320, 240), interpolation=cv2.INTER_AREA)
+    area = AreaMeasurer(binned, scene_targets(), Classifier(threshold=120)).measure(small).area_m2
+    assert abs(area / truth - 1) < 0.01 and abs(area / full - 1) < 0.01, (area, full, truth)
+    cropped = info_to_camera(_fields(ENDOSCOPE, roi=(40, 20, 440, 560, False)))
+    assert (cropped.width, cropped.height, cropped.xp, cropped.yp) == (560, 440, ENDOSCOPE.xp - 40, ENDOSCOPE.yp - 20)
+    area = AreaMeasurer(cropped, scene_targets(), Classifier(threshold=120)).measure(frame[20:460, 40:600]).area_m2
+    assert abs(area / full - 1) < 1e-3, (area, full)
+
+
+@pytest.mark.parametrize("roi, binning, problem", [
+    ((600, 0, 100, 100, False), (0, 0), "does not lie inside its calibrated 640x480"),
+    ((0, 0, 0, 0, False), (1000, 1), "leaves no pixel"),
+])
+def test_a_binning_or_roi_that_cannot_be_is_refused_with_its_values(roi, binning, problem):
+    from veg_area_ros.camera_info import info_to_camera
+    from veg_area_ros.sim.synthetic import ENDOSCOPE
+
+    with pytest.raises(ValueError, match=problem):
+        info_to_camera(_fields(ENDOSCOPE, binning=binning, roi=roi))

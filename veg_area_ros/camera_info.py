@@ -8,6 +8,7 @@ No ROS here.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -57,8 +58,35 @@ def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence
 
 
 def info_to_camera(msg) -> BrownCamera:
-    """The calibrated camera in a sensor_msgs/CameraInfo or CameraInfoFields (the same field names)."""
-    return camera_from_info(msg.width, msg.height, msg.distortion_model, msg.d, msg.k)
+    """The calibrated camera of the images a sensor_msgs/CameraInfo or CameraInfoFields describes: its
+    calibration, binned and cropped to its region of interest where it says so (`binned`)."""
+    if hasattr(msg, "binning_x"):  # a ROS message
+        binning, roi = (msg.binning_x, msg.binning_y), (msg.roi.x_offset, msg.roi.y_offset, msg.roi.height,
+                                                        msg.roi.width)
+    else:
+        binning, roi = tuple(msg.binning), tuple(msg.roi[:4])
+    return binned(camera_from_info(msg.width, msg.height, msg.distortion_model, msg.d, msg.k), binning, roi)
+
+
+def binned(camera: BrownCamera, binning: tuple[int, int], roi: tuple[int, int, int, int]) -> BrownCamera:
+    """The camera of images cropped to `roi` (x_offset, y_offset, height, width of the full-resolution image;
+    all zero: the whole image) and then binned by `binning` (x, y; 0 or 1: none), as image_geometry's
+    PinholeCameraModel makes it from camera_info: fx / bx, cx' = (cx - x_offset) / bx, the same distortion."""
+    bin_x, bin_y = (max(int(b), 1) for b in binning)
+    x_offset, y_offset, height, width = (int(v) for v in roi)
+    if (height, width) == (0, 0):
+        x_offset = y_offset = 0
+        height, width = camera.height, camera.width
+    if bin_x == bin_y == 1 and (x_offset, y_offset, height, width) == (0, 0, camera.height, camera.width):
+        return camera
+    if x_offset + width > camera.width or y_offset + height > camera.height or min(height, width) <= 0:
+        raise ValueError(f"camera_info's roi (x_offset {x_offset}, y_offset {y_offset}, {width}x{height}) does not "
+                         f"lie inside its calibrated {camera.width}x{camera.height} image")
+    if width // bin_x < 1 or height // bin_y < 1:
+        raise ValueError(f"camera_info's binning {bin_x}x{bin_y} leaves no pixel of its {width}x{height} image")
+    return check_plausible(replace(camera, width=width // bin_x, height=height // bin_y, c=camera.c / bin_x,
+                                   aspect=camera.aspect * bin_x / bin_y, xp=(camera.xp - x_offset) / bin_x,
+                                   yp=(camera.yp - y_offset) / bin_y))
 
 
 def other_camera(given: BrownCamera, recorded: BrownCamera, fx_std: float | None = None) -> str | None:

@@ -57,7 +57,9 @@ def add_parser(sub) -> None:
     mea.add_argument("--calibration", required=True,
                      help="camera_info YAML from 'veg-area calibrate', 'none' to measure the raw image, or 'bag' "
                           "for the camera_info recorded in the bag (as the live area node used it)")
-    mea.add_argument("--image-topic", default=None, help="image topic of a bag (default: its only Image topic)")
+    mea.add_argument("--image-topic", default=None,
+                     help="image topic of a bag, sensor_msgs/Image or CompressedImage (default: its only image "
+                          "topic); its camera_info is the sibling in its namespace, as image_transport pairs them")
     mea.add_argument("--start-time", type=float, default=-math.inf, metavar="S",
                      help="bag frames stamped from this time on (seconds, header stamp)")
     mea.add_argument("--end-time", type=float, default=math.inf, metavar="S", help="bag frames up to this time")
