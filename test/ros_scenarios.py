@@ -207,7 +207,7 @@ def main() -> int:
                   "full_rate": scenario_full_rate, "driver_qos": scenario_driver_qos,
                   "replay": scenario_replay, "record_cli": scenario_record_cli,
                   "two_machines": scenario_two_machines, "bad_start_files": scenario_bad_start_files,
-                  "guidance": scenario_guidance}[name](
+                  "guidance": scenario_guidance, "replay_into_recorder": scenario_replay_into_recorder}[name](
                       options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
@@ -1012,6 +1012,40 @@ def scenario_guidance(options: dict, nodes: Nodes) -> dict:
     probe.destroy_node()
     rclpy.try_shutdown()
     return out
+
+
+def scenario_replay_into_recorder(options: dict, nodes: Nodes) -> dict:
+    """`veg-area record` of some topics started beside `veg-area play` of a bag written by other tools (no QoS
+    metadata), or (`silent`) beside a publisher of those topics that never publishes: the player's exit and
+    output, the recorder's exit and stderr."""
+    recorder = subprocess.Popen([sys.executable, "-m", "veg_area_ros.cli", "record", *options["topics"],
+                                 "--duration", str(options["duration"]), "-o", options["output"]],
+                                env=GIVEN_ENVIRONMENT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    nodes.processes.append(("recorder", recorder))
+    if options.get("silent"):
+        import rclpy
+        from rclpy.node import Node
+        from sensor_msgs.msg import CameraInfo
+
+        rclpy.init()
+        silent = Node("silent_camera")
+        publishers = [silent.create_publisher(CameraInfo, topic, 10) for topic in options["topics"]]
+        while recorder.poll() is None:
+            rclpy.spin_once(silent, timeout_sec=0.1)
+        del publishers
+        silent.destroy_node()
+        rclpy.try_shutdown()
+        player_exit, player_stderr = None, ""
+    else:
+        player = subprocess.Popen([sys.executable, "-m", "veg_area_ros.cli", "play", options["bag"], "--delay", "0",
+                                   "--wait-for-subscribers", "20"], env=GIVEN_ENVIRONMENT,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        nodes.processes.append(("player", player))
+        _, player_stderr = player.communicate(timeout=120)
+        player_exit = player.returncode
+    _, recorded_stderr = recorder.communicate(timeout=120)
+    return {"player_exit": player_exit, "player_stderr": player_stderr[-3000:],
+            "recorder_exit": recorder.returncode, "recorder_stderr": recorded_stderr[-3000:]}
 
 
 if __name__ == "__main__":

@@ -183,3 +183,44 @@ def test_a_calibration_file_of_another_camera_is_said_in_each_result(workspace, 
     right, done = _measure(workspace, bag, "--calibration", str(workspace / "right.yaml"))
     assert done.returncode == 0, done.stderr
     assert not any(w.startswith("calibration of another camera") for row in right for w in row["warnings"])
+
+
+@pytest.mark.timeout(300)
+def test_a_bag_without_qos_metadata_replays_completely_into_a_recorder(tmp_path):
+    """A bag written by other tools says nothing of its publishers' QoS: `veg-area play` offers what ROS offers
+    for the type (sensor data for sensor_msgs) and waits until every replayed topic has a subscriber, so a
+    `veg-area record` started beside it records every message (before: "12 messages replayed", the recorder
+    closed with 0 and exit 0)."""
+    from ros_harness import run_scenario
+    from rosbags.rosbag2 import Reader
+
+    from veg_area_ros.bags import play_topics
+
+    bag = tmp_path / "foreign"
+    frames = [np.full((24, 32, 3), 40 * k, np.uint8) for k in range(6)]
+    write_bag(bag, "mcap", [
+        ("/cam/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "cam") for k in range(6)]),
+        ("/cam/image_raw", "sensor_msgs/msg/Image", [_image(frame, k, "cam") for k, frame in enumerate(frames)])])
+    topics = play_topics(bag)
+    assert all(not t.offered for t in topics)  # nothing recorded of the publishers' QoS
+    assert {t.replay_qos().reliability for t in topics} == {"best_effort"}
+    result = run_scenario("replay_into_recorder", tmp_path, timeout=200, bag=str(bag),
+                          topics=["/cam/image_raw", "/cam/camera_info"], duration=25.0,
+                          output=str(tmp_path / "recorded"))
+    assert result["player_exit"] == 0, result["player_stderr"]
+    assert result["recorder_exit"] == 0, result["recorder_stderr"]
+    with Reader(tmp_path / "recorded") as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts == {"/cam/image_raw": 6, "/cam/camera_info": 6}, (counts, result["recorder_stderr"])
+
+
+@pytest.mark.timeout(300)
+def test_a_recorder_that_got_nothing_of_a_topic_says_so_and_fails(tmp_path):
+    """A topic on the graph whose publisher never publishes: the recorder saw it and subscribed, received
+    nothing, says which topic, and exits 1 (it closed with 0 messages and exit 0)."""
+    from ros_harness import run_scenario
+
+    result = run_scenario("replay_into_recorder", tmp_path, timeout=200, topics=["/cam/camera_info"],
+                          duration=8.0, output=str(tmp_path / "recorded"), silent=True)
+    assert result["recorder_exit"] == 1, result["recorder_stderr"]
+    assert "no message recorded of /cam/camera_info" in result["recorder_stderr"], result["recorder_stderr"]

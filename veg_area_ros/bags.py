@@ -385,9 +385,12 @@ class PlayTopic:
 
     def replay_qos(self) -> OfferedQos:
         """The QoS to offer on replay, as `ros2 bag play` adapts it: latched if every recorded publisher was,
-        best effort if any was, else reliable volatile (depth 10)."""
+        best effort if any was, else reliable volatile (depth 10). A bag that does not say (written by other
+        tools) gets what ROS offers for the type: sensor data (best effort, depth 5) for sensor_msgs, as camera
+        drivers publish images and camera_info, else ROS's default (reliable, volatile, depth 10)."""
         if not self.offered:
-            return OfferedQos()
+            return (OfferedQos("best_effort", "volatile", "keep_last", 5) if self.msgtype.startswith("sensor_msgs/")
+                    else OfferedQos())
         return OfferedQos("best_effort" if any(q.reliability == "best_effort" for q in self.offered) else "reliable",
                           "transient_local" if all(q.durability == "transient_local" for q in self.offered)
                           else "volatile", "keep_last", max(q.depth for q in self.offered))

@@ -15,7 +15,7 @@ def add_parsers(sub) -> None:
     rec.add_argument("topics", nargs="*", default=["image_raw", "camera_info", "projected_area",
                                                    "projected_area/info"],
                      help="topics (default: image_raw camera_info projected_area projected_area/info); a topic "
-                          "never seen is a warning and exit 1")
+                          "never seen, or seen but never received, is a warning and exit 1")
     rec.add_argument("--all", action="store_true", help="every topic on the graph")
     rec.add_argument("--duration", type=positive_float, default=None, metavar="S", help="stop after S seconds")
     rec.add_argument("-o", "--output", help="bag folder to create (default veg_area_<date-time>)")
@@ -29,6 +29,8 @@ def add_parsers(sub) -> None:
     play.add_argument("--rate", type=positive_float, default=1.0, help="pace, 1 = as recorded")
     play.add_argument("--delay", type=float, default=1.0, metavar="S",
                       help="seconds to wait before the first message, for subscribers to connect (default 1)")
+    play.add_argument("--wait-for-subscribers", type=float, default=5.0, metavar="S",
+                      help="then wait up to S seconds until every replayed topic has a subscriber (default 5)")
     play.set_defaults(func=cmd_play)
 
     recover = sub.add_parser("bag-recover", help="rebuild a readable bag from an MCAP recording that was killed")
@@ -70,9 +72,10 @@ def cmd_play(args: argparse.Namespace) -> int:
         play_topics(args.bag, args.topics)  # a clear error before ROS starts
     except BagError as exc:
         raise CliError(str(exc)) from exc
-    if args.delay < 0:
-        raise CliError("--delay must be 0 or more", EXIT_USAGE)
-    ros_args = ["--ros-args", "-p", f"bag:={args.bag}", "-p", f"rate:={args.rate}", "-p", f"delay:={args.delay}"]
+    if args.delay < 0 or args.wait_for_subscribers < 0:
+        raise CliError("--delay and --wait-for-subscribers must be 0 or more", EXIT_USAGE)
+    ros_args = ["--ros-args", "-p", f"bag:={args.bag}", "-p", f"rate:={args.rate}", "-p", f"delay:={args.delay}",
+                "-p", f"wait_for_subscribers:={float(args.wait_for_subscribers)}"]
     if args.topics:
         ros_args += ["-p", "topics:=[" + ",".join(f"'{t}'" for t in args.topics) + "]"]
     return play_main(["veg-area-play", *ros_args])

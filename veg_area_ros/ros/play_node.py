@@ -34,6 +34,10 @@ class PlayNode(Node):
                             read_only=True)
         delay = declare(self, "delay", 1.0, "Seconds to wait before the first message (discovery).", low=0.0,
                         high=3600.0, read_only=True)
+        self.wait_for_subscribers = declare(
+            self, "wait_for_subscribers", 5.0, "After the delay, wait up to this long (s) until every replayed topic "
+            "has a subscriber, so that a recorder or node started beside the player misses nothing.", low=0.0,
+            high=3600.0, read_only=True)
         self.stop_requested = False
         self.exit_code = 0
         topics = play_topics(bag, names or None)
@@ -51,8 +55,18 @@ class PlayNode(Node):
         self.start = time.monotonic() + delay
         self.create_timer(0.001, self._play)
 
+    def _subscribed(self) -> bool:
+        """Every replayed topic has a subscriber, or the wait for them is over (the first message then goes)."""
+        if self.first_recorded is not None or time.monotonic() >= self.start + self.wait_for_subscribers:
+            return True
+        return all(publisher.get_subscription_count() > 0 for publisher in self.publishers_by_topic.values())
+
     def _play(self) -> None:
         now = time.monotonic()
+        if now >= self.start and self.first_recorded is None:
+            if not self._subscribed():
+                return
+            self.start = now  # the recorded pace counts from the first message
         while self.pending is not None and now >= self.start:
             topic, recorded, data = self.pending
             if self.first_recorded is None:

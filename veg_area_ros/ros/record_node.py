@@ -162,6 +162,11 @@ class RecordNode(Node):
             self.get_logger().warning(f"never seen on the graph, not recorded: {', '.join(never) or 'any topic'} "
                                       "(a mistyped name? `ros2 topic list` shows what is published)")
             self.exit_code = 1
+        empty = [t for t in self.recording if not self.recorder.counts.get(t) and not self.everything]
+        if empty:  # seen and subscribed, yet nothing came: a QoS that did not match, or a publisher that stopped
+            self.get_logger().warning(f"no message recorded of {', '.join(empty)} although it was on the graph "
+                                      "(its publishers' QoS did not match, or they published nothing)")
+            self.exit_code = 1
         super().destroy_node()
 
 
