@@ -207,7 +207,8 @@ def main() -> int:
                   "full_rate": scenario_full_rate, "driver_qos": scenario_driver_qos,
                   "replay": scenario_replay, "record_cli": scenario_record_cli,
                   "two_machines": scenario_two_machines, "bad_start_files": scenario_bad_start_files,
-                  "guidance": scenario_guidance, "replay_into_recorder": scenario_replay_into_recorder}[name](
+                  "guidance": scenario_guidance, "replay_into_recorder": scenario_replay_into_recorder,
+                  "compressed_driver": scenario_compressed_driver}[name](
                       options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
@@ -1046,6 +1047,51 @@ def scenario_replay_into_recorder(options: dict, nodes: Nodes) -> dict:
     _, recorded_stderr = recorder.communicate(timeout=120)
     return {"player_exit": player_exit, "player_stderr": player_stderr[-3000:],
             "recorder_exit": recorder.returncode, "recorder_stderr": recorded_stderr[-3000:]}
+
+
+def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
+    """A camera driver in this probe publishing image_transport's compressed topic (image_raw/compressed, JPEG,
+    sensor data QoS) and camera_info; the area node started with image_transport:=compressed measures it."""
+    import cv2
+    import numpy as np
+    import rclpy
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.node import Node
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, CompressedImage
+
+    from veg_area_ros.ros.messages import camera_to_info
+    from veg_area_ros.ros.qos import RESULT_QOS
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene
+
+    rclpy.init()
+    probe = Node("compressed_driver")
+    image_pub = probe.create_publisher(CompressedImage, "image_raw/compressed", qos_profile_sensor_data)
+    info_pub = probe.create_publisher(CameraInfo, "camera_info", qos_profile_sensor_data)
+    areas: list[float] = []
+    probe.create_subscription(Vector3Stamped, "projected_area", lambda m: areas.append(m.vector.x), RESULT_QOS)
+    jpeg = cv2.imencode(".jpg", render_scene(ENDOSCOPE, cube_scene(), 0.7), [cv2.IMWRITE_JPEG_QUALITY, 90])[1]
+    published = 0
+
+    def publish() -> None:
+        nonlocal published
+        stamp = probe.get_clock().now().to_msg()
+        message = CompressedImage(format="bgr8; jpeg compressed bgr8", data=jpeg.ravel().tobytes())
+        message.header.stamp, message.header.frame_id = stamp, "camera"
+        info_pub.publish(camera_to_info(ENDOSCOPE, "camera", stamp))
+        image_pub.publish(message)
+        published += 1
+
+    probe.create_timer(0.2, publish)
+    try:
+        nodes.start("area_node", image_transport="compressed")
+        end = time.monotonic() + float(options["seconds"])
+        while time.monotonic() < end:
+            rclpy.spin_once(probe, timeout_sec=0.05)
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return {"areas": areas, "published": published, "jpeg": np.asarray(jpeg).ravel().tolist()}
 
 
 if __name__ == "__main__":

@@ -224,3 +224,21 @@ def test_a_recorder_that_got_nothing_of_a_topic_says_so_and_fails(tmp_path):
                           duration=8.0, output=str(tmp_path / "recorded"), silent=True)
     assert result["recorder_exit"] == 1, result["recorder_stderr"]
     assert "no message recorded of /cam/camera_info" in result["recorder_stderr"], result["recorder_stderr"]
+
+
+@pytest.mark.timeout(300)
+def test_the_area_node_measures_image_transports_compressed_topic(tmp_path):
+    """A driver publishing JPEG on image_raw/compressed: the area node started with image_transport:=compressed
+    measures it, each Af the core's on the same JPEG decoded as a file is."""
+    from ros_harness import run_scenario
+
+    from veg_area_ros.area import AreaMeasurer
+    from veg_area_ros.classify import Classifier
+    from veg_area_ros.sim.synthetic import scene_targets
+
+    result = run_scenario("compressed_driver", tmp_path, seconds=12.0)
+    assert len(result["areas"]) >= 5, result["log"]
+    frame = cv2.imdecode(np.array(result["jpeg"], np.uint8), cv2.IMREAD_COLOR)
+    core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
+    assert all(abs(area / core.area_m2 - 1) <= core.weight_error_bound for area in result["areas"]), (
+        result["areas"], core.area_m2)

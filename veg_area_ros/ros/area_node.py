@@ -22,12 +22,12 @@ from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import String
 
 from ..calib_io import read_calibration
 from ..camera_info import info_to_camera
-from ..cdr import decode_camera_info, decode_image, stamp_ns, unstamped
+from ..cdr import decode_camera_info, decode_compressed_image, decode_image, stamp_ns, unstamped
 from ..classify import AREA_MODES, CHANNELS, OBJECTS, ClassifyError
 from ..frames import read_image
 from ..idealize import FrameSizeError
@@ -50,6 +50,8 @@ DEFAULTS = MeasurementSettings()
 SETTINGS = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "area_mode", "levels")
 TUNABLE = (*SETTINGS, "targets_file", "background_file")
 
+
+IMAGE_TRANSPORTS = ("raw", "compressed")
 
 class AreaNode(Node):
     def __init__(self, name: str = "area_node", **kwargs):
@@ -79,6 +81,12 @@ class AreaNode(Node):
                                     choices=("drop", "measure"))
         calibration_file = declare(self, "calibration_file", "", "Calibration YAML to start with ('' = wait for "
                                    "camera_info).", read_only=True)
+        self.transport = declare(self, "image_transport", "raw", "How the camera's images come: 'raw' "
+                                 "(sensor_msgs/Image on image_raw) or 'compressed' (CompressedImage, JPEG or PNG, on "
+                                 "image_raw/compressed, as image_transport's compressed plugin publishes them).",
+                                 choices=IMAGE_TRANSPORTS, read_only=True)
+        if self.transport not in IMAGE_TRANSPORTS:
+            raise ValueError(f"image_transport must be one of {', '.join(IMAGE_TRANSPORTS)}, got {self.transport!r}")
         self.camera = None
         self.frames = FrameTally()
         self.frames_measured = 0
@@ -124,8 +132,10 @@ class AreaNode(Node):
             self.create_subscription(CameraInfo, "camera_info", self._on_camera_info_received, ANY_INFO_QOS,
                                      raw=True)]
         self._take_unavailable = False
-        self.create_subscription(Image, "image_raw", self._on_frame, IMAGE_QOS, raw=True)
-        self.input_watch = InputWatch(self, "image_raw")
+        image_topic = "image_raw" if self.transport == "raw" else "image_raw/compressed"
+        self.create_subscription(Image if self.transport == "raw" else CompressedImage, image_topic, self._on_frame,
+                                 IMAGE_QOS, raw=True)
+        self.input_watch = InputWatch(self, image_topic)
 
     @staticmethod
     def _load_targets(path: str) -> TargetsSpec:
@@ -309,7 +319,7 @@ class AreaNode(Node):
 
     def _on_image(self, data: bytes) -> None:
         try:
-            fields = decode_image(data)
+            fields = decode_image(data) if self.transport == "raw" else decode_compressed_image(data)
             frame = fields.pixels()
         except ImageMessageError as exc:
             self.warn("frame refused", str(exc))
