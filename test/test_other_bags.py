@@ -242,3 +242,51 @@ def test_the_area_node_measures_image_transports_compressed_topic(tmp_path):
     core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
     assert all(abs(area / core.area_m2 - 1) <= core.weight_error_bound for area in result["areas"]), (
         result["areas"], core.area_m2)
+
+
+def test_our_mcap_is_written_as_ros2_bag_record_writes_it(tmp_path):
+    """Read by the `mcap` library (independent of rosbags and of this package) with CRC validation: every chunk
+    zstd-compressed with its CRC, the data section's and the summary's CRC as the MCAP spec defines them (each
+    recomputed here), publish times as given, the embedded rosbag2 metadata with the real distribution; a
+    flipped byte is found."""
+    import struct
+    import zlib
+
+    from mcap.reader import make_reader
+    from mcap.stream_reader import StreamReader
+
+    from veg_area_ros.bags import ROS_DISTRO, BagRecorder
+    from veg_area_ros.cdr import encode_image
+
+    recorder = BagRecorder(tmp_path / "bag")
+    recorder.add_topic("/image_raw", "sensor_msgs/msg/Image")
+    rng = np.random.default_rng(0)
+    clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0)
+    for k in range(20):
+        noisy = np.clip(clean + rng.normal(0, 3, clean.shape), 0, 255).astype(np.uint8)
+        recorder.write("/image_raw", (k + 1) * 10**8, encode_image(noisy, 0, k, "cam"), publish_ns=(k + 1) * 10**8 - 7)
+    recorder.close()
+    path = next((tmp_path / "bag").glob("*.mcap"))
+    with path.open("rb") as file:
+        reader = make_reader(file, validate_crcs=True)
+        summary = reader.get_summary()
+        assert {c.compression for c in summary.chunk_indexes} == {"zstd"}
+        times = [(m.log_time, m.publish_time) for _, _, m in reader.iter_messages()]
+        metadata = [m.metadata["serialized_metadata"] for m in reader.iter_metadata()]
+    assert times == [((k + 1) * 10**8, (k + 1) * 10**8 - 7) for k in range(20)]
+    assert f"ros_distro: {ROS_DISTRO}" in metadata[0]
+    records = list(StreamReader(path.open("rb"), validate_crcs=True).records)
+    data_end = next(r for r in records if type(r).__name__ == "DataEnd")
+    footer = next(r for r in records if type(r).__name__ == "Footer")
+    data = path.read_bytes()
+    assert data_end.data_section_crc == zlib.crc32(data[:footer.summary_start - 13])
+    footer_at = len(data) - 8 - 29
+    assert struct.unpack_from("<QQI", data, footer_at + 9) == (footer.summary_start, footer.summary_offset_start,
+                                                               footer.summary_crc)
+    assert footer.summary_crc == zlib.crc32(data[footer.summary_start:footer_at + 9 + 16])
+    raw = 20 * clean.nbytes
+    assert len(data) < 0.7 * raw, (len(data), raw)  # 3 DN of noise: about 0.54 of the raw frames
+    flipped = bytearray(data)
+    flipped[len(data) // 3] ^= 0xFF
+    with pytest.raises(Exception, match=r"(?i)crc|compress|zstd|frame"):
+        list(StreamReader(__import__("io").BytesIO(bytes(flipped)), validate_crcs=True).records)

@@ -50,6 +50,21 @@ def test_recorded_bag_is_complete_and_valid(recorded):
     assert counts["/image_raw"] >= 20 and counts["/projected_area"] >= 15
 
 
+def test_the_live_recording_is_mcap_as_ros2_bag_record_writes_it(recorded):
+    """Read by the `mcap` library with CRC validation: zstd chunks, and each message's publish time the sender's
+    (rclpy's source timestamp, at or before the recorder received it, within a second) where log time is the
+    receive time."""
+    from mcap.reader import make_reader
+
+    folder, _ = recorded
+    with next((folder / "closed_bag").glob("*.mcap")).open("rb") as file:
+        reader = make_reader(file, validate_crcs=True)
+        assert {c.compression for c in reader.get_summary().chunk_indexes} == {"zstd"}
+        delays = [m.log_time - m.publish_time for _, _, m in reader.iter_messages()]
+    assert len(delays) > 20 and all(0 <= d < 1e9 for d in delays), (min(delays), max(delays))
+    assert sum(d > 0 for d in delays) > 0.9 * len(delays)  # two clocks read at two moments, not one time twice
+
+
 def test_frames_the_area_node_skipped_are_counted(recorded):
     """camera_node publishes camera_info with every frame: every frame recorded from the area node's first to
     its last is taken by it, counted skipped, or counted lost in transport."""

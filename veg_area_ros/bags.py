@@ -15,11 +15,13 @@ import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
 
 import yaml
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader, Writer
-from rosbags.rosbag2.enums import StoragePlugin
+from rosbags.rosbag2.enums import CompressionMode, StoragePlugin
+from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_typestore
 
 from .cdr import (
@@ -36,7 +38,7 @@ from .strict_yaml import load_text, read_text
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
 SQLITE_COMMIT_SECONDS = 1.0  # sqlite3 bags commit this often: a crash loses at most this much
-ROS_DISTRO = "kilted"  # the message definitions the bag's types come from (rosbags writes 'rosbags' here)
+ROS_DISTRO = "kilted"  # the message definitions the bag's types come from (plain rosbags writes 'rosbags')
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,76 @@ def topic_name_problem(name: str) -> str | None:
     return None
 
 
+class _CheckedMcapWriter(McapWriter):
+    """rosbags' MCAP storage, written as `ros2 bag record` writes MCAP: chunks compressed with zstd, each chunk's
+    CRC, the data section's and the summary's CRC (DataEnd and the footer: corruption can be found), each
+    message's publish time the sender's where it is given (`publish_time_ns`, else the receive time), and the
+    embedded rosbag2 metadata with the real ROS distribution."""
+
+    def __init__(self, path: Path, compression: CompressionMode) -> None:
+        super().__init__(path, CompressionMode.STORAGE)  # zstd chunks, as rosbag2's MCAP storage compresses them
+        self.publish_time_ns: int | None = None  # the next message's publish time
+
+    def write(self, connection, timestamp: int, data: bytes | memoryview) -> None:
+        publish = timestamp if self.publish_time_ns is None else self.publish_time_ns
+        self.publish_time_ns = None
+        chunk = self.chunk
+        self.message_start_time = min(timestamp, self.message_start_time)
+        self.message_end_time = max(timestamp, self.message_end_time)
+        self.channel_stats[connection.id] += 1
+        chunk.message_start_time = min(timestamp, chunk.message_start_time)
+        chunk.message_end_time = max(timestamp, chunk.message_end_time)
+        chunk.msgs[connection.id].append((timestamp, chunk.bio.tell()))
+        # Message record: opcode 0x05, length, channel id, sequence, log time, publish time, data
+        chunk.bio.write(struct.pack("<BQHIQQ", 0x05, 2 + 4 + 8 + 8 + len(data), connection.id, 0, timestamp, publish))
+        chunk.bio.write(data)
+        if chunk.bio.tell() > 2**20:
+            self.close_chunk()
+
+    def close_chunk(self) -> None:
+        crc = zlib.crc32(self.chunk.bio.getbuffer())
+        super().close_chunk()
+        # the Chunk record just written: opcode, length, start time, end time, uncompressed size, then its CRC
+        (chunk_start,) = struct.unpack_from("<Q", self.chunks[-1].getbuffer(), 16)
+        end = self.bio.tell()
+        self.bio.seek(chunk_start + 1 + 8 + 24)
+        self.bio.write(struct.pack("<I", crc))
+        self.bio.seek(end)
+
+    def close(self, version: int, metadata: str) -> None:
+        super().close(version, metadata.replace("ros_distro: rosbags", f"ros_distro: {ROS_DISTRO}"))
+        _write_section_crcs(self.path)
+
+
+def _write_section_crcs(path: Path) -> None:
+    """The data section's CRC (in DataEnd, the record just before the summary) and the summary's (in the
+    footer) of a closed MCAP file, computed in blocks and written in place."""
+    with path.open("r+b") as file:
+        size = file.seek(0, 2)
+        footer = size - 8 - (1 + 8 + 20)
+        file.seek(footer + 9)
+        summary_start, _ = struct.unpack("<QQ", file.read(16))
+        data_end = summary_start - (1 + 8 + 4)
+
+        def crc_of(start: int, stop: int) -> int:
+            crc, file_offset = 0, file.seek(start)
+            while file_offset < stop:
+                block = file.read(min(1 << 20, stop - file_offset))
+                crc, file_offset = zlib.crc32(block, crc), file_offset + len(block)
+            return crc
+
+        data_crc = crc_of(0, data_end)
+        file.seek(data_end + 9)
+        file.write(struct.pack("<I", data_crc))
+        summary_crc = crc_of(summary_start, footer + 9 + 16)
+        file.seek(footer + 9 + 16)
+        file.write(struct.pack("<I", summary_crc))
+
+
+class _CheckedWriter(Writer):
+    STORAGE_PLUGINS = MappingProxyType({**Writer.STORAGE_PLUGINS, StoragePlugin.MCAP: _CheckedMcapWriter})
+
+
 class BagRecorder:
     """Writes serialized messages of named topics into a new rosbag2 folder."""
 
@@ -98,7 +170,7 @@ class BagRecorder:
         self.path = Path(path)
         if self.path.exists():
             raise BagError(f"{self.path} exists already; a recording never overwrites a bag")
-        self._writer = Writer(self.path, version=Writer.VERSION_LATEST, storage_plugin=STORAGES[storage])
+        self._writer = _CheckedWriter(self.path, version=Writer.VERSION_LATEST, storage_plugin=STORAGES[storage])
         self._writer.open()
         self._types = typestore()
         self._connections: dict[str, object] = {}
@@ -127,7 +199,11 @@ class BagRecorder:
         return (f"the rosbags writer ({type(storage).__name__}) has neither an MCAP chunk list and file nor a "
                 "sqlite connection to flush: a recording that is killed loses what was not closed")
 
-    def write(self, topic: str, timestamp_ns: int, data: bytes | memoryview) -> None:
+    def write(self, topic: str, timestamp_ns: int, data: bytes | memoryview, publish_ns: int | None = None) -> None:
+        """One message received at `timestamp_ns` (its log time), sent at `publish_ns` where the middleware says
+        (MCAP's publish time; sqlite3 keeps one time)."""
+        if publish_ns is not None and hasattr(self._writer.storage, "publish_time_ns"):
+            self._writer.storage.publish_time_ns = publish_ns
         self._writer.write(self._connections[topic], timestamp_ns, data)
         self.counts[topic] += 1
         if self.crash_safety_problem:
@@ -174,7 +250,7 @@ def _string(content: memoryview, offset: int) -> tuple[str, int]:
 class Recovery:
     counts: dict[str, int]  # messages recovered per topic
     dropped: list[str]  # why each damaged chunk or record was left out
-    unchecked_chunks: int = 0  # chunks without a CRC (rosbags writes none): damage inside them cannot be seen
+    unchecked_chunks: int = 0  # chunks without a CRC (other writers may leave it 0): damage inside cannot be seen
 
 
 def recover_bag(broken: str | Path, output: str | Path) -> Recovery:
@@ -211,8 +287,8 @@ def recover_bag(broken: str | Path, output: str | Path) -> Recovery:
             topic, _ = _string(content, 4)
             channels[channel_id] = (topic, schema_id)
         elif opcode == 0x05:  # message: channel, sequence, log time, publish time, data
-            channel_id, _, log_time = struct.unpack_from("<HIQ", content, 0)
-            messages.append((channel_id, log_time, bytes(content[22:])))
+            channel_id, _, log_time, publish_time = struct.unpack_from("<HIQQ", content, 0)
+            messages.append((channel_id, log_time, publish_time, bytes(content[22:])))
 
     def chunk(content: memoryview) -> None:
         """A chunk's records, all or none: checked against the chunk's CRC before any is kept."""
@@ -254,9 +330,9 @@ def recover_bag(broken: str | Path, output: str | Path) -> Recovery:
     known = {channel_id: channel for channel_id, channel in channels.items() if channel[1] in schemas}
     for topic, schema_id in known.values():
         recorder.add_topic(topic, schemas[schema_id][0])  # types the recorder could write: Kilted's
-    for channel_id, log_time, payload in messages:
+    for channel_id, log_time, publish_time, payload in messages:
         if channel_id in known:
-            recorder.write(known[channel_id][0], log_time, payload)
+            recorder.write(known[channel_id][0], log_time, payload, publish_time)
         else:
             dropped.append(f"a message of channel {channel_id} dropped: its channel or schema was damaged")
     recorder.close()

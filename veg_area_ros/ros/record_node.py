@@ -109,11 +109,14 @@ class RecordNode(Node):
                 continue
             self.recording[resolved] = msgtype
             self.topic_subscriptions.append(self.create_subscription(
-                cls, resolved, lambda data, t=resolved: self._write(t, data), self._qos_for(resolved), raw=True))
+                cls, resolved, lambda data, info, t=resolved: self._write(t, data, info), self._qos_for(resolved),
+                raw=True))
             self.get_logger().info(f"recording {resolved} ({msgtype})")
 
-    def _write(self, topic: str, data: bytes) -> None:
-        self.recorder.write(topic, self.get_clock().now().nanoseconds, data)
+    def _write(self, topic: str, data: bytes, info: dict | None = None) -> None:
+        # MCAP's publish time: when the sender's middleware sent it (rclpy's message info), as rosbag2 keeps it
+        sent = (info or {}).get("source_timestamp") or None
+        self.recorder.write(topic, self.get_clock().now().nanoseconds, data, sent)
         if self.recording[topic] in STAMPED_TYPES or self.recording[topic].endswith("Stamped"):
             self._note_start(topic, data)
 
