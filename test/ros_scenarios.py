@@ -59,6 +59,15 @@ class Nodes:
                 process.wait()
 
 
+def spin_for(node, seconds: float) -> None:
+    """Spin a probe node for `seconds`, handling its callbacks as they come."""
+    import rclpy
+
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+
+
 def _address(hex_address: str) -> str:
     host, port = hex_address.split(":")
     if len(host) == 8:
@@ -849,9 +858,7 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
         while time.monotonic() < end:  # the driver runs first, as in a lab
             rclpy.spin_once(probe, timeout_sec=0.05)
         nodes.start("area_node")
-        end = time.monotonic() + float(options["seconds"])
-        while time.monotonic() < end:
-            rclpy.spin_once(probe, timeout_sec=0.05)
+        spin_for(probe, float(options["seconds"]))
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
@@ -1085,9 +1092,7 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     probe.create_timer(0.2, publish)
     try:
         nodes.start("area_node", image_transport="compressed")
-        end = time.monotonic() + float(options["seconds"])
-        while time.monotonic() < end:
-            rclpy.spin_once(probe, timeout_sec=0.05)
+        spin_for(probe, float(options["seconds"]))
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
