@@ -17,6 +17,8 @@ CASES = {
     "eight coefficients, the rational ones not zero": (dict(d=[*map(float, ENDOSCOPE.dist), 0.1, 0.0, 0.0]),
                                                        "do not fit plumb_bob's five"),
     "an unknown model": (dict(distortion_model="equidistant"), "not supported"),
+    "a fisheye model with zero coefficients (r = f θ is no pinhole)": (
+        dict(distortion_model="equidistant", d=[0.0, 0.0, 0.0, 0.0]), "fisheye.*not a pinhole"),
     "no focal length": (dict(k=[0.0] * 9), "uncalibrated"),
     "k1 = 1e6": (dict(d=[1e6, 0, 0, 0, 0]), "implausible camera model"),
     "a corrupt size": (dict(width=100_000), "beyond any camera"),

@@ -15,6 +15,7 @@ import numpy as np
 from .camera_model import BrownCamera, check_plausible
 from .files import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE
 
+FISHEYE_MODELS = ("equidistant", "fisheye", "kannala_brandt")
 PLUMB_BOB_SIZES = (0, 4, 5, 8, 12, 14)  # OpenCV's lengths; beyond the fifth they must be zero (rational terms)
 
 
@@ -41,6 +42,9 @@ def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence
         raise ValueError(f"camera_info image size {width}x{height} is more than any camera here "
                          f"({MAX_IMAGE_PIXELS} pixels at most)")
     dist = np.asarray(d, float).ravel()
+    if distortion_model in FISHEYE_MODELS:  # r = f·θ, not f·tan θ: no pinhole even with zero coefficients
+        raise ValueError(f"distortion model {distortion_model!r} (fisheye) is not supported (plumb_bob); a fisheye "
+                         "camera is not a pinhole even where its coefficients are zero")
     if distortion_model not in ("plumb_bob", "rational_polynomial") and np.any(dist != 0):
         raise ValueError(f"distortion model {distortion_model!r} is not supported (plumb_bob)")
     if not np.all(np.isfinite(dist)):
