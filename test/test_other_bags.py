@@ -141,6 +141,9 @@ def test_several_camera_infos_and_no_sibling_are_refused_naming_them(workspace, 
     _, done = _measure(workspace, bag, "--calibration", "bag")
     assert done.returncode != 0
     assert "/a/camera_info, /b/camera_info" in done.stderr and "/cam/camera_info" in done.stderr
+    write_calibration(workspace / "cam.yaml", ENDOSCOPE, "cam", {"medium": "air"})  # a file needs none of them
+    rows, done = _measure(workspace, bag, "--calibration", str(workspace / "cam.yaml"))
+    assert done.returncode == 0 and len(rows) == 1 and not rows[0].get("error"), done.stderr
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])

@@ -385,19 +385,20 @@ def sibling_camera_info(image_topic: str) -> str:
     return f"{namespace}/camera_info"
 
 
-def _info_connections(reader: Reader, path: str | Path, image_topic: str) -> list:
-    """The camera_info connections for an image topic: its sibling (`sibling_camera_info`); where the bag has
-    none, its only camera_info topic if there is one (its frame_id is then held to the images'); none when the
-    bag recorded no camera_info. Two or more other camera_info topics and no sibling: refused, naming them."""
+def _info_connections(reader: Reader, path: str | Path, image_topic: str) -> tuple[list, str]:
+    """The camera_info connections for an image topic and, where none can be chosen, why: its sibling
+    (`sibling_camera_info`); where the bag has none, its only camera_info topic if there is one (its frame_id is
+    then held to the images'); none when the bag recorded no camera_info. Two or more other camera_info topics
+    and no sibling: none, and the reason naming them (measuring with a calibration file needs none of them)."""
     infos = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/CameraInfo"]
     sibling = sibling_camera_info(image_topic)
     paired = [c for c in infos if c.topic == sibling]
     if paired or not infos:
-        return paired
+        return paired, ""
     if len({c.topic for c in infos}) == 1:
-        return infos
-    raise BagError(f"{path}: no camera_info beside {image_topic} ({sibling}), and several others "
-                   f"({', '.join(sorted({c.topic for c in infos}))}): which camera's is meant cannot be told")
+        return infos, ""
+    return [], (f"no camera_info beside {image_topic} ({sibling}), and several others "
+                f"({', '.join(sorted({c.topic for c in infos}))}): which camera's is meant cannot be told")
 
 
 def _decode_image(msgtype: str, data):
@@ -414,11 +415,11 @@ def bag_image_count(path: str | Path, image_topic: str | None = None) -> int:
 
 def bag_camera_info(path: str | Path, image_topic: str | None = None) -> tuple[str, CameraInfoFields] | None:
     """The camera_info topic paired with the bag's image topic and its first message, or None when the bag
-    recorded none for it."""
+    recorded none for it (or none can be told to be its camera's)."""
     reader = _open_reader(path)
     try:
         images = _image_connections(reader, path, image_topic)
-        infos = _info_connections(reader, path, images[0].topic)
+        infos, _ = _info_connections(reader, path, images[0].topic)
         for connection, _, data in reader.messages(connections=infos[:1]):
             return connection.topic, decode_camera_info(data)
         return None
@@ -433,7 +434,7 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
     reader = _open_reader(path)
     try:
         images = _image_connections(reader, path, image_topic)
-        infos = _info_connections(reader, path, images[0].topic)
+        infos, unpaired = _info_connections(reader, path, images[0].topic)
         camera_info = None
         index = 0
         for connection, timestamp, data in reader.messages(connections=images + infos[:1]):
@@ -441,7 +442,7 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
                 camera_info = decode_camera_info(data)
                 continue
             image = _decode_image(connection.msgtype, data)
-            info, problem = camera_info, ""
+            info, problem = camera_info, unpaired
             if info is not None and image.header.frame_id and info.header.frame_id and (
                     image.header.frame_id != info.header.frame_id):
                 info, problem = None, (f"the camera_info on {infos[0].topic} is frame {info.header.frame_id!r}, "
