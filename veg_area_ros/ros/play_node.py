@@ -25,6 +25,8 @@ def qos_profile(offered: OfferedQos) -> QoSProfile:
                       else DurabilityPolicy.VOLATILE)
 
 
+MATCH_SETTLE_S = 1.0  # a subscriber matched on the publisher's side: time for its own side to match too
+
 class PlayNode(Node):
     def __init__(self, name: str = "play_node", **kwargs):
         super().__init__(name, **kwargs)
@@ -51,15 +53,24 @@ class PlayNode(Node):
         self.messages = play_messages(bag, list(self.publishers_by_topic))
         self.pending = next(self.messages, None)
         self.published = 0
+        self.matched_since: float | None = None  # since when every replayed topic has had a subscriber
         self.first_recorded: int | None = None
         self.start = time.monotonic() + delay
         self.create_timer(0.001, self._play)
 
     def _subscribed(self) -> bool:
-        """Every replayed topic has a subscriber, or the wait for them is over (the first message then goes)."""
-        if self.first_recorded is not None or time.monotonic() >= self.start + self.wait_for_subscribers:
+        """Every replayed topic has had a subscriber for MATCH_SETTLE_S, or the wait for them is over (the first
+        message then goes). The publisher sees a match before the subscriber's side has completed it: a message
+        sent at once was lost (5 of 6 recorded in one run of 30), so the match is given time to settle."""
+        now = time.monotonic()
+        if self.first_recorded is not None or now >= self.start + self.wait_for_subscribers:
             return True
-        return all(publisher.get_subscription_count() > 0 for publisher in self.publishers_by_topic.values())
+        if not all(publisher.get_subscription_count() > 0 for publisher in self.publishers_by_topic.values()):
+            self.matched_since = None
+            return False
+        if self.matched_since is None:
+            self.matched_since = now
+        return now - self.matched_since >= MATCH_SETTLE_S
 
     def _play(self) -> None:
         now = time.monotonic()
