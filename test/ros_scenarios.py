@@ -1052,7 +1052,15 @@ def scenario_replay_into_recorder(options: dict, nodes: Nodes) -> dict:
         _, player_stderr = player.communicate(timeout=120)
         player_exit = player.returncode
     _, recorded_stderr = recorder.communicate(timeout=120)
-    return {"player_exit": player_exit, "player_stderr": player_stderr[-3000:],
+    stamps = {}
+    if Path(options["output"]).exists():  # which messages came: the first, the last or others missing
+        from rosbags.rosbag2 import Reader
+
+        from veg_area_ros.cdr import stamp_ns
+        with Reader(options["output"]) as reader:
+            for connection, _, data in reader.messages():
+                stamps.setdefault(connection.topic, []).append(stamp_ns(data) // 10**9)
+    return {"player_exit": player_exit, "player_stderr": player_stderr[-3000:], "stamps": stamps,
             "recorder_exit": recorder.returncode, "recorder_stderr": recorded_stderr[-3000:]}
 
 

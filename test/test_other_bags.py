@@ -214,7 +214,8 @@ def test_a_bag_without_qos_metadata_replays_completely_into_a_recorder(tmp_path)
     assert result["recorder_exit"] == 0, result["recorder_stderr"]
     with Reader(tmp_path / "recorded") as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-    assert counts == {"/cam/image_raw": 6, "/cam/camera_info": 6}, (counts, result["recorder_stderr"])
+    assert counts == {"/cam/image_raw": 6, "/cam/camera_info": 6}, (counts, result["stamps"], result["player_stderr"],
+                                                                   result["recorder_stderr"])
 
 
 @pytest.mark.timeout(300)

@@ -26,6 +26,7 @@ def qos_profile(offered: OfferedQos) -> QoSProfile:
 
 
 MATCH_SETTLE_S = 1.0  # a subscriber matched on the publisher's side: time for its own side to match too
+LINGER_S = 1.0  # after the last message, before the publishers go
 
 class PlayNode(Node):
     def __init__(self, name: str = "play_node", **kwargs):
@@ -54,6 +55,7 @@ class PlayNode(Node):
         self.pending = next(self.messages, None)
         self.published = 0
         self.matched_since: float | None = None  # since when every replayed topic has had a subscriber
+        self.ended_at: float | None = None  # when the last message went
         self.first_recorded: int | None = None
         self.start = time.monotonic() + delay
         self.create_timer(0.001, self._play)
@@ -61,7 +63,7 @@ class PlayNode(Node):
     def _subscribed(self) -> bool:
         """Every replayed topic has had a subscriber for MATCH_SETTLE_S, or the wait for them is over (the first
         message then goes). The publisher sees a match before the subscriber's side has completed it: a message
-        sent at once was lost (5 of 6 recorded in one run of 30), so the match is given time to settle."""
+        sent at once can be lost, so the match is given time to settle."""
         now = time.monotonic()
         if self.first_recorded is not None or now >= self.start + self.wait_for_subscribers:
             return True
@@ -89,6 +91,11 @@ class PlayNode(Node):
             self.published += 1
             self.pending = next(self.messages, None)
         if self.pending is None and not self.stop_requested:
+            # the last messages are delivered before the publishers go: a player that left at once lost them
+            if self.ended_at is None:
+                self.ended_at = now
+            if now - self.ended_at < LINGER_S:
+                return
             self.get_logger().info(f"end of the bag: {self.published} messages replayed")
             self.stop_requested = True
 
