@@ -165,16 +165,19 @@ def _flat_field(band: np.ndarray, weights: Weights, threshold: float, settings: 
     if settings.background_band is not None:
         return flat_field(band, weights.roi, background_band=settings.background_band[weights.window])
     size = 2 * (reach - 1) + 1
-    found = None
-    for split in (threshold, otsu_level(np.bincount(band[weights.roi > 0], minlength=256))):
-        # the user's threshold classifies; where the light is uneven enough that it leaves too little
-        # background to fit (a real photo's dim whites on the object's side of 150), Otsu's split of this band
-        # finds the background the light is fitted to, and the user's threshold still classifies
+
+    def fitted_beyond(split: float) -> FlatField | None:
         background = ~settings.classifier.object_side(band, split)
         background = cv2.erode(background.astype(np.uint8), np.ones((size, size), np.uint8)) > 0
-        found = flat_field(band, weights.roi, background)
-        if found is not None or settings.classifier.threshold == "otsu":
-            break
+        return flat_field(band, weights.roi, background)
+
+    found = fitted_beyond(threshold)
+    if found is None and settings.classifier.threshold != "otsu":
+        # the user's threshold classifies; where the light is uneven enough that it leaves too little
+        # background to fit (a real photo's dim whites on the object's side of 150), Otsu's split of this band
+        # finds the background the light is fitted to (worked out only then), and the user's threshold still
+        # classifies
+        found = fitted_beyond(otsu_level(np.bincount(band[weights.roi > 0], minlength=256)))
     return found
 
 
