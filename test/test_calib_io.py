@@ -83,7 +83,8 @@ def _valid(tmp_path) -> dict:
     (lambda c: c["camera_matrix"].update(data=[1.0] * 8), "should hold 9 numbers"),
     (lambda c: c["camera_matrix"]["data"].__setitem__(0, float("nan")), "NaN"),
     (lambda c: c["distortion_coefficients"].update(data=["a", "b"]), "not a list of numbers"),
-    (lambda c: c.update(distortion_model="equidistant"), "not supported"),
+    (lambda c: c.update(distortion_model="double_sphere"), "'double_sphere' is not supported"),
+    (lambda c: c.update(distortion_model="equidistant"), "do not fit equidistant's four"),
     (lambda c: c["camera_matrix"]["data"].__setitem__(0, -100.0), "positive"),
 ])
 def test_invalid_values_are_refused(tmp_path, edit, problem):

@@ -3,6 +3,7 @@ the same reason (none cuts eight distortion coefficients to five without a word)
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 import yaml
 from rclpy.serialization import serialize_message
@@ -15,10 +16,9 @@ from veg_area_ros.sim.synthetic import ENDOSCOPE
 
 CASES = {
     "eight coefficients, the rational ones not zero": (dict(d=[*map(float, ENDOSCOPE.dist), 0.1, 0.0, 0.0]),
-                                                       "do not fit plumb_bob's five"),
-    "an unknown model": (dict(distortion_model="equidistant"), "not supported"),
-    "a fisheye model with zero coefficients (r = f θ is no pinhole)": (
-        dict(distortion_model="equidistant", d=[0.0, 0.0, 0.0, 0.0]), "fisheye.*not a pinhole"),
+                                                       "do not fit plumb_bob's 5"),
+    "an unknown model, named": (dict(distortion_model="double_sphere"), "'double_sphere' is not supported"),
+    "a fisheye with five coefficients": (dict(distortion_model="equidistant"), "do not fit equidistant's four"),
     "no focal length": (dict(k=[0.0] * 9), "uncalibrated"),
     "k1 = 1e6": (dict(d=[1e6, 0, 0, 0, 0]), "implausible camera model"),
     "a corrupt size": (dict(width=100_000), "beyond any camera"),
@@ -52,12 +52,46 @@ def test_a_file_a_message_and_cdr_fields_refuse_alike(tmp_path, name):
 
 
 def test_a_file_a_message_and_cdr_fields_accept_alike(tmp_path):
-    """rational_polynomial with its extra terms zero is plumb_bob: taken by all three, the same camera."""
+    """rational_polynomial with its extra terms zero maps as plumb_bob does: taken by all three, the same camera."""
     path, msg, fields = _three_ways(tmp_path, dict(distortion_model="rational_polynomial",
                                                    d=[*map(float, ENDOSCOPE.dist), 0.0, 0.0, 0.0]))
     cameras = [read_calibration(path).camera, info_to_camera(msg), info_to_camera(fields)]
     assert all(camera == cameras[0] for camera in cameras)
-    assert cameras[0].parameters() == pytest.approx(ENDOSCOPE.parameters(), rel=1e-12)
+    assert cameras[0].model == "rational_polynomial"
+    plumb = {k: v for k, v in cameras[0].parameters().items() if k not in ("k4", "k5", "k6")}
+    assert plumb == pytest.approx(ENDOSCOPE.parameters(), rel=1e-12)
+    rays = np.random.default_rng(1).uniform(-0.5, 0.5, (50, 2))
+    assert np.array_equal(cameras[0].normalized_to_pixels(rays), ENDOSCOPE.normalized_to_pixels(rays))
+
+
+def test_a_fisheye_with_zero_coefficients_is_measured_as_a_fisheye(tmp_path):
+    """equidistant with k1-k4 zero is r_d = θ, not a pinhole (r_d = tan θ): read by all three as equidistant, and a
+    ray 30 degrees off the axis lands where θ puts it, not tan θ (it was taken as a pinhole without a word)."""
+    path, msg, fields = _three_ways(tmp_path, dict(distortion_model="equidistant", d=[0.0, 0.0, 0.0, 0.0]))
+    cameras = [read_calibration(path).camera, info_to_camera(msg), info_to_camera(fields)]
+    assert all(camera == cameras[0] and camera.model == "equidistant" for camera in cameras)
+    ray = np.array([[np.tan(np.radians(30)), 0.0]])
+    u = cameras[0].normalized_to_pixels(ray)[0, 0]
+    assert u - cameras[0].xp == pytest.approx(cameras[0].fx * np.radians(30), rel=1e-12)
+    assert abs(u - ENDOSCOPE.ideal().normalized_to_pixels(ray)[0, 0]) > 20
+
+
+def test_round_trips_keep_the_model(tmp_path):
+    """file -> camera_info -> file keeps each model and its coefficients."""
+    from veg_area_ros.calib_io import write_calibration
+    from veg_area_ros.camera_model import BrownCamera
+
+    lenses = [BrownCamera(1280, 960, 560.0, 650.0, 500.0, k1=0.07, k2=-0.02, k3=0.018, k4=-0.006, model="equidistant"),
+              BrownCamera(1280, 960, 565.0, 651.0, 500.0, k1=0.3, k2=-0.13, p1=-3e-4, p2=1e-4, k3=-0.01, k4=0.57,
+                          k5=-0.11, k6=-0.04, model="rational_polynomial")]
+    for lens in lenses:
+        write_calibration(tmp_path / "a.yaml", lens)
+        assert yaml.safe_load((tmp_path / "a.yaml").read_text())["distortion_model"] == lens.model
+        msg = camera_to_info(read_calibration(tmp_path / "a.yaml").camera)
+        assert msg.distortion_model == lens.model and len(msg.d) == len(lens.dist)
+        again = info_to_camera(decode_camera_info(serialize_message(msg)))
+        write_calibration(tmp_path / "b.yaml", again)
+        assert read_calibration(tmp_path / "b.yaml").camera == lens
 
 
 def _fields(camera, binning=(0, 0), roi=(0, 0, 0, 0, False)):

@@ -1,8 +1,9 @@
-"""Self-calibrating bundle adjustment of the Brown model from board views.
+"""Self-calibrating bundle adjustment of a camera model (plumb_bob, the Brown model; rational_polynomial;
+equidistant) from board views.
 
-No ROS here. OpenCV's calibrateCamera gives the starting point; then all views are refined jointly with
-scipy's least_squares on the analytic Jacobian (cv2.projectPoints) in a sparse block pattern: the nine
-camera parameters touch every residual, each view's six pose parameters only its own. Optional robust
+No ROS here. OpenCV's calibrateCamera (cv2.fisheye.calibrate for equidistant) gives the starting point; then all
+views are refined jointly on the analytic Jacobian (cv2.projectPoints) in a sparse block pattern: the camera
+parameters (nine for plumb_bob) touch every residual, each view's six pose parameters only its own. Optional robust
 loss and outlier rejection. The result carries what a photogrammetrist reads to judge a calibration:
 residuals overall and per view, parameter standard deviations and correlations from the covariance, and
 warnings about weak geometry.
@@ -21,9 +22,9 @@ from scipy import sparse
 from scipy.optimize import least_squares
 
 from .board import Detection
-from .camera_model import PARAM_NAMES, BrownCamera, distort
+from .camera_model import MODELS, PARAM_NAMES, BrownCamera, distort, distort_model, implausibility, param_names
 
-N_INTRINSIC = len(PARAM_NAMES)
+N_INTRINSIC = len(PARAM_NAMES)  # plumb_bob's; every function below takes the model's own count
 MIN_VIEWS = 3  # below this the nine camera parameters cannot be separated from the poses at all
 RECOMMENDED_VIEWS = 12
 SAME_VIEW_PX = 0.1  # views whose corners lie this close (mean) repeat one another: sensor noise moves them ~0.02
@@ -35,7 +36,7 @@ ROTATION_WARNING_DEG = 45.0
 RADIAL_RINGS = ((0.0, 0.3), (0.3, 0.5), (0.5, 0.7), (0.7, 0.85), (0.85, 1.5))
 RING_MIN_POINTS = 30
 SYSTEMATIC_PX = 0.05  # and 5 standard errors: synthetic and real cameras the model fits stay below 0.01 px
-RADIAL = {"k1", "k2", "k3"}
+RADIAL = {"k1", "k2", "k3", "k4", "k5", "k6"}  # a radial polynomial's terms always go together
 MAX_REJECTION_ROUNDS = 5
 INIT_VIEWS = 40  # views OpenCV's initial estimate is made from (all of a smaller set)
 
@@ -66,8 +67,8 @@ class ViewReport:
 @dataclass
 class CalibrationResult:
     camera: BrownCamera
-    std: dict[str, float]  # one standard deviation per parameter, same keys as PARAM_NAMES
-    correlation: np.ndarray  # (9, 9) between PARAM_NAMES
+    std: dict[str, float]  # one standard deviation per parameter, keys the camera's param_names
+    correlation: np.ndarray  # (n, n) between the camera's param_names (9 for plumb_bob)
     rms_px: float
     mean_px: float
     max_residual_px: float
@@ -86,6 +87,7 @@ class CalibrationResult:
     std_views: dict[str, float] = field(default_factory=dict)  # from resampling views (infinitesimal jackknife)
     halves: dict = field(default_factory=dict)  # two disjoint halves of the views fitted apart (cross-validation)
     projection_std_px: dict = field(default_factory=dict)  # a direction's pixel uncertainty over the image
+    model_choice: dict = field(default_factory=dict)  # --model auto: each model's evidence and why one was picked
     poses: list[np.ndarray] = field(repr=False, default_factory=list)  # (rvec, tvec) of each used view, 6 values
     image_points: list[np.ndarray] = field(repr=False, default_factory=list)
     residuals: list[np.ndarray] = field(repr=False, default_factory=list)  # detected - projected, px
@@ -98,7 +100,10 @@ class CalibrationResult:
     def summary(self) -> dict:
         """Plain numbers for JSON: the CLI's --json output and the calibration file's metadata."""
         cam = self.camera
+        names = cam.param_names
         return {
+            "distortion_model": cam.model,
+            "model_choice": dict(self.model_choice),
             "rms_px": self.rms_px,
             "mean_px": self.mean_px,
             "max_residual_px": self.max_residual_px,
@@ -118,8 +123,8 @@ class CalibrationResult:
             "std_views": dict(self.std_views),
             "halves": dict(self.halves),
             "projection_std_px": dict(self.projection_std_px),
-            "correlations": {f"{PARAM_NAMES[i]}-{PARAM_NAMES[j]}": float(self.correlation[i, j])
-                             for i in range(N_INTRINSIC) for j in range(i + 1, N_INTRINSIC)},
+            "correlations": {f"{names[i]}-{names[j]}": float(self.correlation[i, j])
+                             for i in range(len(names)) for j in range(i + 1, len(names))},
             "coverage": self.coverage,
             "radial_profile": [dict(ring) for ring in self.radial_profile],
             "per_view": [vars(v) for v in self.views],
@@ -131,19 +136,27 @@ class CalibrationResult:
 
 
 def _project_with_jacobian(
-    intrinsics: np.ndarray, pose: np.ndarray, object_points: np.ndarray,
+    intrinsics: np.ndarray, pose: np.ndarray, object_points: np.ndarray, model: str = "plumb_bob",
 ) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels (u0, v0, u1, ...) of the points and their Jacobian, columns rvec(3) tvec(3) and then the camera's
+    parameters in param_names order."""
     fx, fy, cx, cy = intrinsics[:4]
     K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+    if model == "equidistant":
+        uv, jac = cv2.fisheye.projectPoints(object_points.reshape(-1, 1, 3), pose[:3], pose[3:], K, intrinsics[4:])
+        # cv2.fisheye's columns: fx fy cx cy k1-k4 rvec(3) tvec(3) skew
+        return uv.reshape(-1), np.hstack([jac[:, 8:14], jac[:, :8]])
     uv, jac = cv2.projectPoints(object_points.reshape(-1, 1, 3), pose[:3], pose[3:], K, intrinsics[4:])
-    # jac columns: rvec(3) tvec(3) fx fy cx cy k1 k2 p1 p2 k3 (the same order as PARAM_NAMES)
+    # jac columns: rvec(3) tvec(3) fx fy cx cy and the coefficients (the same order as param_names)
     return uv.reshape(-1), jac
 
 
 class _Problem:
-    """Residuals and the sparse Jacobian over [9 camera parameters, 6 per view]."""
+    """Residuals and the sparse Jacobian over [the camera's parameters, 6 per view]."""
 
-    def __init__(self, object_points: list[np.ndarray], image_points: list[np.ndarray]):
+    def __init__(self, object_points: list[np.ndarray], image_points: list[np.ndarray], model: str = "plumb_bob"):
+        self.model = model
+        self.n = n = len(param_names(model))
         self.object_points = object_points
         self.observed = np.concatenate([p.reshape(-1) for p in image_points])
         self.counts = [len(p) for p in object_points]
@@ -151,18 +164,19 @@ class _Problem:
         rows, cols = [], []
         for v, n in enumerate(self.counts):
             r = np.arange(self.row_starts[v], self.row_starts[v] + 2 * n)
-            c = np.concatenate([np.arange(N_INTRINSIC), N_INTRINSIC + 6 * v + np.arange(6)])
+            c = np.concatenate([np.arange(n), n + 6 * v + np.arange(6)])
             rows.append(np.repeat(r, len(c)))
             cols.append(np.tile(c, len(r)))
         self.rows = np.concatenate(rows)
         self.cols = np.concatenate(cols)
-        self.shape = (len(self.observed), N_INTRINSIC + 6 * len(self.counts))
+        self.shape = (len(self.observed), n + 6 * len(self.counts))
 
     def _all(self, x: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
-        intrinsics = x[:N_INTRINSIC]
+        n = self.n
+        intrinsics = x[:n]
         projected, jacobians = [], []
         for v, points in enumerate(self.object_points):
-            uv, jac = _project_with_jacobian(intrinsics, x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6], points)
+            uv, jac = _project_with_jacobian(intrinsics, x[n + 6 * v: n + 6 * v + 6], points, self.model)
             projected.append(uv)
             jacobians.append(jac)
         return np.concatenate(projected), jacobians
@@ -173,8 +187,8 @@ class _Problem:
 
     def jacobian(self, x: np.ndarray) -> sparse.csr_matrix:
         _, jacobians = self._all(x)
-        # per view, reorder columns to [9 intrinsics, 6 pose] to match the sparsity pattern
-        values = np.concatenate([np.hstack([j[:, 6:6 + N_INTRINSIC], j[:, :6]]).ravel() for j in jacobians])
+        # per view, reorder columns to [intrinsics, 6 pose] to match the sparsity pattern
+        values = np.concatenate([np.hstack([j[:, 6:6 + self.n], j[:, :6]]).ravel() for j in jacobians])
         return sparse.csr_matrix((values, (self.rows, self.cols)), shape=self.shape)
 
 
@@ -266,6 +280,7 @@ def same_pose(a: Detection, b: Detection, image_size: tuple[int, int]) -> bool:
 
 def _weak_geometry_warnings(
     views: list[ViewReport], image_points: list[np.ndarray], correlation: np.ndarray, width: int, height: int,
+    names: Sequence[str] = PARAM_NAMES,
 ) -> list[str]:
     warnings = []
     if len(views) < RECOMMENDED_VIEWS:
@@ -285,12 +300,12 @@ def _weak_geometry_warnings(
     if missing:
         warnings.append(f"image corners not covered by any board point: {', '.join(missing)}; "
                         "distortion there is extrapolated")
-    for i in range(N_INTRINSIC):
-        for j in range(i + 1, N_INTRINSIC):
-            pair = {PARAM_NAMES[i], PARAM_NAMES[j]}
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            pair = {names[i], names[j]}
             # fx-fy and the radial terms among themselves are correlated by nature, not by weak views
             if abs(correlation[i, j]) > CORRELATION_WARNING and pair != {"fx", "fy"} and not pair <= RADIAL:
-                warnings.append(f"parameters {PARAM_NAMES[i]} and {PARAM_NAMES[j]} are strongly correlated "
+                warnings.append(f"parameters {names[i]} and {names[j]} are strongly correlated "
                                 f"({correlation[i, j]:+.3f}); the views do not separate them")
     return warnings
 
@@ -302,12 +317,13 @@ def _camera_block(object_points: list[np.ndarray], x: np.ndarray, problem: _Prob
     camera, S^-1 (A^T r - W V^-1 B^T r) (rows). The covariance of the camera when views, not corners, are the
     independent samples is the sum of the influences' outer products (G / (G - 1) aside): the infinitesimal
     jackknife over views, what a bootstrap over views measures, without refitting."""
-    reduced = np.zeros((N_INTRINSIC, N_INTRINSIC))
+    n = problem.n
+    reduced = np.zeros((n, n))
     gradients = []
     for v, points in enumerate(object_points):
-        uv, jac = _project_with_jacobian(x[:N_INTRINSIC], x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6], points)
+        uv, jac = _project_with_jacobian(x[:n], x[n + 6 * v: n + 6 * v + 6], points, problem.model)
         r = uv - problem.observed[problem.row_starts[v]:problem.row_starts[v + 1]]
-        a, b = jac[:, 6:6 + N_INTRINSIC], jac[:, :6]
+        a, b = jac[:, 6:6 + n], jac[:, :6]
         w, pose_inverse = a.T @ b, np.linalg.inv(b.T @ b)
         reduced += a.T @ a - w @ pose_inverse @ w.T
         gradients.append(a.T @ r - w @ pose_inverse @ (b.T @ r))
@@ -325,10 +341,11 @@ LM_DAMPING_WARM = 1e-6
 
 
 def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], start: np.ndarray,
-               damping: float = LM_DAMPING_COLD) -> tuple[np.ndarray, bool, int]:
-    """Levenberg-Marquardt bundle adjustment exploiting its structure: the nine camera parameters are solved
-    from the reduced camera system (Schur complement of each view's 6x6 pose block), then every pose from its
-    own block. (solution, converged, iterations). Each iteration costs one projection per view."""
+               damping: float = LM_DAMPING_COLD, model: str = "plumb_bob") -> tuple[np.ndarray, bool, int]:
+    """Levenberg-Marquardt bundle adjustment exploiting its structure: the camera parameters are solved from the
+    reduced camera system (Schur complement of each view's 6x6 pose block), then every pose from its own block.
+    (solution, converged, iterations). Each iteration costs one projection per view."""
+    n_camera = len(param_names(model))
     x = np.array(start, float)
     views = len(object_points)
     observed = [p.reshape(-1) for p in image_points]
@@ -338,17 +355,19 @@ def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], 
 
     def cost_at(x: np.ndarray) -> float:
         """The sum of squared residuals, all views projected at once (no Jacobian)."""
-        poses = x[N_INTRINSIC:].reshape(views, 6)
+        poses = x[n_camera:].reshape(views, 6)
         rotations = np.array([cv2.Rodrigues(pose[:3])[0] for pose in poses])
         camera = np.einsum("nij,nj->ni", rotations[owner], every_point) + poses[owner, 3:]
         fx, fy, cx, cy = x[:4]
-        distorted = distort(camera[:, :2] / camera[:, 2:3], *x[4:N_INTRINSIC])  # plumb_bob order, as x holds it
+        normalized = camera[:, :2] / camera[:, 2:3]
+        distorted = (distort(normalized, *x[4:n_camera]) if model == "plumb_bob"  # plumb_bob order, as x holds it
+                     else distort_model(normalized, model, x[4:n_camera]))
         projected = (distorted * (fx, fy) + (cx, cy)).ravel()
         difference = projected - every_observed
         return float(difference @ difference)
 
     rows = 2 * max(len(p) for p in object_points)  # every view's rows padded with zeros to the longest view's
-    camera_jacobian = np.zeros((views, rows, N_INTRINSIC))
+    camera_jacobian = np.zeros((views, rows, n_camera))
     pose_jacobian = np.zeros((views, rows, 6))
     residuals = np.zeros((views, rows))
 
@@ -356,11 +375,11 @@ def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], 
         """Each view's residuals and Jacobian blocks (camera A, pose B), into the padded arrays (zero rows add
         nothing to the normal equations)."""
         for v in range(views):
-            uv, jac = _project_with_jacobian(x[:N_INTRINSIC], x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6],
-                                             object_points[v])
+            uv, jac = _project_with_jacobian(x[:n_camera], x[n_camera + 6 * v: n_camera + 6 * v + 6],
+                                             object_points[v], model)
             n = len(uv)
             residuals[v, :n] = uv - observed[v]
-            camera_jacobian[v, :n] = jac[:, 6:6 + N_INTRINSIC]
+            camera_jacobian[v, :n] = jac[:, 6:6 + n_camera]
             pose_jacobian[v, :n] = jac[:, :6]
 
     evaluate(x)
@@ -370,7 +389,7 @@ def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], 
         cross = camera_jacobian.transpose(0, 2, 1) @ pose_jacobian
         pose_normal = pose_jacobian.transpose(0, 2, 1) @ pose_jacobian
         pose_gradient = np.einsum("vri,vr->vi", pose_jacobian, residuals)
-        stacked = camera_jacobian.reshape(-1, N_INTRINSIC)
+        stacked = camera_jacobian.reshape(-1, n_camera)
         camera_normal = stacked.T @ stacked
         camera_gradient = stacked.T @ residuals.ravel()
         diagonal = np.einsum("vii->vi", pose_normal)
@@ -406,31 +425,62 @@ def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], 
 
 
 def _halves(object_points: list[np.ndarray], image_points: list[np.ndarray], x: np.ndarray, camera: BrownCamera,
-            std: dict[str, float]) -> dict:
+            std: dict[str, float], covered: np.ndarray | None = None) -> dict:
     """The views split into two disjoint halves (alternately, so both span the session), each fitted apart:
-    the camera parameters' differences in combined std (each half's std is sqrt(2) x the whole's) and the
-    largest difference in projection over the image (px)."""
-    fitted = []
+    the camera parameters' differences in combined std (each half's std is sqrt(2) x the whole's), the largest
+    difference in projection over the part of the image the board points cover (px), and each half's camera
+    predicting the other half's corners (each view placed anew by the camera, which it did not help fit): the
+    held-out RMS, the evidence a model with more coefficients must win on."""
+    names, model = camera.param_names, camera.model
+    n = len(names)
+    fitted, held_out = [], []
     for half in (0, 1):
         chosen = list(range(half, len(object_points), 2))
-        start = np.concatenate([x[:N_INTRINSIC]] + [x[N_INTRINSIC + 6 * v: N_INTRINSIC + 6 * v + 6] for v in chosen])
+        start = np.concatenate([x[:n]] + [x[n + 6 * v: n + 6 * v + 6] for v in chosen])
         fitted.append(_bundle_lm([object_points[v] for v in chosen], [image_points[v] for v in chosen], start,
-                                 LM_DAMPING_WARM)[0])
-    difference = fitted[0][:N_INTRINSIC] - fitted[1][:N_INTRINSIC]
-    combined = np.array([std[name] for name in PARAM_NAMES]) * 2  # sqrt(2 std_half^2), std_half = sqrt(2) std
+                                 LM_DAMPING_WARM, model)[0])
+    for half in (0, 1):
+        others = list(range(1 - half, len(object_points), 2))
+        held_out += [_pose_residuals(fitted[half][:n], x[n + 6 * v: n + 6 * v + 6], object_points[v],
+                                     image_points[v], model) for v in others]
+    held = np.concatenate(held_out)
+    difference = fitted[0][:n] - fitted[1][:n]
+    combined = np.array([std[name] for name in names]) * 2  # sqrt(2 std_half^2), std_half = sqrt(2) std
     z = np.abs(difference) / np.maximum(combined, 1e-300)
-    grid = _image_grid(camera)
+    grid = _covered_grid(camera, covered)
     directions = camera.pixels_to_normalized(grid)
     projected = [_camera_from(f, camera).normalized_to_pixels(directions) for f in fitted]
     shift = np.hypot(*(projected[0] - projected[1]).T)
     worst = int(np.argmax(z))
-    return {"z": dict(zip(PARAM_NAMES, map(float, z), strict=True)), "max_z": float(z.max()),
-            "worst": f"{PARAM_NAMES[worst]} {difference[worst]:+.3g}", "projection_difference_px":
-            {"median": float(np.median(shift)), "max": float(shift.max())}}
+    return {"z": dict(zip(names, map(float, z), strict=True)), "max_z": float(z.max()),
+            "worst": f"{names[worst]} {difference[worst]:+.3g}", "projection_difference_px":
+            {"median": float(np.median(shift)), "max": float(shift.max())},
+            "held_out_rms_px": float(np.sqrt(np.mean(held**2) * 2))}
+
+
+POSE_ITERATIONS = 20
+
+
+def _pose_residuals(intrinsics: np.ndarray, pose: np.ndarray, object_points: np.ndarray, image_points: np.ndarray,
+                    model: str) -> np.ndarray:
+    """A view's residuals (u, v interleaved) after its pose alone is fitted (Gauss-Newton) to a fixed camera."""
+    pose = np.array(pose, float)
+    observed = image_points.reshape(-1)
+    for _ in range(POSE_ITERATIONS):
+        uv, jac = _project_with_jacobian(intrinsics, pose, object_points, model)
+        b = jac[:, :6]
+        step = np.linalg.lstsq(b, -(uv - observed), rcond=None)[0]
+        pose += step
+        if np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(pose)):
+            break
+    uv, _ = _project_with_jacobian(intrinsics, pose, object_points, model)
+    return uv - observed
 
 
 def _camera_from(x: np.ndarray, like: BrownCamera) -> BrownCamera:
-    return BrownCamera.from_opencv(np.array([[x[0], 0, x[2]], [0, x[1], x[3]], [0, 0, 1]]), x[4:9], like.image_size)
+    n = len(like.param_names)
+    return BrownCamera.from_opencv(np.array([[x[0], 0, x[2]], [0, x[1], x[3]], [0, 0, 1]]), x[4:n], like.image_size,
+                                   like.model)
 
 
 def _image_grid(camera: BrownCamera, n: int = 9) -> np.ndarray:
@@ -438,20 +488,27 @@ def _image_grid(camera: BrownCamera, n: int = 9) -> np.ndarray:
     return np.column_stack([u.ravel(), v.ravel()])
 
 
-def projection_std(camera: BrownCamera, covariance: np.ndarray, covered: np.ndarray | None = None) -> dict:
-    """How far (px, 1 std) the image of a fixed viewing direction is uncertain, over a grid on the image (the
-    part inside the board points' hull, `covered`, where the model is not extrapolated), from the camera
-    parameters' covariance: median and max, and the grid's values."""
+def _covered_grid(camera: BrownCamera, covered: np.ndarray | None) -> np.ndarray:
+    """The image grid's points inside the board points' hull, `covered`, where the model is not extrapolated
+    (the whole grid without points, or where none lies inside)."""
     grid = _image_grid(camera)
     if covered is not None and len(covered) >= 3:
         hull = cv2.convexHull(covered.astype(np.float32))
         inside = [cv2.pointPolygonTest(hull, (float(u), float(v)), False) >= 0 for u, v in grid]
         grid = grid[np.array(inside)] if any(inside) else grid
+    return grid
+
+
+def projection_std(camera: BrownCamera, covariance: np.ndarray, covered: np.ndarray | None = None) -> dict:
+    """How far (px, 1 std) the image of a fixed viewing direction is uncertain, over a grid on the image (the
+    part inside the board points' hull, `covered`, where the model is not extrapolated), from the camera
+    parameters' covariance: median and max, and the grid's values."""
+    grid = _covered_grid(camera, covered)
     directions = camera.pixels_to_normalized(grid)
     base = camera.parameters()
     values = np.array(list(base.values()))
-    jac = np.zeros((len(grid), 2, N_INTRINSIC))
-    for i in range(N_INTRINSIC):
+    jac = np.zeros((len(grid), 2, len(values)))
+    for i in range(len(values)):
         step = 1e-6 * max(abs(values[i]), 1.0)
         moved = values.copy()
         moved[i] += step
@@ -525,11 +582,18 @@ def calibrate(
     outlier_sigma: float | None = 4.0,
     progress: Callable[[str], None] | None = None,
     cross_validate: bool = True,
+    model: str = "plumb_bob",
 ) -> CalibrationResult:
-    """Fit the Brown model to the views. `robust_loss` is a scipy loss ('linear', 'huber', 'soft_l1', ...);
-    points whose residual exceeds `outlier_sigma` robust standard deviations are rejected and the fit
-    repeated (None disables rejection). `std` is the larger of the covariance's and the view-resampling
-    std; `cross_validate` also fits two disjoint halves of the views and compares them."""
+    """Fit a camera model (`model`: one of MODELS, or "auto": `choose_model`) to the views. `robust_loss` is a
+    scipy loss ('linear', 'huber', 'soft_l1', ...); points whose residual exceeds `outlier_sigma` robust
+    standard deviations are rejected and the fit repeated (None disables rejection). `std` is the larger of the
+    covariance's and the view-resampling std; `cross_validate` also fits two disjoint halves of the views and
+    compares them (and has each half predict the other's corners)."""
+    if model == "auto":
+        return choose_model(views, image_size, robust_loss, outlier_sigma, progress)
+    if model not in MODELS:
+        raise CalibrationError(f"unknown camera model {model!r} (known: {', '.join(MODELS)}, auto)")
+    n_camera = len(param_names(model))
     started = time.perf_counter()
     say = progress or (lambda _msg: None)
     width, height = image_size
@@ -547,27 +611,25 @@ def calibrate(
     chosen = np.unique(np.linspace(0, len(views) - 1, min(len(views), INIT_VIEWS)).round().astype(int))
     initial_views = len(chosen)
     say(f"initial estimate (OpenCV) from {initial_views} of {len(views)} views")
-    try:
-        opencv_rms, K, dist, _, _ = cv2.calibrateCamera(
-            [object_points[v].astype(np.float32) for v in chosen], [image_points[v].astype(np.float32) for v in chosen],
-            (width, height), None, None)
-    except cv2.error as exc:
-        raise CalibrationError(f"OpenCV could not initialise the calibration: {exc.err}") from exc
-    if not np.isfinite(opencv_rms):
-        raise CalibrationError("OpenCV's initial calibration did not converge")
+    opencv_rms, K, dist = _initial_camera([object_points[v] for v in chosen], [image_points[v] for v in chosen],
+                                          (width, height), model)
     rvecs, tvecs = [], []
+    start_camera = BrownCamera.from_opencv(K, dist, (width, height), model) if model == "equidistant" else None
     for points, pixels in zip(object_points, image_points, strict=True):
-        found, rvec, tvec = cv2.solvePnP(points, pixels, K, dist)
+        if start_camera is None:
+            found, rvec, tvec = cv2.solvePnP(points, pixels, K, dist)
+        else:  # OpenCV's solvePnP knows no fisheye: place the view by its corners' ideal rays
+            found, rvec, tvec = cv2.solvePnP(points, start_camera.pixels_to_normalized(pixels), np.eye(3), None)
         if not found:
             raise CalibrationError("OpenCV could not place a view from the initial camera")
         rvecs.append(rvec)
         tvecs.append(tvec)
-    dist = np.asarray(dist, float).ravel()[:5]
+    dist = np.asarray(dist, float).ravel()[:n_camera - 4]
     x = np.concatenate([[K[0, 0], K[1, 1], K[0, 2], K[1, 2]], dist]
                        + [np.concatenate([np.ravel(r), np.ravel(t)]) for r, t in zip(rvecs, tvecs, strict=True)])
 
     def pose_of(v: int) -> slice:
-        return slice(N_INTRINSIC + 6 * v, N_INTRINSIC + 6 * v + 6)
+        return slice(n_camera + 6 * v, n_camera + 6 * v + 6)
 
     keep = [np.ones(len(p), bool) for p in object_points]
     rejected_views: dict[str, str] = dict(repeated)
@@ -581,24 +643,24 @@ def calibrate(
         nonlocal iterations, unconverged
         active_objects = [object_points[v][keep[v]] for v in active]
         active_images = [image_points[v][keep[v]] for v in active]
-        x_active = np.concatenate([x[:N_INTRINSIC]] + [x[pose_of(v)] for v in active])
+        x_active = np.concatenate([x[:n_camera]] + [x[pose_of(v)] for v in active])
         say(f"bundle adjustment: {len(active)} views, {sum(len(o) for o in active_objects)} points")
         if robust_loss == "linear":
             refit = iterations > 0  # x holds a converged (or stopped) fit already
             solution, converged, nfev = _bundle_lm(active_objects, active_images, x_active,
-                                                   LM_DAMPING_WARM if refit else LM_DAMPING_COLD)
+                                                   LM_DAMPING_WARM if refit else LM_DAMPING_COLD, model)
         else:  # robust losses: scipy's trust region on the sparse Jacobian
-            problem = _Problem(active_objects, active_images)
+            problem = _Problem(active_objects, active_images, model)
             fit = least_squares(problem.residuals, x_active, jac=problem.jacobian, method="trf", x_scale="jac",
                                 loss=robust_loss, f_scale=1.0, tr_solver="lsmr", ftol=1e-12, xtol=1e-12,
                                 gtol=1e-12, max_nfev=200)
             solution, converged, nfev = fit.x, fit.status > 0, fit.nfev
         iterations += nfev
         unconverged += not converged
-        x[:N_INTRINSIC] = solution[:N_INTRINSIC]
+        x[:n_camera] = solution[:n_camera]
         for k, v in enumerate(active):
-            x[pose_of(v)] = solution[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6]
-        return _Problem(active_objects, active_images).residuals(solution)
+            x[pose_of(v)] = solution[n_camera + 6 * k: n_camera + 6 * k + 6]
+        return _Problem(active_objects, active_images, model).residuals(solution)
 
     residuals = refine()
     for _ in range(MAX_REJECTION_ROUNDS if outlier_sigma is not None else 0):
@@ -609,7 +671,7 @@ def calibrate(
         limit = max(outlier_sigma * robust_sigma * np.sqrt(2), 0.05)
         changed = False
         for v in list(active):
-            uv, _ = _project_with_jacobian(x[:N_INTRINSIC], x[pose_of(v)], object_points[v])
+            uv, _ = _project_with_jacobian(x[:n_camera], x[pose_of(v)], object_points[v], model)
             new_keep = np.hypot(*(uv.reshape(-1, 2) - image_points[v]).T) <= limit
             if not np.array_equal(new_keep, keep[v]):
                 keep[v] = new_keep
@@ -626,8 +688,8 @@ def calibrate(
 
     # final solution over the kept points; covariance from the Jacobian there
     obj = [object_points[v][keep[v]] for v in active]
-    problem = _Problem(obj, [image_points[v][keep[v]] for v in active])
-    x_final = np.concatenate([x[:N_INTRINSIC]] + [x[pose_of(v)] for v in active])
+    problem = _Problem(obj, [image_points[v][keep[v]] for v in active], model)
+    x_final = np.concatenate([x[:n_camera]] + [x[pose_of(v)] for v in active])
     residuals = problem.residuals(x_final)
     dof = len(residuals) - len(x_final)
     if dof <= 0:
@@ -646,9 +708,10 @@ def calibrate(
     cov_i = view_cov if np.all(view_std >= covariance_std) else covariance
     std_values = np.maximum(view_std, covariance_std)
     correlation = cov_i / np.outer(np.sqrt(np.diag(cov_i)), np.sqrt(np.diag(cov_i)))
+    names = param_names(model)
     camera = BrownCamera.from_opencv(
-        np.array([[x_final[0], 0, x_final[2]], [0, x_final[1], x_final[3]], [0, 0, 1]]), x_final[4:9],
-        (width, height))
+        np.array([[x_final[0], 0, x_final[2]], [0, x_final[1], x_final[3]], [0, 0, 1]]), x_final[4:n_camera],
+        (width, height), model)
 
     reports, per_view_residuals, per_view_points, per_view_inliers = [], [], [], []
     offset = 0
@@ -656,7 +719,7 @@ def calibrate(
         n = len(obj[k])
         r = residuals[offset: offset + 2 * n].reshape(-1, 2)
         offset += 2 * n
-        pose = x_final[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6]
+        pose = x_final[n_camera + 6 * k: n_camera + 6 * k + 6]
         # residuals of all the view's points, rejected ones included, for the report
         all_r = views[v].detection.image_points - camera.project(views[v].detection.object_points, pose[:3], pose[3:])
         per_view_residuals.append(all_r)
@@ -669,18 +732,19 @@ def calibrate(
             roll_deg=_view_roll_deg(camera, views[v].detection, pose[:3], pose[3:])))
     err = np.hypot(*residuals.reshape(-1, 2).T)
     used_points = [views[v].detection.image_points[keep[v]] for v in active]
-    warnings = _weak_geometry_warnings(reports, used_points, correlation, width, height)
+    warnings = _weak_geometry_warnings(reports, used_points, correlation, width, height, names)
     profile = radial_profile(camera, used_points, [r[k] for r, k in zip(per_view_residuals, per_view_inliers,
                                                                           strict=True)])
     warnings += _systematic_residual_warning(profile)
     coverage = float(coverage_grid(used_points, width, height, 8, 6).mean())
-    honest = dict(zip(PARAM_NAMES, map(float, std_values), strict=True))
+    honest = dict(zip(names, map(float, std_values), strict=True))
     projection = projection_std(camera, view_cov if np.all(view_std >= covariance_std) else cov_i,
                                 np.vstack(used_points))
     halves = {}
     if cross_validate and len(active) >= 2 * MIN_VIEWS + 2:
         say("cross-validation: the two halves of the views fitted apart")
-        halves = _halves(obj, [image_points[v][keep[v]] for v in active], x_final, camera, honest)
+        halves = _halves(obj, [image_points[v][keep[v]] for v in active], x_final, camera, honest,
+                         np.vstack(used_points))
         if halves["max_z"] > 3:
             warnings.append(f"two halves of the views disagree by up to {halves['max_z']:.1f} combined std "
                             f"({halves['worst']}): some views are not like the others (moved board, refocus, "
@@ -693,14 +757,96 @@ def calibrate(
         warnings.append(f"{unconverged} of the bundle adjustments stopped at the iteration limit before converging")
     say(f"done: RMS {np.sqrt(np.mean(err**2)):.4f} px over {len(active)} views")
     return CalibrationResult(
-        camera=camera, std=dict(zip(PARAM_NAMES, map(float, std_values), strict=True)), correlation=correlation,
+        camera=camera, std=dict(zip(names, map(float, std_values), strict=True)), correlation=correlation,
         rms_px=float(np.sqrt(np.mean(err**2))), mean_px=float(err.mean()), max_residual_px=float(err.max()),
         views=reports, rejected_views=rejected_views, warnings=warnings, opencv_rms_px=float(opencv_rms),
         opencv_rms_views=initial_views,
         sigma0_px=sigma0, iterations=iterations, seconds=time.perf_counter() - started, coverage=coverage,
         converged=not unconverged, radial_profile=profile,
-        std_covariance=dict(zip(PARAM_NAMES, map(float, covariance_std), strict=True)),
-        std_views=dict(zip(PARAM_NAMES, map(float, view_std), strict=True)), halves=halves,
+        std_covariance=dict(zip(names, map(float, covariance_std), strict=True)),
+        std_views=dict(zip(names, map(float, view_std), strict=True)), halves=halves,
         projection_std_px=projection,
-        poses=[x_final[N_INTRINSIC + 6 * k: N_INTRINSIC + 6 * k + 6].copy() for k in range(len(active))],
+        poses=[x_final[n_camera + 6 * k: n_camera + 6 * k + 6].copy() for k in range(len(active))],
         image_points=per_view_points, residuals=per_view_residuals, inliers=per_view_inliers)
+
+
+def _initial_camera(object_points: list[np.ndarray], image_points: list[np.ndarray], image_size: tuple[int, int],
+                    model: str) -> tuple[float, np.ndarray, np.ndarray]:
+    """OpenCV's calibration of the model from these views, the bundle adjustment's start: (RMS px, K, dist).
+    cv2.fisheye.calibrate often fails on views of a lens that is not a true fisheye: its start is then the
+    pinhole's camera matrix with zero coefficients (r_d = θ), from which the adjustment converges."""
+    objects = [p.astype(np.float32) for p in object_points]
+    images = [p.astype(np.float32) for p in image_points]
+    flags = cv2.CALIB_RATIONAL_MODEL if model == "rational_polynomial" else 0
+    try:
+        rms, K, dist, _, _ = cv2.calibrateCamera(objects, images, image_size, None, None, flags=flags)
+    except cv2.error as exc:
+        raise CalibrationError(f"OpenCV could not initialise the calibration: {exc.err}") from exc
+    if not np.isfinite(rms):
+        raise CalibrationError("OpenCV's initial calibration did not converge")
+    if model != "equidistant":
+        return float(rms), K, np.asarray(dist, float).ravel()
+    try:
+        criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-10)
+        fisheye_rms, fisheye_k, fisheye_d, _, _ = cv2.fisheye.calibrate(
+            [p.reshape(-1, 1, 3).astype(np.float64) for p in object_points],
+            [p.reshape(-1, 1, 2).astype(np.float64) for p in image_points], image_size, None, None,
+            flags=cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW, criteria=criteria)
+        if np.isfinite(fisheye_rms) and np.all(np.isfinite(fisheye_d)):
+            return float(fisheye_rms), fisheye_k, np.asarray(fisheye_d, float).ravel()
+    except cv2.error:
+        pass
+    return float(rms), K, np.zeros(4)
+
+
+MODEL_PREFERENCE = ("plumb_bob", "equidistant", "rational_polynomial")  # every ROS tool knows the first; fewest terms
+MODEL_MARGIN = 0.03  # a model must predict held-out corners this much better (relative RMS) to be preferred
+MIN_VIEWS_TO_CHOOSE = 2 * MIN_VIEWS + 2  # each half must calibrate on its own
+
+
+def choose_model(views: Sequence[View], image_size: tuple[int, int], robust_loss: str = "linear",
+                 outlier_sigma: float | None = 4.0, progress: Callable[[str], None] | None = None,
+                 ) -> CalibrationResult:
+    """Every model fitted to the views, one picked on evidence: how well each half of the views' camera predicts
+    the other half's corners (held-out RMS), not the fit's RMS (more coefficients always lower it). A model
+    whose distortion has no inverse over the board points' region is out. The first of MODEL_PREFERENCE within
+    MODEL_MARGIN of the best held-out RMS is picked; the result's `model_choice` says each model's figures and
+    why. With too few views to split, plumb_bob."""
+    say = progress or (lambda _msg: None)
+    if len(views) < MIN_VIEWS_TO_CHOOSE:
+        result = calibrate(views, image_size, robust_loss, outlier_sigma, progress, True, "plumb_bob")
+        result.model_choice = {"chosen": "plumb_bob", "reason": f"{len(views)} views are too few to compare models "
+                               f"on held-out views (at least {MIN_VIEWS_TO_CHOOSE}): plumb_bob", "candidates": {}}
+        return result
+    fits: dict[str, CalibrationResult] = {}
+    candidates: dict[str, dict] = {}
+    for model in MODEL_PREFERENCE:
+        say(f"model {model}")
+        try:
+            fit = calibrate(views, image_size, robust_loss, outlier_sigma, progress, True, model)
+        except CalibrationError as exc:
+            candidates[model] = {"error": str(exc)}
+            continue
+        problem = implausibility(fit.camera, covered=np.vstack([p[k] for p, k in zip(fit.image_points, fit.inliers,
+                                                                                         strict=True)]))
+        held_out = fit.halves.get("held_out_rms_px", math.nan)
+        candidates[model] = {"rms_px": fit.rms_px, "held_out_rms_px": held_out, "problem": problem}
+        if problem is None and np.isfinite(held_out):
+            fits[model] = fit
+    if not fits:
+        raise CalibrationError("no camera model fits these views: " + "; ".join(
+            f"{m}: {c.get('error') or c.get('problem') or 'no held-out figure'}" for m, c in candidates.items()))
+    best = min(fit.halves["held_out_rms_px"] for fit in fits.values())
+    chosen = next(m for m in MODEL_PREFERENCE
+                  if m in fits and fits[m].halves["held_out_rms_px"] <= best * (1 + MODEL_MARGIN))
+    figures = ", ".join(f"{m} {c['held_out_rms_px']:.3f} px" if "held_out_rms_px" in c else f"{m} failed"
+                        for m, c in candidates.items())
+    out = [f"{m} ({c.get('error') or c.get('problem')})" for m, c in candidates.items() if m not in fits]
+    reason = (f"{chosen}: each half of the views predicts the other half's corners to {figures} (RMS); "
+              + (f"{chosen} is within {MODEL_MARGIN:.0%} of the best and earlier in {', '.join(MODEL_PREFERENCE)}"
+                 if fits[chosen].halves["held_out_rms_px"] > best else f"{chosen} predicts best")
+              + (f"; left out: {'; '.join(out)}" if out else ""))
+    result = fits[chosen]
+    result.model_choice = {"chosen": chosen, "reason": reason, "candidates": candidates}
+    say(f"model: {reason}")
+    return result

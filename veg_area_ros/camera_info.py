@@ -12,18 +12,18 @@ from dataclasses import replace
 
 import numpy as np
 
-from .camera_model import BrownCamera, check_plausible
+from .camera_model import MODEL_DIST_NAMES, MODELS, BrownCamera, check_plausible
 from .files import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE
 
-FISHEYE_MODELS = ("equidistant", "fisheye", "kannala_brandt")
-PLUMB_BOB_SIZES = (0, 4, 5, 8, 12, 14)  # OpenCV's lengths; beyond the fifth they must be zero (rational terms)
+FISHEYE_MODELS = ("equidistant", "fisheye", "kannala_brandt")  # other tools' names for OpenCV's fisheye
+PINHOLE_SIZES = (0, 4, 5, 8, 12, 14)  # OpenCV's lengths; beyond the model's own coefficients they must be zero
 
 
 def camera_info_fields(camera: BrownCamera) -> dict:
-    """camera_info's fields for a camera: plumb_bob, and the projection matrix of the ideal camera (what
-    `image_rect` and the idealized images are in)."""
+    """camera_info's fields for a camera: its distortion model's ROS name and coefficients, and the projection
+    matrix of the ideal camera (what `image_rect` and the idealized images are in)."""
     ideal = camera.ideal().camera_matrix
-    return {"width": camera.width, "height": camera.height, "distortion_model": "plumb_bob",
+    return {"width": camera.width, "height": camera.height, "distortion_model": camera.model,
             "d": [float(v) for v in camera.dist], "k": [float(v) for v in camera.camera_matrix.ravel()],
             "r": [float(v) for v in np.eye(3).ravel()],
             "p": [float(v) for v in np.hstack([ideal, np.zeros((3, 1))]).ravel()]}
@@ -43,22 +43,25 @@ def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence
                          f"({MAX_IMAGE_PIXELS} pixels at most)")
     dist = np.asarray(d, float).ravel()
     if distortion_model in FISHEYE_MODELS:  # r = f·θ, not f·tan θ: no pinhole even with zero coefficients
-        raise ValueError(f"distortion model {distortion_model!r} (fisheye) is not supported (plumb_bob); a fisheye "
-                         "camera is not a pinhole even where its coefficients are zero")
-    if distortion_model not in ("plumb_bob", "rational_polynomial") and np.any(dist != 0):
-        raise ValueError(f"distortion model {distortion_model!r} is not supported (plumb_bob)")
+        distortion_model = "equidistant"
+    if distortion_model not in MODELS:
+        raise ValueError(f"distortion model {distortion_model!r} is not supported (known: {', '.join(MODELS)})")
     if not np.all(np.isfinite(dist)):
         raise ValueError("distortion coefficients are not finite")
-    if dist.size not in PLUMB_BOB_SIZES or np.any(dist[5:] != 0):
-        raise ValueError(f"{dist.size} distortion coefficients do not fit plumb_bob's five")
+    count = len(MODEL_DIST_NAMES[distortion_model])
+    if distortion_model == "equidistant":
+        if dist.size not in (0, 4):
+            raise ValueError(f"{dist.size} distortion coefficients do not fit equidistant's four (k1-k4)")
+    elif dist.size not in PINHOLE_SIZES or np.any(dist[count:] != 0):
+        raise ValueError(f"{dist.size} distortion coefficients do not fit {distortion_model}'s {count}")
     matrix = np.asarray(k, float).ravel()
     if matrix.size != 9:
         raise ValueError(f"the camera matrix should hold 9 numbers, found {matrix.size}")
     matrix = matrix.reshape(3, 3)
     if not np.all(np.isfinite(matrix)) or matrix[0, 0] <= 0 or matrix[1, 1] <= 0:
         raise ValueError("camera matrix fx, fy must be finite and positive (zero: an uncalibrated camera_info)")
-    return check_plausible(BrownCamera.from_opencv(matrix, np.pad(dist[:5], (0, 5 - min(5, dist.size))),
-                                                   (int(width), int(height))))
+    coefficients = np.pad(dist[:count], (0, count - min(count, dist.size)))
+    return check_plausible(BrownCamera.from_opencv(matrix, coefficients, (int(width), int(height)), distortion_model))
 
 
 def info_to_camera(msg) -> BrownCamera:

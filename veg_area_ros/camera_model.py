@@ -1,8 +1,9 @@
-"""Brown camera model (principal distance, principal point, K1 K2 K3, P1 P2, pixel aspect).
+"""The camera models: a pinhole with the Brown distortion (principal distance, principal point, K1 K2 K3, P1 P2,
+pixel aspect) and ROS's two other distortion models, each with its forward and inverse mapping.
 
 No ROS here. Conventions: pixel coordinates (u, v) with the origin at the centre of the top-left pixel,
 u right, v down (as OpenCV and ROS). The model maps an ideal pinhole ray (x, y) = (X/Z, Y/Z) to a
-distorted pixel:
+distorted pixel; `plumb_bob` (the Brown model, the default):
 
     r² = x² + y²
     x_d = x (1 + K1 r² + K2 r⁴ + K3 r⁶) + 2 P1 x y + P2 (r² + 2 x²)
@@ -16,11 +17,20 @@ is absorbed into K1..P2, as in the self-calibration method this package follows.
 Calibrations made elsewhere use other conventions: PhotoModeler-style parameters are metric (mm) and
 correct *measured* (distorted) coordinates towards ideal ones, the opposite direction; they are refitted
 here by least squares and the refit residual is reported in pixels.
+
+ROS's (and OpenCV's) other two models:
+
+    rational_polynomial (wide lenses): the radial factor (1 + K1 r² + K2 r⁴ + K3 r⁶) / (1 + K4 r² + K5 r⁴ + K6 r⁶),
+        the same tangential terms; coefficients (k1, k2, p1, p2, k3, k4, k5, k6)
+    equidistant (fisheye, OpenCV's cv2.fisheye): θ = atan r, θ_d = θ (1 + K1 θ² + K2 θ⁴ + K3 θ⁶ + K4 θ⁸),
+        (x_d, y_d) = (θ_d / r) (x, y); coefficients (k1, k2, k3, k4). With every K zero it is r_d = θ, not a
+        pinhole: it reaches rays at 90° and beyond the pinhole's reach.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -28,6 +38,20 @@ from scipy.optimize import least_squares
 
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3")  # plumb_bob order
 PARAM_NAMES = ("fx", "fy", "cx", "cy", *DIST_NAMES)  # OpenCV's names, the order calibration fits them
+# each model's coefficients in camera_info's (and OpenCV's) order
+MODEL_DIST_NAMES = {
+    "plumb_bob": DIST_NAMES,
+    "rational_polynomial": (*DIST_NAMES, "k4", "k5", "k6"),
+    "equidistant": ("k1", "k2", "k3", "k4"),
+}
+MODELS = tuple(MODEL_DIST_NAMES)
+SMALL_RADIUS = 1e-8  # normalized: below it the equidistant factor θ_d / r is taken at its limit, 1
+
+
+def param_names(model: str = "plumb_bob") -> tuple[str, ...]:
+    """A model's parameters by OpenCV's names, in the order calibration fits them: fx fy cx cy, then its
+    distortion coefficients in camera_info's order."""
+    return ("fx", "fy", "cx", "cy", *MODEL_DIST_NAMES[model])
 NEWTON_TOLERANCE = 1e-14  # normalized units: ~1e-11 px, the inverse distortion's round trip
 
 
@@ -42,9 +66,72 @@ def distort(xy: np.ndarray, k1: float, k2: float, p1: float, p2: float, k3: floa
     return np.column_stack([xd, yd])
 
 
+def distort_model(xy: np.ndarray, model: str, dist: np.ndarray) -> np.ndarray:
+    """Any model's distortion: ideal normalized coordinates (N, 2) -> distorted ones (N, 2); `dist` in the
+    model's camera_info order (MODEL_DIST_NAMES)."""
+    if model == "plumb_bob":
+        return distort(xy, *dist)
+    xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+    x, y = xy[:, 0], xy[:, 1]
+    if model == "rational_polynomial":
+        k1, k2, p1, p2, k3, k4, k5, k6 = dist
+        r2 = x * x + y * y
+        radial = (1 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1 + r2 * (k4 + r2 * (k5 + r2 * k6)))
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        return np.column_stack([xd, yd])
+    scale, _ = _equidistant_scale(x, y, dist)
+    return np.column_stack([x * scale, y * scale])
+
+
+def _equidistant_scale(x: np.ndarray, y: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The equidistant model's factor s = θ_d / r and (ds/dr) / r, the two numbers its mapping and Jacobian
+    need; both at their limits near the axis (s -> 1, (ds/dr) / r -> 2 (K1 - 1/3))."""
+    k1, k2, k3, k4 = dist
+    r2 = x * x + y * y
+    r = np.sqrt(r2)
+    theta = np.arctan(r)
+    t2 = theta * theta
+    theta_d = theta * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+    dtheta_d = 1 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
+    near = r < SMALL_RADIUS
+    safe_r = np.where(near, 1.0, r)
+    scale = np.where(near, 1.0, theta_d / safe_r)
+    slope = np.where(near, 2 * (k1 - 1 / 3), (dtheta_d / (1 + r2) - scale) / (safe_r * safe_r))
+    return scale, slope
+
+
+def distortion_jacobian(xy: np.ndarray, model: str, dist: np.ndarray) -> tuple[np.ndarray, ...]:
+    """d(x_d, y_d)/d(x, y) of any model as the four entries (dxd/dx, dxd/dy, dyd/dx, dyd/dy)."""
+    x, y = xy[:, 0], xy[:, 1]
+    if model == "equidistant":
+        scale, slope = _equidistant_scale(x, y, dist)
+        cross = x * y * slope
+        return scale + x * x * slope, cross, cross, scale + y * y * slope
+    r2 = x * x + y * y
+    if model == "plumb_bob":
+        k1, k2, p1, p2, k3 = dist
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        dradial_dr2 = k1 + r2 * (2 * k2 + 3 * r2 * k3)
+    else:
+        k1, k2, p1, p2, k3, k4, k5, k6 = dist
+        numerator = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        denominator = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+        radial = numerator / denominator
+        dradial_dr2 = ((k1 + r2 * (2 * k2 + 3 * r2 * k3)) * denominator
+                       - numerator * (k4 + r2 * (2 * k5 + 3 * r2 * k6))) / denominator**2
+    dxd_dx = radial + 2 * x * x * dradial_dr2 + 2 * p1 * y + 6 * p2 * x
+    dxd_dy = 2 * x * y * dradial_dr2 + 2 * p1 * x + 2 * p2 * y
+    dyd_dx = 2 * x * y * dradial_dr2 + 2 * p1 * x + 2 * p2 * y
+    dyd_dy = radial + 2 * y * y * dradial_dr2 + 6 * p1 * y + 2 * p2 * x
+    return dxd_dx, dxd_dy, dyd_dx, dyd_dy
+
+
 @dataclass(frozen=True)
 class BrownCamera:
-    """A calibrated camera. Pixel units for c, xp, yp; K and P act on ideal normalized coordinates."""
+    """A calibrated camera of any of MODELS (plumb_bob, the Brown model, by default). Pixel units for c, xp, yp;
+    K and P act on ideal normalized coordinates; k4-k6 only in rational_polynomial, k4 also in equidistant,
+    which has no P."""
 
     width: int
     height: int
@@ -57,8 +144,17 @@ class BrownCamera:
     k3: float = 0.0
     p1: float = 0.0
     p2: float = 0.0
+    k4: float = 0.0
+    k5: float = 0.0
+    k6: float = 0.0
+    model: str = "plumb_bob"
 
     def __post_init__(self) -> None:
+        if self.model not in MODEL_DIST_NAMES:
+            raise ValueError(f"unknown distortion model {self.model!r} (known: {', '.join(MODELS)})")
+        unused = sorted(set(("k1", "k2", "k3", "k4", "k5", "k6", "p1", "p2")) - set(MODEL_DIST_NAMES[self.model]))
+        if any(getattr(self, name) != 0 for name in unused):
+            raise ValueError(f"{self.model} has no {', '.join(n for n in unused if getattr(self, n) != 0)}")
         values = np.array([self.c, self.xp, self.yp, self.aspect, *self.dist], dtype=float)
         if not np.all(np.isfinite(values)):
             raise ValueError(f"camera parameters must be finite, got {self}")
@@ -78,8 +174,14 @@ class BrownCamera:
 
     @property
     def dist(self) -> np.ndarray:
-        """Distortion coefficients in plumb_bob order (k1, k2, p1, p2, k3)."""
-        return np.array([self.k1, self.k2, self.p1, self.p2, self.k3], dtype=float)
+        """Distortion coefficients in the model's camera_info order: plumb_bob (k1, k2, p1, p2, k3),
+        rational_polynomial (k1, k2, p1, p2, k3, k4, k5, k6), equidistant (k1, k2, k3, k4)."""
+        return np.array([getattr(self, name) for name in MODEL_DIST_NAMES[self.model]], dtype=float)
+
+    @property
+    def pinhole(self) -> bool:
+        """Whether OpenCV's pinhole functions (projectPoints, undistortPoints, ...) take this model."""
+        return self.model != "equidistant"
 
     @property
     def camera_matrix(self) -> np.ndarray:
@@ -91,29 +193,43 @@ class BrownCamera:
         return (self.width, self.height)
 
     @classmethod
-    def from_opencv(cls, camera_matrix: np.ndarray, dist: np.ndarray, image_size: tuple[int, int]) -> BrownCamera:
-        """Exact conversion from OpenCV's K and plumb_bob coefficients. Skew must be zero."""
+    def from_opencv(cls, camera_matrix: np.ndarray, dist: np.ndarray, image_size: tuple[int, int],
+                    model: str = "plumb_bob") -> BrownCamera:
+        """Exact conversion from OpenCV's K and a model's coefficients (plumb_bob: 4, 5, or more with the rest
+        zero; rational_polynomial: up to 8; equidistant: 4). Skew must be zero."""
         K = np.asarray(camera_matrix, dtype=float).reshape(3, 3)
-        d = np.zeros(5)
         given = np.asarray(dist, dtype=float).ravel()
-        if given.size not in (4, 5, 8, 12, 14) or (given.size > 5 and np.any(given[5:] != 0)):
-            raise ValueError(f"only plumb_bob (k1, k2, p1, p2[, k3]) is supported, got {given.size} coefficients")
-        d[: min(5, given.size)] = given[:5]
+        names = MODEL_DIST_NAMES.get(model)
+        if names is None:
+            raise ValueError(f"unknown distortion model {model!r} (known: {', '.join(MODELS)})")
+        if model == "plumb_bob":
+            if given.size not in (4, 5, 8, 12, 14) or (given.size > 5 and np.any(given[5:] != 0)):
+                raise ValueError(f"plumb_bob has five coefficients (k1, k2, p1, p2[, k3]), got {given.size}")
+        elif model == "rational_polynomial":
+            if given.size not in (4, 5, 8, 12, 14) or (given.size > 8 and np.any(given[8:] != 0)):
+                raise ValueError(f"rational_polynomial has eight coefficients (k1, k2, p1, p2, k3, k4, k5, k6), "
+                                 f"got {given.size}")
+        elif given.size != 4:
+            raise ValueError(f"equidistant has four coefficients (k1, k2, k3, k4), got {given.size}")
+        d = np.zeros(len(names))
+        d[: min(len(names), given.size)] = given[: len(names)]
         if abs(K[0, 1]) > 1e-9 * abs(K[0, 0]):
             raise ValueError("camera matrix has skew; the Brown model here has none")
         width, height = image_size
-        return cls(
-            width=int(width), height=int(height), c=K[0, 0], xp=K[0, 2], yp=K[1, 2], aspect=K[1, 1] / K[0, 0],
-            k1=d[0], k2=d[1], p1=d[2], p2=d[3], k3=d[4],
-        )
+        return cls(width=int(width), height=int(height), c=K[0, 0], xp=K[0, 2], yp=K[1, 2],
+                   aspect=K[1, 1] / K[0, 0], model=model, **dict(zip(names, map(float, d), strict=True)))
 
     def to_opencv(self) -> tuple[np.ndarray, np.ndarray]:
         return self.camera_matrix, self.dist
 
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return param_names(self.model)
+
     def parameters(self) -> dict[str, float]:
-        """The nine parameters by OpenCV's names (PARAM_NAMES), as the calibration reports them."""
+        """The parameters by OpenCV's names (`param_names`: nine for plumb_bob), as the calibration reports them."""
         values = [self.fx, self.fy, self.xp, self.yp, *self.dist]
-        return {name: float(v) for name, v in zip(PARAM_NAMES, values, strict=True)}
+        return {name: float(v) for name, v in zip(self.param_names, values, strict=True)}
 
     def ideal(self) -> BrownCamera:
         """The idealized camera: no distortion, square pixels (scale of the horizontal axis), principal point
@@ -126,7 +242,9 @@ class BrownCamera:
     # --- projection ---------------------------------------------------------------------------------
     def distort_normalized(self, xy: np.ndarray) -> np.ndarray:
         """Ideal normalized coordinates (N, 2) -> distorted normalized coordinates (N, 2)."""
-        return distort(xy, self.k1, self.k2, self.p1, self.p2, self.k3)
+        if self.model == "plumb_bob":
+            return distort(xy, self.k1, self.k2, self.p1, self.p2, self.k3)
+        return distort_model(xy, self.model, self.dist)
 
     def normalized_to_pixels(self, xy: np.ndarray) -> np.ndarray:
         """Ideal normalized coordinates -> distorted pixels."""
@@ -139,8 +257,28 @@ class BrownCamera:
         uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
         target = np.column_stack([(uv[:, 0] - self.xp) / self.fx, (uv[:, 1] - self.yp) / self.fy])
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
-        xy = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.camera_matrix, self.dist, criteria=criteria)
-        return self._newton(xy.reshape(-1, 2).copy(), target)
+        if self.pinhole:
+            xy = cv2.undistortPoints(uv.reshape(-1, 1, 2), self.camera_matrix, self.dist, criteria=criteria)
+        else:
+            xy = cv2.fisheye.undistortPoints(uv.reshape(-1, 1, 2), self.camera_matrix, self.dist, criteria=criteria)
+        xy = self._newton(xy.reshape(-1, 2).copy(), target)
+        if self.reach is not None:  # a solution past the fold is another branch's: start again inside it
+            astray = np.flatnonzero(~self.rays_within_reach(xy))
+            if len(astray):
+                xy[astray] = self._newton(self._radial_start(target[astray]), target[astray])
+        return xy
+
+    def _radial_start(self, target: np.ndarray) -> np.ndarray:
+        """Ideal rays for distorted ones, the radius bisected inside the model's reach along the distorted
+        direction (tangential terms aside): a start on the right branch for Newton's steps."""
+        radius = np.hypot(*target.T)
+        direction = target / np.maximum(radius, 1e-300)[:, None]
+        low, high = np.zeros(len(target)), np.full(len(target), self.reach[0])
+        for _ in range(60):
+            middle = (low + high) / 2
+            below = np.hypot(*self.distort_normalized(middle[:, None] * direction).T) < radius
+            low, high = np.where(below, middle, low), np.where(below, high, middle)
+        return (low + high)[:, None] / 2 * direction
 
     def _newton(self, xy: np.ndarray, target: np.ndarray) -> np.ndarray:
         """Newton steps on distort(xy) = target, in place, each point until it is within NEWTON_TOLERANCE (or
@@ -172,6 +310,8 @@ class BrownCamera:
 
     def _distortion_jacobian(self, xy: np.ndarray) -> tuple[np.ndarray, ...]:
         """d(x_d, y_d)/d(x, y) as the four entries (dxd/dx, dxd/dy, dyd/dx, dyd/dy)."""
+        if self.model != "plumb_bob":
+            return distortion_jacobian(xy, self.model, self.dist)
         x, y = xy[:, 0], xy[:, 1]
         r2 = x * x + y * y
         radial = 1 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
@@ -182,21 +322,95 @@ class BrownCamera:
         dyd_dy = radial + 2 * y * y * dradial_dr2 + 6 * self.p1 * y + 2 * self.p2 * x
         return dxd_dx, dxd_dy, dyd_dx, dyd_dy
 
+    @cached_property
+    def reach(self) -> tuple[float, float] | None:
+        """Where the model stops being one-to-one inside the image (`model_reach`); None: nowhere."""
+        return model_reach(self)
+
+    def reach_px(self) -> float | None:
+        """The distorted radius the model holds to, in pixels along the principal distance; None: everywhere."""
+        return None if self.reach is None else self.reach[1] * self.fx
+
+    def within_reach(self, uv: np.ndarray) -> np.ndarray:
+        """Which raw pixels (N, 2) the model gives a trustworthy ray (`reach`): all of them for most lenses."""
+        uv = np.asarray(uv, float).reshape(-1, 2)
+        if self.reach is None:
+            return np.ones(len(uv), bool)
+        return np.hypot((uv[:, 0] - self.xp) / self.fx, (uv[:, 1] - self.yp) / self.fy) < self.reach[1]
+
+    def holds_everywhere(self) -> bool:
+        """Whether every pixel of the image has its ray (the model folds, if at all, beyond the image)."""
+        corners = np.array([[0.0, 0.0], [self.width - 1, 0.0], [0.0, self.height - 1],
+                            [self.width - 1, self.height - 1]])
+        return bool(np.all(self.within_reach(corners)))
+
+    def rays_within_reach(self, xy: np.ndarray) -> np.ndarray:
+        """Which ideal normalized rays (N, 2) lie inside the model's reach (all of them for most lenses)."""
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        if self.reach is None:
+            return np.ones(len(xy), bool)
+        return np.hypot(xy[:, 0], xy[:, 1]) < self.reach[0]
+
     def project(self, points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
         """3-D points in a board frame seen from a pose -> distorted pixels (N, 2)."""
+        if not self.pinhole:
+            uv, _ = cv2.fisheye.projectPoints(np.asarray(points, float).reshape(-1, 1, 3), np.ravel(rvec).astype(float),
+                                              np.ravel(tvec).astype(float), self.camera_matrix, self.dist)
+            return uv.reshape(-1, 2)
         uv, _ = cv2.projectPoints(np.asarray(points, float).reshape(-1, 1, 3), rvec, tvec, *self.to_opencv())
         return uv.reshape(-1, 2)
 
 
+MIN_REACH = 0.5  # a model that folds nearer the centre than this share of the half-diagonal is no lens's
 MAX_FIELD_SCALE = 3.0  # ideal vs distorted radius over the image: beyond a factor 3 no lens here, a corrupt model
 MIN_FOCAL_SCALE, MAX_FOCAL_SCALE = 0.05, 50.0  # principal distance in image widths: fisheye to long telephoto
 
 
-def implausibility(camera: BrownCamera, samples: int = 25) -> str | None:
+FOLD_DIRECTIONS = 72
+FOLD_STEPS = 400
+
+
+def model_reach(camera: BrownCamera) -> tuple[float, float] | None:
+    """Where a model stops being one-to-one: (ideal radius, distorted radius), both normalized; the distorted one
+    may lie beyond the image (every pixel has its ray, but rays beyond the ideal radius are no pixel's). Along
+    every direction from the principal point the mapping is followed outward (ray angles up to the field scale's
+    limit) until it folds (its Jacobian turns); the smallest ideal radius where one does, and
+    the smallest distorted radius the circle there reaches. Raw pixels farther out than the distorted radius
+    (and ideal ones beyond the ideal radius) have no trustworthy ray. None: it holds over the whole image. A
+    polynomial fitted to a wide lens bends back beyond the board's reach; inside it, it is as good as any."""
+    width, height = camera.image_size
+    corners = np.array([[0.0, 0.0], [width - 1, 0.0], [0.0, height - 1], [width - 1, height - 1]])
+    image_reach = float(np.max(np.hypot((corners[:, 0] - camera.xp) / camera.fx,
+                                        (corners[:, 1] - camera.yp) / camera.fy)))
+    if camera.model == "equidistant":
+        top = min(np.pi / 2 - 1e-3, MAX_FIELD_SCALE * image_reach)
+    else:
+        top = float(np.arctan(MAX_FIELD_SCALE * image_reach))
+    angles = np.linspace(0.0, 2 * np.pi, FOLD_DIRECTIONS, endpoint=False)
+    radii = np.tan(np.linspace(0.0, top, FOLD_STEPS + 1)[1:])
+    rays = (radii[None, :, None] * np.stack([np.cos(angles), np.sin(angles)], axis=1)[:, None, :]).reshape(-1, 2)
+    with np.errstate(all="ignore"):
+        a, b, c, d = camera._distortion_jacobian(rays)
+        distorted = np.hypot(*camera.distort_normalized(rays).T).reshape(FOLD_DIRECTIONS, FOLD_STEPS)
+    folds = ~((a * d - b * c) > 0).reshape(FOLD_DIRECTIONS, FOLD_STEPS)
+    folds[:, 1:] |= ~(np.diff(distorted, axis=1) > 0)
+    if not folds.any():
+        return None if distorted[:, -1].min() >= image_reach else (float(radii[-1]), float(distorted[:, -1].min()))
+    first = np.where(folds.any(axis=1), folds.argmax(axis=1), FOLD_STEPS)
+    last_good = max(int(first.min()) - 1, 0)
+    ideal_reach = float(radii[last_good])
+    circle = ideal_reach * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    distorted_reach = float(np.hypot(*camera.distort_normalized(circle).T).min())
+    # a fold beyond the image still matters: rays past it land in the image a second time (a rational model's pole)
+    return ideal_reach, distorted_reach
+
+
+def implausibility(camera: BrownCamera, samples: int = 25, covered: np.ndarray | None = None) -> str | None:
     """Why this camera model cannot be a real lens-and-port calibration, or None. A model is refused when its
     principal distance or point is absurd for its image, or when its distortion is not one-to-one over the
     image (the Jacobian folds, or a pixel has no ideal ray) or stretches the field by more than
-    MAX_FIELD_SCALE: such a model (k1 = 1e6, say) would idealize frames into nonsense without an error."""
+    MAX_FIELD_SCALE: such a model (k1 = 1e6, say) would idealize frames into nonsense without an error.
+    With `covered` (pixels, N x 2) only the part of the image inside their hull is asked to be one-to-one."""
     width, height = camera.image_size
     if not MIN_FOCAL_SCALE * width <= camera.fx <= MAX_FOCAL_SCALE * width:
         return f"principal distance {camera.fx:.6g} px is absurd for an image {width} px wide"
@@ -206,6 +420,20 @@ def implausibility(camera: BrownCamera, samples: int = 25) -> str | None:
         return f"principal point ({camera.xp:.6g}, {camera.yp:.6g}) px is far outside the {width}x{height} image"
     u, v = np.meshgrid(np.linspace(0, width - 1, samples), np.linspace(0, height - 1, samples))
     raw = np.column_stack([u.ravel(), v.ravel()])
+    if covered is not None and len(covered) >= 3:
+        raw = np.vstack([_inside_hull(raw, covered), cv2.convexHull(covered.astype(np.float32)).reshape(-1, 2)])
+    with np.errstate(all="ignore"):
+        reach = camera.reach
+    if reach is not None:
+        half_diagonal = 0.5 * np.hypot(width, height)
+        reach_px = camera.reach_px()
+        if covered is not None and len(covered) >= 3 and not np.all(camera.within_reach(covered)):
+            return (f"its distortion folds over {reach_px:.0f} px from the principal point, inside the region "
+                    "its board points cover (not monotonic)")
+        if reach_px < MIN_REACH * half_diagonal:
+            return (f"its distortion folds over {reach_px:.0f} px from the principal point, less than "
+                    f"{MIN_REACH:.0%} of the half-diagonal ({half_diagonal:.0f} px): not monotonic")
+        raw = raw[camera.within_reach(raw)]
     with np.errstate(all="ignore"):
         ideal = camera.pixels_to_normalized(raw)
         back = camera.normalized_to_pixels(ideal)
@@ -218,12 +446,20 @@ def implausibility(camera: BrownCamera, samples: int = 25) -> str | None:
             return "its distortion folds over inside the image (not monotonic)"
         distorted = np.hypot(*camera.distort_normalized(ideal).T)
         radius = np.hypot(*ideal.T)
+        if camera.model == "equidistant":  # its own polynomial on θ (r_d = θ with zero coefficients), not r
+            radius = np.arctan(radius)
         far = radius > 1e-6
         ratio = radius[far] / distorted[far]
     if far.any() and not 1 / MAX_FIELD_SCALE <= ratio.min() <= ratio.max() <= MAX_FIELD_SCALE:
         return (f"its distortion scales the field by {ratio.min():.3g}–{ratio.max():.3g}x over the image "
                 f"(at most {MAX_FIELD_SCALE:g}x for any lens and port): the coefficients are absurd")
     return None
+
+
+def _inside_hull(points: np.ndarray, hull_of: np.ndarray) -> np.ndarray:
+    hull = cv2.convexHull(np.asarray(hull_of, np.float32).reshape(-1, 2))
+    inside = [cv2.pointPolygonTest(hull, (float(u), float(v)), False) >= 0 for u, v in points]
+    return points[np.array(inside, bool)]
 
 
 def check_plausible(camera: BrownCamera) -> BrownCamera:

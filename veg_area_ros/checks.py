@@ -26,6 +26,7 @@ from .locate import Located
 from .markers import DetectedMarker
 from .weights import Weights
 
+ROI_CUT_SHARE = 1e-3  # of the ROI without a pixel behind it: said (the remap's border is never counted)
 CLIP_HIGH, CLIP_LOW = 250, 5  # band values a sensor or JPEG has clipped: whites burnt out, shadows crushed
 CLIP_REACH_PX = 2  # blooming and the lens's blur carry a clipped pixel's light this far into its neighbours
 CLIP_EDGE_SHARE = 0.10  # clipping next to this share of the object's edge pixels matters (real photos: 17 %, Af -1.2 %)
@@ -157,6 +158,13 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
     if located.missing:
         said.append(f"targets missing: marker(s) {located.missing} not found; the scale comes from the others "
                     "and the ROI places the missing ones by their fit")
+    if weights.roi_cut_share > ROI_CUT_SHARE:
+        reach = settings.view.camera.reach_px() if settings.view.camera is not None else None
+        said.append(f"the ROI reaches beyond the image: {100 * weights.roi_cut_share:.1f} % of it has no pixel "
+                    + ("(outside the frame, or past "
+                       f"{reach:.0f} px from the principal point, where the lens model folds) " if reach else
+                       "(outside the frame) ")
+                    + "and is not measured; Af is the part inside")
     border = weights.border()
     touching = cv2.countNonZero(mask & border)
     if touching >= max(5, BORDER_TOUCH_SHARE * max(result.pixel_count, 1)):

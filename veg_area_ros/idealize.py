@@ -21,9 +21,28 @@ class Idealizer:
         self.camera = camera
         self.ideal = camera.ideal()
         # fixed-point maps: about twice as fast to apply as float maps, 1/32 px interpolation steps
-        self._map1, self._map2 = cv2.initUndistortRectifyMap(
-            camera.camera_matrix, camera.dist, None, self.ideal.camera_matrix, camera.image_size, cv2.CV_16SC2)
+        if camera.pinhole and camera.reach is None:
+            self._map1, self._map2 = cv2.initUndistortRectifyMap(
+                camera.camera_matrix, camera.dist, None, self.ideal.camera_matrix, camera.image_size, cv2.CV_16SC2)
+        else:
+            self._map1, self._map2 = cv2.convertMaps(*self._float_maps(), cv2.CV_16SC2)
         self._valid: np.ndarray | None = None
+
+    def _float_maps(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each ideal pixel's raw position by the model itself: any model, and a model that folds (`reach`) has
+        no raw pixel for the rays beyond the fold (-1: outside, not the ghost its polynomial bends back to)."""
+        camera = self.camera
+        map_u = np.empty((camera.height, camera.width), np.float32)
+        map_v = np.empty_like(map_u)
+        u = np.arange(camera.width, dtype=float)
+        for first in range(0, camera.height, 256):  # row blocks bound the memory of a 10-megapixel frame
+            rows = np.arange(first, min(first + 256, camera.height), dtype=float)
+            rays = self.ideal.pixels_to_normalized(np.column_stack([np.tile(u, len(rows)), np.repeat(rows, len(u))]))
+            raw = camera.normalized_to_pixels(rays)
+            raw[~camera.rays_within_reach(rays)] = -1.0
+            map_u[first:first + len(rows)] = raw[:, 0].reshape(len(rows), -1)
+            map_v[first:first + len(rows)] = raw[:, 1].reshape(len(rows), -1)
+        return map_u, map_v
 
     def check(self, frame: np.ndarray) -> None:
         height, width = frame.shape[:2]

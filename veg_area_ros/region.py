@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .classify import ClassifyError, check_polygon, check_roi_in_image, polygon_roi
+from .classify import ClassifyError, check_polygon, check_roi_in_image, polygon_roi, roi_area_inside
 from .idealize import IdealView
 from .locate import MARKER_EXCLUSION, Located
 from .scale import marker_layout_problem
@@ -43,16 +43,23 @@ class Region:
         hull = cv2.convexHull(scale.plane_to_pixels(self.targets.all_planes()).astype(np.float32)).reshape(-1, 2)
         return hull.astype(float), holes
 
-    def in_ideal(self, shape: tuple[int, ...], located: Located) -> tuple[np.ndarray, np.ndarray]:
-        """The ROI (uint8 mask over an idealized image of `shape`) and its polygon."""
+    def in_ideal(self, shape: tuple[int, ...], located: Located) -> tuple[np.ndarray, np.ndarray, float]:
+        """The ROI (uint8 mask over an idealized image of `shape`), its polygon, and the share of the polygon
+        that lies where the idealized image has no raw pixel (beyond the frame, or past a lens model's fold)."""
         polygon, holes = self.polygon(located)
         if self.user_polygon is not None:  # the user's: said to lie outside the frame, not found empty
             check_roi_in_image(polygon, shape[1], shape[0])
         roi = polygon_roi(shape, polygon, holes)
+        corners = np.asarray(polygon, float).reshape(-1, 2)
+        x, y = corners[:, 0], corners[:, 1]
+        area = abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2
+        kept = min(roi_area_inside(corners, shape[1], shape[0]) / area, 1.0) if area > 0 else 1.0
         valid = self.view.valid_mask()
         if valid is not None:
+            whole = polygon_roi(shape[:2], corners)
             roi &= valid  # never count the black border the remap leaves
-        return roi, polygon
+            kept *= cv2.countNonZero(whole & valid) / max(cv2.countNonZero(whole), 1)
+        return roi, polygon, 1.0 - kept
 
     def check_layout(self, located: Located, roi_polygon: np.ndarray) -> None:
         """TargetsError when the targets file cannot describe the detected markers (`marker_layout_problem`)."""

@@ -60,6 +60,8 @@ class PixelGeometry:
                 rows = np.arange(first, min(first + 256, bottom), dtype=float)
                 uv = np.column_stack([np.tile(u, len(rows)), np.repeat(rows, len(u))])
                 ideal, block_area = camera.pixels_to_ideal(uv)
+                beyond = ~camera.within_reach(uv)  # a folding model's pixels past its fold: outside any ROI
+                ideal[beyond], block_area[beyond] = -1.0, 0.0
                 block = slice(first - top, first - top + len(rows))
                 ideal_u[block] = ideal[:, 0].reshape(len(rows), len(u))
                 ideal_v[block] = ideal[:, 1].reshape(len(rows), len(u))
@@ -116,6 +118,7 @@ class Weights:
     _border: np.ndarray | None = None
     marker_edge_px: float | None = None  # the printed markers' edge width in this layout (px)
     marker_edge_found: bool = False
+    roi_cut_share: float = 0.0  # of the ROI polygon where the idealized image has no raw pixel (Region.in_ideal)
 
     def border(self) -> np.ndarray:
         """The ROI's one-pixel border ring (its outline and the markers' holes), once per layout."""
@@ -196,7 +199,7 @@ class Weighting:
 
     def _build(self, shape: tuple[int, ...], located: Located, memory: WeightsMemory) -> Weights:
         height, width = shape[:2]
-        roi_ideal, polygon = self.region.in_ideal(shape, located)
+        roi_ideal, polygon, cut = self.region.in_ideal(shape, located)
         self.region.check_layout(located, polygon)
         geometry = self._pixel_geometry(height, width, roi_ideal, memory)
         roi_raw, (x, y, w, h) = geometry.roi(roi_ideal)
@@ -226,7 +229,7 @@ class Weighting:
                           * self.targets.object_plane_offset_std_m)
         return Weights(window, roi, levels, level_area, float(np.max(np.abs(level_area[level] - exact) / exact)),
                        roi_ideal, located.scale, list(located.labels), np.array(located.pixels), polygon, centre,
-                       located.scale.relative_area_std_at(centre), offset_std)
+                       located.scale.relative_area_std_at(centre), offset_std, roi_cut_share=cut)
 
     def weights_for(self, shape: tuple[int, ...], located: Located, memory: WeightsMemory
                     ) -> tuple[Weights, float, float]:
