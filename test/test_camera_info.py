@@ -3,6 +3,7 @@ the same reason (none cuts eight distortion coefficients to five without a word)
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import yaml
@@ -86,7 +87,13 @@ def test_round_trips_keep_the_model(tmp_path):
                           k5=-0.11, k6=-0.04, model="rational_polynomial")]
     for lens in lenses:
         write_calibration(tmp_path / "a.yaml", lens)
-        assert yaml.safe_load((tmp_path / "a.yaml").read_text())["distortion_model"] == lens.model
+        content = yaml.safe_load((tmp_path / "a.yaml").read_text())
+        assert content["distortion_model"] == lens.model
+        assert content["distortion_coefficients"]["cols"] == len(content["distortion_coefficients"]["data"]) == len(
+            lens.dist)
+        storage = cv2.FileStorage(str(tmp_path / "a.yaml"), cv2.FILE_STORAGE_READ)  # OpenCV reads it whole
+        assert storage.getNode("distortion_model").string() == lens.model
+        assert storage.getNode("distortion_coefficients").getNode("cols").real() == len(lens.dist)
         msg = camera_to_info(read_calibration(tmp_path / "a.yaml").camera)
         assert msg.distortion_model == lens.model and len(msg.d) == len(lens.dist)
         again = info_to_camera(decode_camera_info(serialize_message(msg)))

@@ -60,7 +60,7 @@ def to_camera_info_dict(camera: BrownCamera, camera_name: str = "camera",
         "camera_name": camera_name,
         "camera_matrix": _matrix(3, 3, fields["k"]),
         "distortion_model": fields["distortion_model"],
-        "distortion_coefficients": _matrix(1, 5, fields["d"]),
+        "distortion_coefficients": _matrix(1, len(fields["d"]), fields["d"]),
         "rectification_matrix": _matrix(3, 3, fields["r"]),
         "projection_matrix": _matrix(3, 4, fields["p"]),
     }

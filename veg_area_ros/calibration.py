@@ -103,6 +103,7 @@ class CalibrationResult:
         names = cam.param_names
         return {
             "distortion_model": cam.model,
+            "reach_px": cam.reach_px() if not cam.holds_everywhere() else None,
             "model_choice": dict(self.model_choice),
             "rms_px": self.rms_px,
             "mean_px": self.mean_px,
@@ -736,6 +737,16 @@ def calibrate(
     profile = radial_profile(camera, used_points, [r[k] for r, k in zip(per_view_residuals, per_view_inliers,
                                                                           strict=True)])
     warnings += _systematic_residual_warning(profile)
+    if camera.reach is not None and not np.all(camera.within_reach(np.vstack(used_points))):
+        raise CalibrationError(f"the {model} fit folds over {camera.reach_px():.0f} px from the principal point, "
+                               "inside the region the board points cover: it passes near the points but bends "
+                               "between them, no lens (a ratio of polynomials can); use --model auto, or another "
+                               "model")
+    if not camera.holds_everywhere():
+        warnings.append(f"the {model} model holds to {camera.reach_px():.0f} px from the principal point and "
+                        "folds beyond (its polynomial bends back past the board's reach): frames are measured only "
+                        "inside that circle and a ROI reaching past it says so; cover the corners with the board, "
+                        "or use a model made for wide lenses (--model equidistant or rational_polynomial)")
     coverage = float(coverage_grid(used_points, width, height, 8, 6).mean())
     honest = dict(zip(names, map(float, std_values), strict=True))
     projection = projection_std(camera, view_cov if np.all(view_std >= covariance_std) else cov_i,
@@ -773,19 +784,22 @@ def calibrate(
 def _initial_camera(object_points: list[np.ndarray], image_points: list[np.ndarray], image_size: tuple[int, int],
                     model: str) -> tuple[float, np.ndarray, np.ndarray]:
     """OpenCV's calibration of the model from these views, the bundle adjustment's start: (RMS px, K, dist).
-    cv2.fisheye.calibrate often fails on views of a lens that is not a true fisheye: its start is then the
+    A ratio of polynomials has many optima with the same mapping (numerator and denominator sharing a factor,
+    OpenCV's own rational fit lands at K1 -3.7 for a lens of 0.1): rational_polynomial starts from plumb_bob's
+    fit with the denominator 1. cv2.fisheye.calibrate often fails on views of a lens that is not a true fisheye: its start is then the
     pinhole's camera matrix with zero coefficients (r_d = θ), from which the adjustment converges."""
     objects = [p.astype(np.float32) for p in object_points]
     images = [p.astype(np.float32) for p in image_points]
-    flags = cv2.CALIB_RATIONAL_MODEL if model == "rational_polynomial" else 0
     try:
-        rms, K, dist, _, _ = cv2.calibrateCamera(objects, images, image_size, None, None, flags=flags)
+        rms, K, dist, _, _ = cv2.calibrateCamera(objects, images, image_size, None, None)
     except cv2.error as exc:
         raise CalibrationError(f"OpenCV could not initialise the calibration: {exc.err}") from exc
     if not np.isfinite(rms):
         raise CalibrationError("OpenCV's initial calibration did not converge")
-    if model != "equidistant":
+    if model == "plumb_bob":
         return float(rms), K, np.asarray(dist, float).ravel()
+    if model == "rational_polynomial":  # from plumb_bob's fit, the denominator 1: the nearest of its many optima
+        return float(rms), K, np.concatenate([np.asarray(dist, float).ravel()[:5], np.zeros(3)])
     try:
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-10)
         fisheye_rms, fisheye_k, fisheye_d, _, _ = cv2.fisheye.calibrate(

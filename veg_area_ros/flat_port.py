@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from .camera_model import BrownCamera
+from .camera_model import MODEL_DIST_NAMES, BrownCamera
 
 WATER_INDEX = 1.333  # fresh water at about 20 °C, visible light
 ACRYLIC_INDEX = 1.49
@@ -201,8 +201,9 @@ def estimate_pose(camera: FlatPortCamera, plane_points: np.ndarray, pixels: np.n
 def absorbed_camera(camera: FlatPortCamera, rvec: np.ndarray, tvec: np.ndarray, samples: int = 25,
                     box: tuple[float, float, float, float] | None = None,
                     more_tvecs: tuple[np.ndarray, ...] = ()) -> tuple[BrownCamera, float]:
-    """The plumb_bob camera that images the plane z = 0 of this pose as the lens behind the port does: what
-    an underwater calibration at this plane would absorb into K1..P2, for ROS tools that know only plumb_bob
+    """The camera of the lens's model (plumb_bob for most) that images the plane z = 0 of this pose as the lens
+    behind the port does: what an underwater calibration at this plane would absorb into its coefficients,
+    for ROS tools that know no port
     and for measuring with the existing pipeline. Fitted on a grid of pixels over the image, or over `box`
     (u0, v0, u1, v1 raw px: where the measurement is, since five coefficients cannot follow refraction at
     the corners of a wide lens as well), on this plane and on the parallel planes at `more_tvecs` (the
@@ -218,8 +219,11 @@ def absorbed_camera(camera: FlatPortCamera, rvec: np.ndarray, tvec: np.ndarray, 
     lens, n_w = camera.lens, camera.port.water_index
     start = replace(lens, c=lens.c * n_w)
 
+    names = MODEL_DIST_NAMES[lens.model]
+
     def model(x: np.ndarray) -> BrownCamera:
-        return BrownCamera(width, height, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], x[8])
+        return BrownCamera(width, height, x[0], x[1], x[2], x[3], model=lens.model,
+                           **dict(zip(names, map(float, x[4:4 + len(names)]), strict=True)))
 
     # x[9]: the stand-in pinhole's place along the optical axis. Through a port the planes look as if seen
     # from about distance * (n - 1) farther back; a pinhole held at the lens would scale a second plane's
@@ -229,11 +233,11 @@ def absorbed_camera(camera: FlatPortCamera, rvec: np.ndarray, tvec: np.ndarray, 
 
     def residual(x: np.ndarray) -> np.ndarray:
         candidate = model(x)
-        shift = np.array([0.0, 0.0, x[9] if len(x) > 9 else paraxial_shift])
+        shift = np.array([0.0, 0.0, x[4 + len(names)] if len(x) > 4 + len(names) else paraxial_shift])
         return np.concatenate([(candidate.project(points, rvec, t + shift) - pixels).ravel()
                                for points, t in planes])
 
-    x0 = np.array([start.c, start.xp, start.yp, start.aspect, start.k1, start.k2, start.k3, start.p1, start.p2,
+    x0 = np.array([start.c, start.xp, start.yp, start.aspect, *[getattr(start, name) for name in names],
                    *([paraxial_shift] if more_tvecs else [])])
     fit = least_squares(residual, x0, method="lm", x_scale="jac")
     absorbed = model(fit.x)
@@ -255,10 +259,12 @@ class PortFit:
 PORT_PARAMETERS = ("tilt_x_rad", "tilt_y_rad", "distance", "water_index")
 
 
-def _lens_from(parameters: np.ndarray, image_size: tuple[int, int]) -> BrownCamera:
-    """A lens from its nine parameters in PARAM_NAMES order (fx, fy, cx, cy, k1, k2, p1, p2, k3)."""
+def _lens_from(parameters: np.ndarray, like: BrownCamera) -> BrownCamera:
+    """A lens of `like`'s model and size from its parameters in param_names order (fx, fy, cx, cy, then the
+    model's coefficients)."""
     fx, fy, cx, cy, *dist = parameters
-    return BrownCamera.from_opencv(np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.array(dist), image_size)
+    return BrownCamera.from_opencv(np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.array(dist),
+                                   like.image_size, like.model)
 
 
 def fit_port(lens: BrownCamera, views: list[tuple[np.ndarray, np.ndarray]], start: FlatPort,
@@ -308,8 +314,8 @@ def fit_port(lens: BrownCamera, views: list[tuple[np.ndarray, np.ndarray]], star
             if step <= 0:
                 continue
             moved = [theta + sign * step * np.eye(len(theta))[j] for sign in (1, -1)]
-            derivative = (residual(fit.x, _lens_from(moved[0], lens.image_size))
-                          - residual(fit.x, _lens_from(moved[1], lens.image_size))) / (2 * step)
+            derivative = (residual(fit.x, _lens_from(moved[0], lens)) - residual(fit.x, _lens_from(moved[1], lens))
+                          ) / (2 * step)
             sensitivity[:, j] = -normal_inverse @ (fit.jac.T @ derivative)
         covariance = covariance + sensitivity @ lens_covariance @ sensitivity.T
     std = {name: float(np.sqrt(covariance[k, k])) for k, name in enumerate(names)}

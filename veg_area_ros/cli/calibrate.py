@@ -29,6 +29,10 @@ def add_parser(sub) -> None:
     cal.add_argument("--distance", type=positive_float, default=None,
                      help="camera-to-board distance of the calibration, metres (recorded in the file)")
     cal.add_argument("--camera-name", default="camera")
+    cal.add_argument("--model", choices=["auto", "plumb_bob", "rational_polynomial", "equidistant"],
+                     help="camera model (ROS's distortion_model): auto (the default) fits all three and picks the "
+                          "one that best predicts held-out views; plumb_bob for most lenses, rational_polynomial "
+                          "and equidistant (fisheye) for wide ones")
     cal.add_argument("--loss", default="linear", choices=["linear", "huber", "soft_l1", "cauchy"],
                      help="robust loss for the bundle adjustment")
     cal.add_argument("--outlier-sigma", type=positive_float, default=4.0,
@@ -151,6 +155,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                   "calibrated")
     check_writable([("-o", output, False), ("--report", args.report, True)], "calibrated")
     if args.port or args.lens:
+        if args.model is not None:
+            raise CliError("--model does not apply with --port/--lens: the lens's model is its air calibration's "
+                           "(--lens)", EXIT_USAGE)
         return _calibrate_port(args, say)
     if not args.inputs or not args.board:
         raise CliError("give the board (--board) and its images", EXIT_USAGE)
@@ -185,7 +192,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                        "charuco, circles (asymmetric, or :symmetric)")
     try:
         result = calibrate(found.views, found.image_size, robust_loss=args.loss,
-                           outlier_sigma=None if args.no_outlier_rejection else args.outlier_sigma, progress=say)
+                           outlier_sigma=None if args.no_outlier_rejection else args.outlier_sigma, progress=say,
+                           model=args.model or "auto")
     except CalibrationError as exc:
         raise CliError(str(exc)) from exc
 
@@ -277,6 +285,7 @@ def format_calibration(result, output: Path) -> str:
     lines = [f"calibration written to {output}",
              f"views used {result.views_used}, rejected {len(result.rejected_views)}; "
              f"RMS {result.rms_px:.4f} px, mean {result.mean_px:.4f} px, max {result.max_residual_px:.4f} px",
+             f"model {cam.model}" + (f": {result.model_choice['reason']}" if result.model_choice else ""),
              f"{'param':>6} {'value':>14} {'std':>12} {'(covariance':>12} {'views)':>10}"]
     lines += [f"{name:>6} {value:14.6g} {std[name]:12.3g} {result.std_covariance[name]:12.3g} "
               f"{result.std_views[name]:10.3g}" for name, value in cam.parameters().items()]

@@ -25,7 +25,7 @@ from ..calib_io import (
     write_calibration,
 )
 from ..calibration import CalibrationError, View, calibrate
-from ..camera_model import BrownCamera
+from ..camera_model import MODELS, BrownCamera
 from ..cdr import decode_image
 from ..feedback import FitView, render_feedback
 from ..guidance import CalibrationGuide
@@ -47,6 +47,12 @@ class CalibrationNode(Node):
                                 low=0.01, high=100.0)
         self.min_views = declare(self, "min_views", 12, "Views kept before an automatic fit (which also waits for "
                                  "enough variety: see ~/feedback).", low=4, high=500)
+        declare(self, "model", "auto", "Camera model fitted (ROS's distortion_model); auto fits all three and picks "
+                "the one that best predicts held-out views (as `veg-area calibrate --model`); read at each fit.",
+                choices=("auto", *MODELS))
+        if self.get_parameter("model").value not in ("auto", *MODELS):
+            raise ValueError(f"parameter model: {self.get_parameter('model').value!r} is not one of auto, "
+                             f"{', '.join(MODELS)}")
         self.auto_calibrate = declare(self, "auto_calibrate", True, "Fit once min_views varied views are in.")
         self.camera_name = declare(self, "camera_name", "camera", "camera_name written in the YAML.")
         url = declare(self, "camera_info_url", "file://" + os.path.expanduser("~/.ros/camera_info/veg_area.yaml"),
@@ -175,8 +181,11 @@ class CalibrationNode(Node):
         lacking = f"; the views still lack variety: {missing}" if missing else ""
         if self.image_size is None or len(self.views) < 4:
             return False, f"{len(self.views)} views kept; at least 4 are needed (12+ recommended){lacking}"
+        model = self.get_parameter("model").value
         try:
-            result = calibrate(self.views, self.image_size)
+            if model not in ("auto", *MODELS):
+                raise CalibrationError(f"parameter model: {model!r} is not one of auto, {', '.join(MODELS)}")
+            result = calibrate(self.views, self.image_size, model=model)
         except CalibrationError as exc:
             self._report(f"fit failed: {exc}{lacking}")
             return False, f"{exc}{lacking}"
@@ -192,7 +201,9 @@ class CalibrationNode(Node):
             return False, text
         metadata = fit_metadata(result.summary(), self.medium, self.distance, str(self.board), "calibration_node")
         self._serve(result.camera, result.rms_px, persist=True, metadata=metadata)
-        text = (f"calibrated on {result.views_used} views: RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} "
+        text = (f"calibrated on {result.views_used} views ({result.camera.model}"
+                + (f"; {result.model_choice['reason']}" if result.model_choice else "")
+                + f"): RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} "
                 f"fy {result.camera.fy:.2f} cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}{lacking}")
         self._report(text, warnings=warnings)
         for warning in warnings:
