@@ -123,6 +123,8 @@ class AreaMeasurer:
             result.mask = self.view.image(raw_mask, cv2.INTER_NEAREST)
             result.image = self.view.image(frame)
             result.roi = weights.roi_ideal
+            if self.camera is not None and not self.camera.holds_everywhere():
+                result.model_reach_px = self.camera.reach[0] * self.camera.c
         return result
 
     def measure_idealized(self, frame: np.ndarray) -> AreaResult:

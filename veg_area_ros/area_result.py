@@ -30,6 +30,8 @@ class AreaResult:
     mask: np.ndarray | None = field(default=None, repr=False)  # uint8 0/255 in the idealized image
     roi: np.ndarray | None = field(default=None, repr=False)
     image: np.ndarray | None = field(default=None, repr=False)  # the idealized frame
+    # a lens model that folds inside the frame holds inside this radius (idealized px) around the image's centre
+    model_reach_px: float | None = None
     target_pixels: dict[str, np.ndarray] = field(default_factory=dict)  # "marker 3" / "point 0" -> idealized px
     weight_error_bound: float = 0.0  # relative bound on Af from quantizing the pixel weights
     area_mode: str = "count"

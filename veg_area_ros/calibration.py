@@ -784,10 +784,10 @@ def calibrate(
 def _initial_camera(object_points: list[np.ndarray], image_points: list[np.ndarray], image_size: tuple[int, int],
                     model: str) -> tuple[float, np.ndarray, np.ndarray]:
     """OpenCV's calibration of the model from these views, the bundle adjustment's start: (RMS px, K, dist).
-    A ratio of polynomials has many optima with the same mapping (numerator and denominator sharing a factor,
-    OpenCV's own rational fit lands at K1 -3.7 for a lens of 0.1): rational_polynomial starts from plumb_bob's
-    fit with the denominator 1. cv2.fisheye.calibrate often fails on views of a lens that is not a true fisheye: its start is then the
-    pinhole's camera matrix with zero coefficients (r_d = θ), from which the adjustment converges."""
+    rational_polynomial starts from plumb_bob's fit with the denominator 1, the optimum nearest the simpler
+    model (a ratio of polynomials has many with one mapping: numerator and denominator can share a factor).
+    cv2.fisheye.calibrate often fails on views of a lens that is not a true fisheye: equidistant then starts
+    from the pinhole's camera matrix with zero coefficients (r_d = θ), from which the adjustment converges."""
     objects = [p.astype(np.float32) for p in object_points]
     images = [p.astype(np.float32) for p in image_points]
     try:

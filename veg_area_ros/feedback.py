@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .camera_model import BrownCamera
 from .guidance import GOALS, CalibrationGuide, Verdict
 
 MAX_WIDTH = 1280
@@ -34,6 +35,15 @@ class FitView:
     projection: dict  # calibration.projection_std: grid points and their std in px
     newest_points: np.ndarray | None = None  # the newest kept view's points (raw pixels) ...
     newest_residuals: np.ndarray | None = None  # ... and its residuals (px)
+    reach: tuple[float, float, float, float] | None = None  # a folding model holds inside: (cx, cy, rx, ry) raw px
+
+
+def fit_reach(camera: BrownCamera) -> tuple[float, float, float, float] | None:
+    """Where a fitted model that folds inside the frame holds, for `FitView.reach`; None where it holds over all."""
+    if camera.holds_everywhere():
+        return None
+    radius = camera.reach[1]
+    return camera.xp, camera.yp, radius * camera.fx, radius * camera.fy
 
 
 def render_feedback(image: np.ndarray, guide: CalibrationGuide, points: np.ndarray | None = None,
@@ -49,6 +59,10 @@ def render_feedback(image: np.ndarray, guide: CalibrationGuide, points: np.ndarr
     _draw_coverage(frame, guide.covered)
     if fit is not None and fit.projection.get("points"):
         _draw_uncertainty(frame, fit.projection, scale)
+    if fit is not None and fit.reach is not None:  # where the fitted model stops holding: cover it, or change model
+        cx, cy, rx, ry = (value * scale for value in fit.reach)
+        cv2.ellipse(frame, (round(cx), round(cy)), (round(rx), round(ry)), 0, 0, 360, (0, 140, 255), 2, cv2.LINE_AA)
+        _text(frame, "the model holds inside", (round(cx - rx / 3), round(cy + ry) - 8), (0, 140, 255), scale=0.45)
     if points is not None:
         colour = (KEPT_COLOUR if verdict is None or verdict.kept
                   else SIMILAR_COLOUR if verdict.kind == "similar" else REJECTED_COLOUR)

@@ -11,6 +11,8 @@ import numpy as np
 
 from .camera_model import BrownCamera
 
+OUTSIDE_PX = -10000.0  # a map entry for no raw pixel: far outside (OpenCV's nearest remap takes -1 as pixel 0)
+
 
 class FrameSizeError(ValueError):
     """A frame whose size does not match the calibration: measuring it would be wrong, so it is refused."""
@@ -30,7 +32,7 @@ class Idealizer:
 
     def _float_maps(self) -> tuple[np.ndarray, np.ndarray]:
         """Each ideal pixel's raw position by the model itself: any model, and a model that folds (`reach`) has
-        no raw pixel for the rays beyond the fold (-1: outside, not the ghost its polynomial bends back to)."""
+        no raw pixel for the rays beyond the fold (outside, not the ghost its polynomial bends back to)."""
         camera = self.camera
         map_u = np.empty((camera.height, camera.width), np.float32)
         map_v = np.empty_like(map_u)
@@ -39,7 +41,7 @@ class Idealizer:
             rows = np.arange(first, min(first + 256, camera.height), dtype=float)
             rays = self.ideal.pixels_to_normalized(np.column_stack([np.tile(u, len(rows)), np.repeat(rows, len(u))]))
             raw = camera.normalized_to_pixels(rays)
-            raw[~camera.rays_within_reach(rays)] = -1.0
+            raw[~camera.rays_within_reach(rays)] = OUTSIDE_PX
             map_u[first:first + len(rows)] = raw[:, 0].reshape(len(rows), -1)
             map_v[first:first + len(rows)] = raw[:, 1].reshape(len(rows), -1)
         return map_u, map_v

@@ -14,7 +14,7 @@ from .area_result import AreaResult
 
 def draw_overlay(result: AreaResult) -> np.ndarray:
     """The idealized frame with the object mask tinted red, the ROI outlined in yellow, the targets marked
-    in green and Af written in the corner (BGR)."""
+    in green, where a folding lens model stops holding in orange, and Af written in the corner (BGR)."""
     image = result.image
     canvas = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) if image.ndim == 2 else image.copy()
     if result.mask is not None:
@@ -25,6 +25,11 @@ def draw_overlay(result: AreaResult) -> np.ndarray:
         contours, _ = cv2.findContours(result.roi, cv2.RETR_LIST, cv2.CHAIN_APPROX_SIMPLE)
         cv2.drawContours(canvas, contours, -1, (0, 255, 255), 1, cv2.LINE_AA)
     size = max(6, canvas.shape[1] // 80)
+    if result.model_reach_px is not None:  # nothing is measured beyond it
+        centre = (round((canvas.shape[1] - 1) / 2), round((canvas.shape[0] - 1) / 2))
+        cv2.circle(canvas, centre, round(result.model_reach_px), (0, 140, 255), 2, cv2.LINE_AA)
+        cv2.putText(canvas, "lens model holds inside", (centre[0] - 6 * size, centre[1] + round(result.model_reach_px)
+                    - size), cv2.FONT_HERSHEY_SIMPLEX, size / 25, (0, 140, 255), 1, cv2.LINE_AA)
     for label, (u, v) in result.target_pixels.items():
         centre = (round(u), round(v))
         cv2.drawMarker(canvas, centre, (0, 255, 0), cv2.MARKER_CROSS, 2 * size, 1, cv2.LINE_AA)

@@ -20,7 +20,7 @@ import numpy as np
 
 from .camera_model import BrownCamera
 from .classify import ClassifyError
-from .idealize import IdealView
+from .idealize import OUTSIDE_PX, IdealView
 from .locate import Located
 from .region import Region, centroid
 from .scale import PlaneScale
@@ -61,7 +61,7 @@ class PixelGeometry:
                 uv = np.column_stack([np.tile(u, len(rows)), np.repeat(rows, len(u))])
                 ideal, block_area = camera.pixels_to_ideal(uv)
                 beyond = ~camera.within_reach(uv)  # a folding model's pixels past its fold: outside any ROI
-                ideal[beyond], block_area[beyond] = -1.0, 0.0
+                ideal[beyond], block_area[beyond] = OUTSIDE_PX, 0.0
                 block = slice(first - top, first - top + len(rows))
                 ideal_u[block] = ideal[:, 0].reshape(len(rows), len(u))
                 ideal_v[block] = ideal[:, 1].reshape(len(rows), len(u))

@@ -27,7 +27,7 @@ from ..calib_io import (
 from ..calibration import CalibrationError, View, calibrate
 from ..camera_model import MODELS, BrownCamera
 from ..cdr import decode_image
-from ..feedback import FitView, render_feedback
+from ..feedback import FitView, fit_reach, render_feedback
 from ..guidance import CalibrationGuide
 from ..sources import DEFAULT_BOARD
 from .health import CountedWarnings, InputWatch, publish_safely
@@ -192,7 +192,7 @@ class CalibrationNode(Node):
         self.fitted = True
         self.fit_view = FitView(result.rms_px, dict(result.std), result.projection_std_px,
                                 result.image_points[-1] if result.image_points else None,
-                                result.residuals[-1] if result.residuals else None)
+                                result.residuals[-1] if result.residuals else None, fit_reach(result.camera))
         warnings = list(result.warnings)
         if result.rms_px > self.rms:
             text = (f"new fit RMS {result.rms_px:.4f} px is worse than the served {self.rms:.4f} px; "
