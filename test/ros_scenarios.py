@@ -304,6 +304,7 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         out["persisted"] = calibration_file.exists()
         if calibration_file.exists():
             out["persisted_fx"] = read_calibration(calibration_file).camera.fx
+            out["persisted_model"] = read_calibration(calibration_file).metadata.get("model_choice")
         if camera_infos:
             out["served_fx"] = info_to_camera(camera_infos[-1]).fx
 

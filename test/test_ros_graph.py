@@ -30,6 +30,9 @@ def test_frames_arrive_at_the_configured_rate(graph):
 def test_calibration_is_served_persisted_and_latched(graph):
     assert graph["camera_info_received"] and graph["late_joiner_got_camera_info"]
     assert graph["persisted"] and graph["persisted_fx"] == pytest.approx(graph["served_fx"], rel=1e-9)
+    # the node's model parameter is auto by default: the file says which model was fitted and why
+    assert graph["persisted_model"]["chosen"] == "plumb_bob", graph["persisted_model"]
+    assert graph["persisted_model"]["reason"].startswith("plumb_bob: ")
     assert graph["served_fx"] == pytest.approx(UNDERWATER_FX, rel=0.01)
 
 

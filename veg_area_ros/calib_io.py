@@ -244,7 +244,7 @@ def camera_info_url_to_path(url: str) -> Path | None:
 
 
 FIT_KEYS = ("rms_px", "mean_px", "max_residual_px", "sigma0_px", "views_used", "views_rejected", "std",
-            "std_covariance", "std_views", "coverage", "warnings")
+            "std_covariance", "std_views", "coverage", "warnings", "reach_px")
 
 
 def provenance(producer: str) -> dict[str, str]:
@@ -260,6 +260,8 @@ def fit_metadata(summary: dict, medium: str, distance_m: float | None, board: st
     return {"medium": medium, "calibration_distance_m": distance_m, "board": str(board), **provenance(producer),
             **{k: summary[k] for k in FIT_KEYS if k in summary},
             "halves": {k: v for k, v in summary.get("halves", {}).items() if k != "z"},
+            **({"model_choice": {"chosen": summary["model_choice"]["chosen"],
+                                 "reason": summary["model_choice"]["reason"]}} if summary.get("model_choice") else {}),
             "projection_std_px": {k: summary["projection_std_px"][k] for k in ("median", "max")
                                   if k in summary.get("projection_std_px", {})}}
 
