@@ -203,6 +203,81 @@ def scenario_delivery(options: dict, nodes: Nodes) -> dict:
     return results
 
 
+def scenario_calibration_trap(options: dict, nodes: Nodes) -> dict:
+    """The calibration node judges a new fit against the served one on evidence, not RMS: A serves a 5-view fit
+    from its file and is fed 16 varied views (~/calibrate); B serves the many-view fit A wrote and is fed 5 of
+    first 8 views (~/calibrate, then ~/commit)."""
+    import shutil
+
+    import rclpy
+    from rclpy.node import Node
+    from sensor_msgs.msg import Image
+    from std_srvs.srv import Trigger
+    from test_guidance import BOARD_SPEC, PORT, poses
+
+    from veg_area_ros.calib_io import fit_metadata, read_calibration, write_calibration
+    from veg_area_ros.calibration import View, calibrate
+    from veg_area_ros.ros.messages import image_to_msg
+    from veg_area_ros.ros.qos import IMAGE_QOS
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, render_board_views
+
+    images = render_board_views(ENDOSCOPE, BOARD_SPEC, poses(16), port=PORT, rng=np.random.default_rng(1),
+                                noise_sigma=2.0, supersample=2)
+    few = calibrate([View(f"v{i}", BOARD_SPEC.detect(image)) for i, image in enumerate(images[:5])],
+                    ENDOSCOPE.image_size)
+    file_a, file_b = Path("a.yaml").resolve(), Path("b.yaml").resolve()
+    write_calibration(file_a, few.camera, metadata=fit_metadata(few.summary(), "water", 0.7, str(BOARD_SPEC), "test"))
+    out: dict = {"a_before": read_calibration(file_a).metadata["views_used"]}
+    rclpy.init()
+    probe = Node("probe")
+    publisher = probe.create_publisher(Image, "image_raw", IMAGE_QOS)
+
+    def spin(seconds: float) -> None:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            rclpy.spin_once(probe, timeout_sec=0.02)
+
+    def feed(frames: list[np.ndarray]) -> None:
+        deadline = time.monotonic() + 30
+        while publisher.get_subscription_count() == 0 and time.monotonic() < deadline:
+            spin(0.1)
+        for image in frames:
+            for _ in range(3):
+                publisher.publish(image_to_msg(image, probe.get_clock().now().to_msg(), "camera"))
+                spin(0.25)
+        spin(2.0)
+
+    def trigger(service: str) -> list:
+        client = probe.create_client(Trigger, service)
+        if not client.wait_for_service(timeout_sec=20):
+            return [None, "no service"]
+        future = client.call_async(Trigger.Request())
+        rclpy.spin_until_future_complete(probe, future, timeout_sec=60)
+        response = future.result()
+        return [None, "no answer"] if response is None else [response.success, response.message]
+
+    try:
+        nodes.start("calibration_node", name="cal_a", camera_info_url=f"file://{file_a}", min_views=12,
+                     auto_calibrate=False)
+        feed(images)
+        out["a_calibrate"] = trigger("cal_a/calibrate")
+        out["a_after"] = read_calibration(file_a).metadata["views_used"]
+        shutil.copy(file_a, file_b)
+        before = file_b.read_bytes()
+        nodes.start("calibration_node", name="cal_b", camera_info_url=f"file://{file_b}", min_views=4,
+                    auto_calibrate=False)
+        feed(images[:8])
+        out["b_calibrate"] = trigger("cal_b/calibrate")
+        out["b_unchanged"] = file_b.read_bytes() == before
+        out["b_commit"] = trigger("cal_b/commit")
+        out["b_after"] = read_calibration(file_b).metadata["views_used"]
+        out["b_commit_again"] = trigger("cal_b/commit")
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return out
+
+
 def main() -> int:
     from veg_area_ros.ros.run import ensure_ros_environment
 
@@ -217,7 +292,8 @@ def main() -> int:
                   "replay": scenario_replay, "record_cli": scenario_record_cli,
                   "two_machines": scenario_two_machines, "bad_start_files": scenario_bad_start_files,
                   "guidance": scenario_guidance, "replay_into_recorder": scenario_replay_into_recorder,
-                  "compressed_driver": scenario_compressed_driver}[name](
+                  "compressed_driver": scenario_compressed_driver,
+                  "calibration_trap": scenario_calibration_trap}[name](
                       options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
@@ -1110,3 +1186,4 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
 
 if __name__ == "__main__":
     sys.exit(main())
+

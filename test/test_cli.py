@@ -138,18 +138,31 @@ def test_corrupt_existing_output_is_not_overwritten(tmp_path, board_folder):
     assert out.read_text() == "camera_matrix: [oops\n"
 
 
-def test_a_better_calibration_is_never_silently_replaced(tmp_path, board_folder):
+def test_a_calibration_is_replaced_on_evidence_not_rms(tmp_path, board_folder):
+    """The trap: 5 views fit with a lower RMS than 15 and know the lens worse. A 5-view fit in the file does not
+    block the 15-view one (it was refused: "holds a better calibration"); the 15-view one is not replaced by a
+    5-view fit without --replace, and the refusal names the figures of both; re-running the same command
+    writes again."""
+    few = tmp_path / "few"
+    few.mkdir()
+    for path in sorted(board_folder.iterdir())[:5]:
+        shutil.copy(path, few / path.name)
     out = tmp_path / "c.yaml"
-    assert run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out), "-q").returncode == 0
-    saved = yaml.safe_load(out.read_text())
-    saved["veg_area_ros"]["rms_px"] = 0.001  # pretend the file holds a far better fit
-    out.write_text(yaml.safe_dump(saved))
+    assert run_cli("calibrate", str(few), "--board", BOARD, "-o", str(out), "-q").returncode == 0
+    five = yaml.safe_load(out.read_text())["veg_area_ros"]
+    result = run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out))
+    assert result.returncode == 0, result.stderr
+    fifteen = yaml.safe_load(out.read_text())["veg_area_ros"]
+    assert five["rms_px"] < fifteen["rms_px"] and fifteen["views_used"] == 15
+    assert "replaced: this fit knows the lens as well or better" in result.stderr
     before = out.read_text()
-    result = run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out), "-q")
-    assert_clean_failure(result, 3, "holds a better calibration")
-    assert out.read_text() == before
-    forced = run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out), "-q", "--force")
-    assert forced.returncode == 0 and out.read_text() != before
+    result = run_cli("calibrate", str(few), "--board", BOARD, "-o", str(out), "-q")
+    assert_clean_failure(result, 3, "kept the calibration it holds: the held calibration knows the lens better")
+    assert "5 views against 15" in result.stderr and out.read_text() == before
+    again = run_cli("calibrate", str(board_folder), "--board", BOARD, "-o", str(out), "-q")
+    assert again.returncode == 0, again.stderr
+    replaced = run_cli("calibrate", str(few), "--board", BOARD, "-o", str(out), "-q", "--replace")
+    assert replaced.returncode == 0 and yaml.safe_load(out.read_text())["veg_area_ros"]["views_used"] == 5
 
 
 def test_bad_board_spec_is_a_usage_error(tmp_path, board_folder):

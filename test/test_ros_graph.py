@@ -389,3 +389,18 @@ def test_the_calibration_node_guides_the_operator_and_fits_only_on_enough_variet
         counts["frames_looked"] + counts["frames_skipped"] + 2), counts
     assert counts["frames_looked"] >= 16
     assert all(result["alive_at_end"].values()) and result["exit_codes"] == {"calibration_node": 0}
+
+
+def test_the_node_replaces_a_calibration_on_evidence_not_rms(tmp_path):
+    """The trap in the node: a served 5-view fit (lower RMS) does not block the 16-view one ~/calibrate makes,
+    which is written; a node serving that one keeps it against a fit of a few of the views (those of the first
+    8 it keeps), says why, writes nothing, and ~/commit writes the fewer-view fit on request (once)."""
+    trap = run_scenario("calibration_trap", tmp_path, timeout=300)
+    assert trap["a_before"] == 5
+    assert trap["a_calibrate"][0] is True, trap["a_calibrate"]
+    assert trap["a_after"] >= 12
+    success, message = trap["b_calibrate"]
+    assert success is False and "kept the served calibration: the held calibration knows the lens better" in message
+    assert "~/commit" in message and trap["b_unchanged"]
+    assert trap["b_commit"][0] is True and 4 <= trap["b_after"] < trap["a_after"]
+    assert trap["b_commit_again"] == [False, "no fit is waiting (~/calibrate fits one)"]

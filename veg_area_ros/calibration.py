@@ -90,6 +90,7 @@ class CalibrationResult:
     model_choice: dict = field(default_factory=dict)  # --model auto: each model's evidence and why one was picked
     poses: list[np.ndarray] = field(repr=False, default_factory=list)  # (rvec, tvec) of each used view, 6 values
     image_points: list[np.ndarray] = field(repr=False, default_factory=list)
+    object_points: list[np.ndarray] = field(repr=False, default_factory=list)  # the board points of each used view
     residuals: list[np.ndarray] = field(repr=False, default_factory=list)  # detected - projected, px
     inliers: list[np.ndarray] = field(repr=False, default_factory=list)
 
@@ -442,7 +443,7 @@ def _halves(object_points: list[np.ndarray], image_points: list[np.ndarray], x: 
                                  LM_DAMPING_WARM, model)[0])
     for half in (0, 1):
         others = list(range(1 - half, len(object_points), 2))
-        held_out += [_pose_residuals(fitted[half][:n], x[n + 6 * v: n + 6 * v + 6], object_points[v],
+        held_out += [pose_residuals(fitted[half][:n], x[n + 6 * v: n + 6 * v + 6], object_points[v],
                                      image_points[v], model) for v in others]
     held = np.concatenate(held_out)
     difference = fitted[0][:n] - fitted[1][:n]
@@ -462,7 +463,7 @@ def _halves(object_points: list[np.ndarray], image_points: list[np.ndarray], x: 
 POSE_ITERATIONS = 20
 
 
-def _pose_residuals(intrinsics: np.ndarray, pose: np.ndarray, object_points: np.ndarray, image_points: np.ndarray,
+def pose_residuals(intrinsics: np.ndarray, pose: np.ndarray, object_points: np.ndarray, image_points: np.ndarray,
                     model: str) -> np.ndarray:
     """A view's residuals (u, v interleaved) after its pose alone is fitted (Gauss-Newton) to a fixed camera."""
     pose = np.array(pose, float)
@@ -778,7 +779,8 @@ def calibrate(
         std_views=dict(zip(names, map(float, view_std), strict=True)), halves=halves,
         projection_std_px=projection,
         poses=[x_final[n_camera + 6 * k: n_camera + 6 * k + 6].copy() for k in range(len(active))],
-        image_points=per_view_points, residuals=per_view_residuals, inliers=per_view_inliers)
+        image_points=per_view_points, residuals=per_view_residuals, inliers=per_view_inliers,
+        object_points=[views[v].detection.object_points.astype(np.float64) for v in active])
 
 
 def _initial_camera(object_points: list[np.ndarray], image_points: list[np.ndarray], image_size: tuple[int, int],

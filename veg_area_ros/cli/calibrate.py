@@ -40,7 +40,9 @@ def add_parser(sub) -> None:
     cal.add_argument("--no-outlier-rejection", action="store_true")
     cal.add_argument("--video-step", type=int, default=0,
                      help=f"use every Nth video frame (0: about {VIEWS_PER_VIDEO} per video)")
-    cal.add_argument("--force", action="store_true", help="replace the output even if it holds a better fit")
+    cal.add_argument("--replace", "--force", dest="replace", action="store_true",
+                     help="write the output even where the calibration it holds is judged better (by projection "
+                          "uncertainty, views and coverage, not RMS: fewer views always fit with a lower RMS)")
     cal.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     cal.add_argument("--port", metavar="flat:DISTANCE_M:THICKNESS_M:N_GLASS",
                      help="an explicit flat port in front of the --lens air calibration: fitted (normal, distance) "
@@ -145,9 +147,10 @@ def _board_and_files(args: argparse.Namespace):
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
-    from ..calib_io import CalibrationFileError, fit_metadata, quality_rms, read_calibration, write_calibration
+    from ..calib_io import CalibrationFileError, fit_metadata, read_calibration, write_calibration
     from ..calibration import CalibrationError, calibrate
     from ..frames import VIDEO_SUFFIXES, video_frame_count
+    from ..replacement import judge
 
     say = progress(args.quiet)
     output = Path(args.output)
@@ -164,12 +167,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     board, files = _board_and_files(args)
 
     previous = None
-    if output.exists() and not args.force:
+    if output.exists() and not args.replace:
         try:
             previous = read_calibration(output)
         except CalibrationFileError as exc:
             raise CliError(f"{output} exists and is not a readable calibration ({exc}); "
-                           "use --force to replace it", EXIT_REFUSED) from exc
+                           "use --replace to replace it", EXIT_REFUSED) from exc
 
     step = args.video_step
     if step <= 0:
@@ -200,12 +203,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     summary = result.summary()
     summary.update(unreadable=found.unreadable, no_board=found.no_board, wrong_size=found.wrong_size,
                    repeated_poses=found.repeated, output=str(output), variety=found.guide.summary())
-    if previous is not None and previous.camera.image_size == result.camera.image_size \
-            and quality_rms(previous) < result.rms_px:
-        raise CliError(
-            f"{output} holds a better calibration (RMS {quality_rms(previous):.4f} px) than this one "
-            f"({result.rms_px:.4f} px); kept it. Use --force to replace it, or write elsewhere with -o",
-            EXIT_REFUSED)
+    if previous is not None:
+        verdict = judge(previous.camera, previous.metadata, result)
+        if not verdict.replace:
+            raise CliError(f"{output}: kept the calibration it holds: {verdict.reason}. Use --replace to write this "
+                           "one anyway, or write elsewhere with -o", EXIT_REFUSED)
+        say(f"{output}: replaced: {verdict.reason}")
     write_calibration(output, result.camera, args.camera_name,
                       fit_metadata(summary, args.medium, args.distance, str(board), "veg-area calibrate"))
     if args.report:

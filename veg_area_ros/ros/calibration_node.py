@@ -29,6 +29,7 @@ from ..camera_model import MODELS, BrownCamera
 from ..cdr import decode_image
 from ..feedback import FitView, fit_reach, render_feedback
 from ..guidance import CalibrationGuide
+from ..replacement import Judgement, judge
 from ..sources import DEFAULT_BOARD
 from .health import CountedWarnings, InputWatch, publish_safely
 from .messages import ImageMessageError, camera_to_info, image_bytes, info_to_camera
@@ -73,6 +74,8 @@ class CalibrationNode(Node):
         self.feedback_published = 0  # ~/feedback images: drawn only while someone subscribes
         self.camera: BrownCamera | None = None
         self.rms: float = math.inf
+        self.served_metadata: dict = {}  # what the served calibration records of its fit: judged against
+        self.pending: tuple | None = None  # a fit kept back (or from fewer than min_views): ~/commit, ~/discard
         self.fitted = False
         self.fit_view: FitView | None = None
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
@@ -82,12 +85,14 @@ class CalibrationNode(Node):
         self.input_watch = InputWatch(self, "image_raw")
         self.warn = CountedWarnings(self.get_logger())
         self.create_service(Trigger, "~/calibrate", self._on_calibrate)
+        self.create_service(Trigger, "~/commit", self._on_commit)
+        self.create_service(Trigger, "~/discard", self._on_discard)
         self.create_service(SetCameraInfo, "set_camera_info", self._on_set_camera_info)
         if self.path is not None and self.path.exists():
             existing = read_start_file(self, "camera_info_url", lambda: read_calibration(self.path),
                                        "serving no calibration until a fit or set_camera_info")
             if existing is not None:
-                self._serve(existing.camera, quality_rms(existing), persist=False)
+                self._serve(existing.camera, quality_rms(existing), persist=False, metadata=existing.metadata)
                 self.get_logger().info(f"serving {self.path} (RMS {self.rms:.3f} px)")
         # frames are looked at in a thread of their own: a 10-megapixel frame's board search must not hold up
         # the executor (services, parameters), and a frame that arrives meanwhile replaces the waiting one
@@ -194,21 +199,52 @@ class CalibrationNode(Node):
                                 result.image_points[-1] if result.image_points else None,
                                 result.residuals[-1] if result.residuals else None, fit_reach(result.camera))
         warnings = list(result.warnings)
-        if result.rms_px > self.rms:
-            text = (f"new fit RMS {result.rms_px:.4f} px is worse than the served {self.rms:.4f} px; "
-                    "kept the served calibration (use set_camera_info to replace it)")
+        metadata = fit_metadata(result.summary(), self.medium, self.distance, str(self.board), "calibration_node")
+        described = (f"{result.views_used} views ({result.camera.model}"
+                     + (f"; {result.model_choice['reason']}" if result.model_choice else "")
+                     + f"): RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} fy {result.camera.fy:.2f} "
+                     f"cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}")
+        verdict = (judge(self.camera, self.served_metadata, result) if self.camera is not None
+                   else Judgement(True, "no calibration served yet"))
+        if not verdict.replace:
+            self.pending = (result.camera, result.rms_px, metadata)
+            text = (f"fitted on {described}; kept the served calibration: {verdict.reason}; ~/commit serves and "
+                    f"writes this fit, ~/discard drops it{lacking}")
             self._report(text, warnings=warnings)
             return False, text
-        metadata = fit_metadata(result.summary(), self.medium, self.distance, str(self.board), "calibration_node")
-        self._serve(result.camera, result.rms_px, persist=True, metadata=metadata)
-        text = (f"calibrated on {result.views_used} views ({result.camera.model}"
-                + (f"; {result.model_choice['reason']}" if result.model_choice else "")
-                + f"): RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} "
-                f"fy {result.camera.fy:.2f} cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}{lacking}")
+        if result.views_used < self.min_views:  # served, but written only on request
+            self.pending = (result.camera, result.rms_px, metadata)
+            self._serve(result.camera, result.rms_px, persist=False, metadata=metadata)
+            text = (f"calibrated on {described}; served but not written to camera_info_url: {result.views_used} "
+                    f"views, fewer than min_views {self.min_views} (~/commit writes it){lacking}")
+        else:
+            self.pending = None
+            self._serve(result.camera, result.rms_px, persist=True, metadata=metadata)
+            text = f"calibrated on {described} ({verdict.reason}){lacking}"
         self._report(text, warnings=warnings)
         for warning in warnings:
             self.get_logger().warning(warning)
         return True, text
+
+    def _on_commit(self, request, response):
+        """Serve and write the fit waiting for a decision (kept back, or from fewer than min_views)."""
+        with self._state:
+            if self.pending is None:
+                response.success, response.message = False, "no fit is waiting (~/calibrate fits one)"
+                return response
+            camera, rms, metadata = self.pending
+            failed = self._serve(camera, rms, persist=True, metadata=metadata)
+            self.pending = None
+        response.success = failed is None
+        response.message = failed or f"committed: served and written to {self.path}"
+        self._report(response.message)
+        return response
+
+    def _on_discard(self, request, response):
+        with self._state:
+            had, self.pending = self.pending is not None, None
+        response.success, response.message = had, "discarded the waiting fit" if had else "no fit is waiting"
+        return response
 
     def _serve(self, camera: BrownCamera, rms: float, persist: bool, metadata: dict | None = None) -> str | None:
         """Publish (latched) and, with `persist`, write the calibration; the reason the write failed, or None."""
@@ -219,7 +255,7 @@ class CalibrationNode(Node):
             except OSError as exc:
                 failed = f"not written to {self.path}: {exc.strerror or exc}"
                 self.get_logger().error(f"calibration served but {failed}")
-        self.camera, self.rms = camera, rms
+        self.camera, self.rms, self.served_metadata = camera, rms, metadata or {}
         info = camera_to_info(camera, self.frame_id, self.get_clock().now().to_msg())
         publish_safely(self, self.info_pub, info)
         return failed
