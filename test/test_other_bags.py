@@ -294,3 +294,35 @@ def test_our_mcap_is_written_as_ros2_bag_record_writes_it(tmp_path):
     flipped[len(data) // 3] ^= 0xFF
     with pytest.raises(Exception, match=r"(?i)crc|compress|zstd|frame"):
         list(StreamReader(__import__("io").BytesIO(bytes(flipped)), validate_crcs=True).records)
+
+
+def test_start_and_end_times_count_from_the_bags_first_image(workspace, scenes):
+    """--start-time/--end-time are seconds after the bag's first image (they were epoch stamps, unlike what the
+    docs said); an absolute stamp is unix:SECONDS or an ISO time; a range that holds no frame says both."""
+    write_calibration(workspace / "left.yaml", ENDOSCOPE)
+    bag = workspace / "timed"  # images stamped 100, 101, 102 s
+    write_bag(bag, "mcap", [("/image_raw", "sensor_msgs/msg/Image",
+                             [_image(frame, k, "cam") for k, frame in enumerate(scenes["left"])])])
+    calibration = ("--calibration", str(workspace / "left.yaml"))
+    for options, stamps in ((("--start-time", "1", "--end-time", "1.5"), [101]),
+                            (("--start-time", "unix:101.5"), [102]),
+                            (("--end-time", "1970-01-01T00:01:41Z"), [100, 101])):
+        rows, done = _measure(workspace, bag, *calibration, *options)
+        assert done.returncode == 0, done.stderr
+        assert [row["stamp_sec"] for row in rows] == stamps, (options, rows)
+    rows, done = _measure(workspace, bag, *calibration, "--start-time", "5")
+    assert done.returncode == 1
+    assert "no frame lies between --start-time 5 s and --end-time inf s (the frames lie 0.000 to 2.000 s after " \
+           "their bag's first image, stamped 100.000 to 102.000 s)" in done.stderr
+
+
+def test_the_af_plot_runs_in_seconds_from_the_first_frame():
+    """A bag's Af(t) had an epoch axis (+1.7962316e9); now seconds since its first frame, the start as a date in
+    the title; frames without time are numbered."""
+    from veg_area_ros.cli.measure_job import series_axis
+
+    rows = [{"time_s": 1796231648.811 + k / 10, "stamp_sec": 1796231648 + k // 10} for k in range(3)]
+    times, title, label = series_axis(rows, "run")
+    assert times == pytest.approx([0.0, 0.1, 0.2]) and label == "time since the first frame [s]"
+    assert title == "Projected area, run, from 2026-12-02T17:14:08.811+00:00"
+    assert series_axis([{"time_s": None}] * 2, "x") == ([0, 1], "Projected area, x", "frame")

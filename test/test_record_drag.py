@@ -193,7 +193,7 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
     first = min(live)
     done = run_cli("measure", str(folder / "closed_bag"), "--calibration", "bag", "--targets", str(targets),
                    "--threshold", "120", "--json", "--csv", str(tmp_path / "bag.csv"),
-                   "--start-time", repr(first[0] + first[1] * 1e-9 - 1e-6))
+                   "--start-time", f"unix:{first[0] + first[1] * 1e-9 - 1e-6!r}")
     assert done.returncode == 0, done.stderr
     offline = {(r["stamp_sec"], r["stamp_nanosec"]): r for r in map(json.loads, done.stdout.splitlines())
                if "area_m2" in r}

@@ -546,3 +546,16 @@ def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x",
             "force_n": sum(samples["force"]) / len(samples["force"]),
             "area_m2": sum(samples["area"]) / len(samples["area"]),
             "samples": {name: len(values) for name, values in samples.items()}}
+
+
+def bag_first_stamp(path: str | Path, image_topic: str | None = None) -> float | None:
+    """The header stamp (s) of the bag's first image on its image topic: where its run starts; None if it has
+    no image."""
+    reader = _open_reader(path)
+    try:
+        images = _image_connections(reader, path, image_topic)
+        for connection, _, data in reader.messages(connections=images):
+            return _decode_image(connection.msgtype, data).header.seconds
+        return None
+    finally:
+        reader.close()

@@ -154,8 +154,8 @@ def plot_area_series(times: list[float], areas: list[float], stds: list[float], 
     """Af(t) with its ±1 standard deviation band (PNG); NaN areas (frames that failed) leave gaps."""
     plt = _pyplot()
     t = np.asarray(times, float)
-    a = np.asarray(areas, float) * 1e4
-    s = np.asarray(stds, float) * 1e4
+    a = np.asarray(areas, float)  # m², the CSV's unit
+    s = np.asarray(stds, float)
     fig, ax = plt.subplots(figsize=(9, 4))
     ax.fill_between(t, a - s, a + s, color="tab:blue", alpha=0.25, label="±1 std")
     ax.plot(t, a, ".-", color="tab:blue", markersize=3, lw=1, label="Af")
@@ -164,7 +164,8 @@ def plot_area_series(times: list[float], areas: list[float], stds: list[float], 
         ax.plot(t[failed], np.full(failed.sum(), np.nanmin(a) if (~failed).any() else 0), "rx",
                 label="not measured")
     ax.set_xlabel(time_label)
-    ax.set_ylabel("Af [cm²]")
+    ax.set_ylabel("Af [m²]")
+    ax.ticklabel_format(axis="x", useOffset=False)
     ax.set_title(title)
     ax.grid(alpha=0.3)
     # beside the axes: it hides no data, and "best" searches every point (7 s of a 2-hour video's 216 000)

@@ -10,7 +10,7 @@ from pathlib import Path
 from ..settings import MeasurementSettings
 from .batch import measure_batch
 from .common import EXIT_USAGE, CliError, positive_float
-from .measure_job import SEGMENT_FRAMES, MeasureJob, measure
+from .measure_job import SEGMENT_FRAMES, MeasureJob, TimeBound, measure, time_bound
 
 DEFAULTS = MeasurementSettings()
 
@@ -60,9 +60,11 @@ def add_parser(sub) -> None:
     mea.add_argument("--image-topic", default=None,
                      help="image topic of a bag, sensor_msgs/Image or CompressedImage (default: its only image "
                           "topic); its camera_info is the sibling in its namespace, as image_transport pairs them")
-    mea.add_argument("--start-time", type=float, default=-math.inf, metavar="S",
-                     help="bag frames stamped from this time on (seconds, header stamp)")
-    mea.add_argument("--end-time", type=float, default=math.inf, metavar="S", help="bag frames up to this time")
+    mea.add_argument("--start-time", type=time_bound, default=TimeBound(-math.inf), metavar="S",
+                     help="bag frames from this many seconds after the bag's first image on (its header stamp); "
+                          "an absolute time as unix:SECONDS or an ISO time (2026-06-01T10:31:05Z)")
+    mea.add_argument("--end-time", type=time_bound, default=TimeBound(math.inf), metavar="S",
+                     help="bag frames up to this many seconds after the first image (or unix:/ISO, as above)")
     mea.add_argument("--targets", required=True, help="targets YAML: ArUco marker ids or hand-picked points")
     mea.add_argument("--threshold", type=_threshold, default=DEFAULTS.threshold,
                      help=f"0..255 or 'otsu' (default {DEFAULTS.threshold})")

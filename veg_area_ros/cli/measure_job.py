@@ -10,7 +10,9 @@ import os
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, fields
+from datetime import UTC
 from pathlib import Path
+from typing import NamedTuple
 
 from ..settings import MeasurementSettings
 from .common import (
@@ -33,6 +35,46 @@ CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area
 SEGMENT_FRAMES = 1000
 
 
+class TimeBound(NamedTuple):
+    """A bound of --start-time/--end-time: seconds after a bag's first image, or an absolute stamp."""
+
+    seconds: float
+    absolute: bool = False
+
+    def at(self, stamp: float, since_start: float) -> float:
+        """How far this bound lies after a frame (stamped `stamp`, `since_start` after its bag's first image)."""
+        return self.seconds - (stamp if self.absolute else since_start)
+
+    def __str__(self) -> str:
+        return f"unix:{self.seconds:.3f}" if self.absolute else f"{self.seconds:g} s"
+
+
+def time_bound(text: str) -> TimeBound:
+    """--start-time/--end-time: seconds after the first image, `unix:SECONDS`, or an ISO time."""
+    from datetime import datetime
+
+    if text.startswith("unix:"):
+        try:
+            return TimeBound(float(text[5:]), True)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(f"unix: needs seconds since 1970, got {text!r}") from exc
+    try:
+        return TimeBound(float(text))
+    except ValueError:
+        pass
+    try:
+        moment = datetime.fromisoformat(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"a time is seconds after the first image, unix:SECONDS or an ISO time "
+                                         f"(2026-06-01T10:31:05Z), got {text!r}") from exc
+    if moment.tzinfo is None:
+        raise argparse.ArgumentTypeError(f"say the time zone of {text!r} (Z for UTC, or +02:00)")
+    return TimeBound(moment.astimezone(UTC).timestamp(), True)
+
+
+EARLIEST, LATEST = TimeBound(-math.inf), TimeBound(math.inf)
+
+
 @dataclass(frozen=True)
 class MeasureJob:
     """One `measure` run over its inputs: what the command line asked for, checked; a batch gives each worker
@@ -43,8 +85,8 @@ class MeasureJob:
     targets: str
     settings: MeasurementSettings
     image_topic: str | None = None
-    start_time: float = -math.inf
-    end_time: float = math.inf
+    start_time: TimeBound = EARLIEST  # seconds after each bag's first image, unless absolute
+    end_time: TimeBound = LATEST
     video_step: int = 1
     csv: str | None = None
     overlay: str | None = None
@@ -64,10 +106,10 @@ class MeasureJob:
         if args.video_step < 1:
             raise CliError("--video-step must be 1 or more", EXIT_USAGE)
         for option, value in (("--start-time", args.start_time), ("--end-time", args.end_time)):
-            if math.isnan(value):
+            if math.isnan(value.seconds):
                 raise CliError(f"{option} must be a time in seconds, got nan", EXIT_USAGE)
-        if args.start_time > args.end_time:
-            raise CliError(f"--start-time {args.start_time:g} s lies after --end-time {args.end_time:g} s: no frame "
+        if args.start_time.absolute == args.end_time.absolute and args.start_time.seconds > args.end_time.seconds:
+            raise CliError(f"--start-time {args.start_time} lies after --end-time {args.end_time}: no frame "
                            "could be measured", EXIT_USAGE)
         try:
             settings = MeasurementSettings(threshold=args.threshold, object=args.object, channel=args.channel,
@@ -136,7 +178,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError(str(exc)) from exc
     videos = [f for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
     bags = [f for f in files if is_bag(f)]
-    if (math.isfinite(job.start_time) or math.isfinite(job.end_time)) and not bags:
+    if (math.isfinite(job.start_time.seconds) or math.isfinite(job.end_time.seconds)) and not bags:
         raise CliError("--start-time and --end-time pick bag frames by their header stamp; the inputs hold no bag",
                        EXIT_USAGE)
     if from_bag and len(bags) != len(files):
@@ -199,7 +241,18 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     log = RowLog(csv_path, CSV_COLUMNS, lambda row: not row["error"] and not _no_object(row)) \
         if csv_path is not None else None
     warned: dict[str, int] = {}
-    stamps: list[float] = []  # of the frames left out by the time range
+    stamps: list[tuple[float, float]] = []  # (stamp, since its bag's start) of the frames left out by the range
+    starts: dict[str, float] = {}
+
+    def run_start(name: str) -> float:
+        """The header stamp of the first image of the bag named `name` (once per bag)."""
+        if name not in starts:
+            from ..bags import bag_first_stamp
+
+            path = next(f for f in files if Path(f).name == name)
+            starts[name] = bag_first_stamp(path, job.image_topic) or 0.0
+        return starts[name]
+
     interrupted = False
     segment = None
     try:
@@ -217,8 +270,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                     measurer.start_segment()
             if frame.stamp is not None:
                 row["stamp_sec"], row["stamp_nanosec"] = frame.stamp
-                if not (job.start_time <= frame.time_s <= job.end_time):
-                    stamps.append(frame.time_s)
+                since = frame.time_s - run_start(frame.name.rsplit("#", 1)[0])
+                if not (job.start_time.at(frame.time_s, since) <= 0 <= job.end_time.at(frame.time_s, since)):
+                    stamps.append((frame.time_s, since))
                     continue
             try:
                 if frame.image is None:
@@ -294,9 +348,10 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     if measured == 0:
         reasons = sorted({r["error"] for r in rows})
         if not rows and stamps:  # every frame fell outside the time range
-            raise CliError(f"no frame measured: no frame is stamped between --start-time {job.start_time:g} s and "
-                           f"--end-time {job.end_time:g} s (the frames are stamped {min(stamps):.3f} to "
-                           f"{max(stamps):.3f} s)")
+            raise CliError(f"no frame measured: no frame lies between --start-time {job.start_time} and "
+                           f"--end-time {job.end_time} (the frames lie {min(s for _, s in stamps):.3f} to "
+                           f"{max(s for _, s in stamps):.3f} s after their bag's first image, stamped "
+                           f"{min(t for t, _ in stamps):.3f} to {max(t for t, _ in stamps):.3f} s)")
         raise CliError(f"no frame measured: {'; '.join(reasons)[:500] or 'the inputs hold no frame'}")
     if measured < len(rows):
         say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
@@ -342,11 +397,23 @@ def plot_series(rows: list[dict], csv_path: Path) -> Path:
     from ..report import plot_area_series
 
     nan = float("nan")
-    timed = all(r["time_s"] is not None for r in rows)
-    return plot_area_series([r["time_s"] if timed else k for k, r in enumerate(rows)],
-                            [r.get("area_m2", nan) for r in rows], [r.get("area_std_m2", nan) for r in rows],
-                            csv_path.with_suffix(".png"), title=f"Projected area, {csv_path.stem}",
-                            time_label="time [s]" if timed else "frame")
+    times, title, label = series_axis(rows, csv_path.stem)
+    return plot_area_series(times, [r.get("area_m2", nan) for r in rows], [r.get("area_std_m2", nan) for r in rows],
+                            csv_path.with_suffix(".png"), title=title, time_label=label)
+
+
+def series_axis(rows: list[dict], name: str) -> tuple[list[float], str, str]:
+    """The Af(t) plot's time axis: seconds since the first frame (a bag's stamps are seconds since 1970: its
+    start is said in the title as a date), or frame numbers where frames have no time."""
+    if not all(r["time_s"] is not None for r in rows):
+        return list(range(len(rows))), f"Projected area, {name}", "frame"
+    start = min(r["time_s"] for r in rows)
+    begun = ""
+    if any("stamp_sec" in r for r in rows):
+        from datetime import datetime
+
+        begun = f", from {datetime.fromtimestamp(start, UTC).isoformat(timespec='milliseconds')}"
+    return [r["time_s"] - start for r in rows], f"Projected area, {name}{begun}", "time since the first frame [s]"
 
 
 def csv_row(row: dict) -> dict:
