@@ -95,6 +95,19 @@ def test_vogel_command_on_an_experiment_table(tmp_path):
     result = json.loads(done.stdout)
     assert result["exponent"] == pytest.approx(-0.5, abs=1e-9) and result["runs"] == 6
     assert (tmp_path / "runs.vogel.png").stat().st_size > 1000
+    # each run's Cd and its std (from the optional std columns): in the text and --json; defaults in --help
+    table.write_text("velocity_m_s,force_n,area_m2,force_std_n,velocity_std_m_s,area_std_m2\n" + "".join(
+        f"{u},{f},{a},{0.02 * f},{0.01 * u},{0.03 * a}\n" for u, f, a in zip(velocity, force, area, strict=True)))
+    done = run_cli("vogel", str(table), "--json")
+    runs = json.loads(done.stdout)["per_run"]
+    assert [r["cd"] for r in runs] == pytest.approx(cd, rel=1e-9)
+    # Cd = 2F / (rho U² Af): relative std hypot(2 %, 2 x 1 %, 3 %); Cd·Af's without Af's
+    assert [r["cd_std"] / r["cd"] for r in runs] == pytest.approx([float(np.sqrt(0.02**2 + 0.02**2 + 0.03**2))] * 6, rel=1e-9)
+    assert [r["cd_area_std_m2"] / r["cd_area_m2"] for r in runs] == pytest.approx([np.hypot(0.02, 0.02)] * 6)
+    text = run_cli("vogel", str(table)).stdout
+    assert text.splitlines()[0].split() == ["run", "U", "[m/s]", "F", "[N]", "Af", "[m²]", "Cd"]
+    assert f"{cd[0]:7.4g} ± " in text
+    assert "(default 998.2: 20 °C)" in " ".join(run_cli("vogel", "--help").stdout.split())
     table.write_text("velocity_m_s,force_n\n0.1,1\n")
     bad = run_cli("vogel", str(table))
     assert bad.returncode == 1 and "needs columns" in bad.stderr

@@ -9,6 +9,7 @@ being filled is lost. Reading hands image messages over as zero-copy views (veg_
 
 from __future__ import annotations
 
+import statistics
 import struct
 import time
 import zlib
@@ -523,6 +524,7 @@ def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x",
     reader = _open_reader(path)
     store = typestore()
     samples: dict[str, list[float]] = {"force": [], "velocity": [], "area": []}
+    area_std: list[float] = []  # each Af's reported std (y)
     try:
         present = sorted({c.topic for c in reader.connections})
         connections = [c for c in reader.connections if c.topic in wanted]
@@ -535,6 +537,7 @@ def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x",
                 samples[name].append(component(message.twist.linear, velocity_axis))
             else:
                 samples[name].append(message.vector.x)
+                area_std.append(message.vector.y)
     except (AttributeError, KeyError) as exc:
         raise BagError(f"{path}: a topic has another message type than expected ({exc})") from exc
     finally:
@@ -542,9 +545,15 @@ def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x",
     missing = [topic for topic, name in wanted.items() if not samples[name]]
     if missing:
         raise BagError(f"{path}: no messages on {', '.join(missing)} (topics in the bag: {present})")
-    return {"run": str(path), "velocity_m_s": sum(samples["velocity"]) / len(samples["velocity"]),
-            "force_n": sum(samples["force"]) / len(samples["force"]),
-            "area_m2": sum(samples["area"]) / len(samples["area"]),
+
+    def error_of_mean(values: list[float]) -> float:  # the instrument's noise over the run, averaged away
+        return statistics.stdev(values) / len(values) ** 0.5 if len(values) > 1 else 0.0
+
+    # Af's std: the frames' reported std, not averaged down (its scale term is common to every frame)
+    return {"run": str(path), "velocity_m_s": statistics.fmean(samples["velocity"]),
+            "velocity_std_m_s": error_of_mean(samples["velocity"]),
+            "force_n": statistics.fmean(samples["force"]), "force_std_n": error_of_mean(samples["force"]),
+            "area_m2": statistics.fmean(samples["area"]), "area_std_m2": statistics.fmean(area_std),
             "samples": {name: len(values) for name, values in samples.items()}}
 
 

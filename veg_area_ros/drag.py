@@ -183,6 +183,12 @@ def vogel_fit(velocity, cd_area, confidence: float = 0.95) -> VogelFit:
 
 def read_runs(path: str | Path, density: float = WATER_DENSITY) -> tuple[np.ndarray, np.ndarray]:
     """Experiment table (CSV with columns velocity_m_s, force_n, area_m2; one row per run) -> (U, Cd·Af)."""
+    return runs_to_vogel(read_table(path), density, str(path))
+
+
+def read_table(path: str | Path) -> list[dict]:
+    """An experiment table's rows (CSV with columns velocity_m_s, force_n, area_m2; optional run, density and
+    the std columns of `run_table`), checked for its columns."""
     path = Path(path)
     try:
         with path.open(newline="", encoding="utf-8-sig") as handle:
@@ -195,32 +201,58 @@ def read_runs(path: str | Path, density: float = WATER_DENSITY) -> tuple[np.ndar
     if not rows or not needed <= set(rows[0]):
         has = f"it has {', '.join(repr(c) for c in rows[0])}" if rows else "it has no data row"
         raise DragError(f"{path}: needs columns {', '.join(sorted(needed))}; {has}")
-    return runs_to_vogel(rows, density, str(path))
+    return rows
 
 
 def runs_to_vogel(rows: list[dict], density: float = WATER_DENSITY, source: str = "runs") -> tuple[np.ndarray,
                                                                                                       np.ndarray]:
     """Runs (velocity_m_s, force_n, area_m2 and optionally density each) -> (U, Cd·Af)."""
-    u, cd_area = [], []
+    table = run_table(rows, density, source)
+    return np.array([r["velocity_m_s"] for r in table]), np.array([r["cd_area_m2"] for r in table])
+
+
+def run_table(rows: list[dict], density: float = WATER_DENSITY, source: str = "runs") -> list[dict]:
+    """Each run's U, F, Af, Cd and Cd·Af with their standard deviations (the optional columns velocity_std_m_s,
+    force_std_n, area_std_m2; zero where absent). Cd·Af = 2F / (rho U²) needs no Af: its std comes from F and U
+    alone; Cd's adds Af's."""
+    table = []
     for line, row in enumerate(rows, 2):
         try:
-            cd, _ = drag_coefficient(float(row["force_n"]), float(row["velocity_m_s"]), float(row["area_m2"]),
-                                     float(row.get("density") or density))
+            values = {key: float(row.get(key) or 0.0) for key in ("velocity_m_s", "force_n", "area_m2",
+                                                                 "velocity_std_m_s", "force_std_n", "area_std_m2")}
+            rho = float(row.get("density") or density)
+            cd, cd_std = drag_coefficient(values["force_n"], values["velocity_m_s"], values["area_m2"], rho,
+                                          values["force_std_n"], values["velocity_std_m_s"], values["area_std_m2"])
+            _, cd_area_relative = drag_coefficient(values["force_n"], values["velocity_m_s"], values["area_m2"], rho,
+                                                   values["force_std_n"], values["velocity_std_m_s"])
         except (ValueError, DragError) as exc:
             raise DragError(f"{source}, line {line}: {exc}") from exc
-        u.append(float(row["velocity_m_s"]))
-        cd_area.append(cd * float(row["area_m2"]))
-    return np.array(u), np.array(cd_area)
+        table.append({"run": str(row.get("run") or line - 1), **values, "density": rho, "cd": cd, "cd_std": cd_std,
+                      "cd_area_m2": cd * values["area_m2"],
+                      "cd_area_std_m2": cd_area_relative * values["area_m2"]})
+    return table
 
 
-def plot_vogel(velocity, cd_area, fit: VogelFit, path: str | Path) -> None:
+def format_run_table(table: list[dict]) -> str:
+    """The runs as a text table (U, F, Af, Cd with their std)."""
+    lines = [f"{'run':>12} {'U [m/s]':>16} {'F [N]':>18} {'Af [m²]':>22} {'Cd':>16}"]
+    for r in table:
+        lines.append(f"{Path(r['run']).name[-12:]:>12} {r['velocity_m_s']:8.4g} ± {r['velocity_std_m_s']:<5.2g} "
+                     f"{r['force_n']:9.4g} ± {r['force_std_n']:<6.2g} {r['area_m2']:11.4g} ± {r['area_std_m2']:<8.2g} "
+                     f"{r['cd']:7.4g} ± {r['cd_std']:<6.2g}")
+    return "\n".join(lines)
+
+
+def plot_vogel(velocity, cd_area, fit: VogelFit, path: str | Path, cd_area_std=None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     figure, axes = plt.subplots(figsize=(5, 4))
-    axes.loglog(velocity, cd_area, "o", label="runs")
+    axes.set_xscale("log")
+    axes.set_yscale("log")
+    axes.errorbar(velocity, cd_area, yerr=cd_area_std, fmt="o", capsize=3, label="runs (±1 std)")
     u = np.geomspace(np.min(velocity), np.max(velocity), 50)
     low, high = fit.interval
     axes.loglog(u, fit.coefficient * u**fit.exponent, "-",

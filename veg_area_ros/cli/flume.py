@@ -18,13 +18,20 @@ def add_parser(sub) -> None:
                      help="a CSV with velocity_m_s, force_n, area_m2 (optional density) per run, or rosbag2 bags "
                           "recorded with force, velocity and projected_area, one run each")
     vog.add_argument("--force-axis", default="+x",
-                     help="bags: force component along the flow, +x .. -z (a minus sign: --force-axis=-y)")
-    vog.add_argument("--velocity-axis", default="+x", help="bags: velocity component along the flow")
-    vog.add_argument("--force-topic", default="/force", help="bags: geometry_msgs/WrenchStamped topic")
-    vog.add_argument("--velocity-topic", default="/velocity", help="bags: geometry_msgs/TwistStamped topic")
-    vog.add_argument("--area-topic", default="/projected_area", help="bags: Af topic (Vector3Stamped, x = Af)")
-    vog.add_argument("--density", type=positive_float, default=998.2, help="water density, kg/m³")
-    vog.add_argument("--confidence", type=float, default=0.95)
+                     help="bags: force component along the flow, +x .. -z (a minus sign: --force-axis=-y; "
+                          "default %(default)s)")
+    vog.add_argument("--velocity-axis", default="+x",
+                     help="bags: velocity component along the flow (default %(default)s)")
+    vog.add_argument("--force-topic", default="/force",
+                     help="bags: geometry_msgs/WrenchStamped topic (default %(default)s)")
+    vog.add_argument("--velocity-topic", default="/velocity",
+                     help="bags: geometry_msgs/TwistStamped topic (default %(default)s)")
+    vog.add_argument("--area-topic", default="/projected_area",
+                     help="bags: Af topic (Vector3Stamped, x = Af, y = its std; default %(default)s)")
+    vog.add_argument("--density", type=positive_float, default=998.2,
+                     help="water density, kg/m³, where a table row gives none (default %(default)s: 20 °C)")
+    vog.add_argument("--confidence", type=float, default=0.95,
+                     help="of the exponent's interval (default %(default)s)")
     vog.add_argument("--plot", help="PNG (default: the first input's name + .vogel.png)")
     vog.add_argument("--json", action="store_true")
     vog.set_defaults(func=cmd_vogel)
@@ -33,7 +40,7 @@ def add_parser(sub) -> None:
 
 def cmd_vogel(args: argparse.Namespace) -> int:
     from ..bags import BagError, bag_run
-    from ..drag import DragError, plot_vogel, read_runs, runs_to_vogel, vogel_fit
+    from ..drag import DragError, format_run_table, plot_vogel, read_table, run_table, vogel_fit
     from ..frames import is_bag
 
     bags = [Path(i) for i in args.inputs if is_bag(Path(i))]
@@ -51,20 +58,24 @@ def cmd_vogel(args: argparse.Namespace) -> int:
                       f"Af = {run['area_m2']:.4g} m² ({run['samples']['force']} force, "
                       f"{run['samples']['velocity']} velocity, {run['samples']['area']} Af samples)",
                       file=sys.stderr)
-            velocity, cd_area = runs_to_vogel(runs, args.density, "bags")
+            table = run_table(runs, args.density, "bags")
         else:
-            velocity, cd_area = read_runs(args.inputs[0], args.density)
+            table = run_table(read_table(args.inputs[0]), args.density, args.inputs[0])
+        velocity = [r["velocity_m_s"] for r in table]
+        cd_area = [r["cd_area_m2"] for r in table]
         fit = vogel_fit(velocity, cd_area, args.confidence)
     except (DragError, BagError) as exc:
         raise CliError(str(exc)) from exc
     plot.parent.mkdir(parents=True, exist_ok=True)
-    plot_vogel(velocity, cd_area, fit, plot)
+    plot_vogel(velocity, cd_area, fit, plot, [r["cd_area_std_m2"] for r in table])
     result = {"exponent": fit.exponent, "interval": list(fit.interval), "confidence": fit.confidence,
-              "coefficient_m2": fit.coefficient, "r_squared": fit.r_squared, "runs": fit.runs, "plot": str(plot)}
+              "coefficient_m2": fit.coefficient, "r_squared": fit.r_squared, "runs": fit.runs, "plot": str(plot),
+              "density_kg_m3": args.density, "per_run": table}
     if args.json:
         print(json.dumps(result))
     else:
         low, high = fit.interval
+        print(format_run_table(table))
         print(f"Vogel exponent psi = {fit.exponent:.4f}, {fit.confidence:.0%} interval [{low:.4f}, {high:.4f}] "
               f"({fit.runs} runs, R² {fit.r_squared:.4f}); Cd·Af = {fit.coefficient:.4g} m² x U^psi")
         print(f"plot: {plot}")
