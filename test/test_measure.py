@@ -116,6 +116,9 @@ def test_batch_over_several_videos_on_all_cores(workspace, tmp_path):
         assert row["csv"] == str(batch_csv)
         assert [float(r["area_m2"]) for r in csv.DictReader(batch_csv.open())] == expected
         assert float(row["mean_area_m2"]) == pytest.approx(np.mean(expected), rel=1e-12)
+        # the mean's uncertainty (the frames' shared terms once) beside the frames' spread, each named as such
+        assert float(row["frame_spread_m2"]) == pytest.approx(np.std(expected, ddof=1), rel=1e-9)
+        assert float(row["mean_area_std_m2"]) > float(row["frame_spread_m2"]) / np.sqrt(3)
         assert cv2.imread(str(batch_csv.with_suffix(".png"))) is not None
         assert abs(float(row["mean_area_m2"]) / SCENE.true_area_m2 - 1) <= 0.01  # every distance: the true Af
     as_json = run_cli("measure", *map(str, videos[:2]), *common, "--jobs", "2", "--json", "--output-dir",

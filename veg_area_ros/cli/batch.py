@@ -9,7 +9,6 @@ import multiprocessing
 import os
 import queue
 import signal
-import statistics
 import threading
 import time
 import traceback
@@ -17,6 +16,7 @@ from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecu
 from dataclasses import replace
 from pathlib import Path
 
+from ..series import series_summary
 from .common import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
@@ -30,7 +30,9 @@ from .common import (
 )
 from .measure_job import MeasureJob, frames_lost, measure
 
-BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "std_area_m2", "warnings", "csv", "error")
+# mean_area_std_m2: the uncertainty of the mean Af; frame_spread_m2: the frames' standard deviation (series.py)
+BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "mean_area_std_m2", "frame_spread_m2", "warnings",
+                 "not_measured", "csv", "error")
 PROGRESS_EVERY_S = 2.0
 
 
@@ -49,17 +51,8 @@ def _ignore_ctrl_c() -> None:
 
 def _summary(source: str, csv_path: str, error: str = "") -> dict:
     """One input's row of batch_summary.csv before anything was measured."""
-    return {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "std_area_m2": "", "warnings": "",
-            "csv": csv_path, "error": error}
-
-
-def warning_counts(rows: list[dict]) -> str:
-    """How many frames carried each kind of warning ('clipped highlights: 12 frames | ...')."""
-    kinds: dict[str, int] = {}
-    for row in rows:
-        for kind in {w.split(":", 1)[0] for w in row.get("warnings", [])}:
-            kinds[kind] = kinds.get(kind, 0) + 1
-    return " | ".join(f"{kind}: {count} frame{'s' if count > 1 else ''}" for kind, count in sorted(kinds.items()))
+    return {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "mean_area_std_m2": "",
+            "frame_spread_m2": "", "warnings": "", "not_measured": "", "csv": csv_path, "error": error}
 
 
 def _measure_one(job: MeasureJob, position: int, progress_queue, stopping) -> dict:
@@ -80,11 +73,10 @@ def input_summary(source: str, csv_path: str, code: int, rows: list[dict]) -> di
         summary["error"] = f"interrupted after {len(rows)} frames"
     elif code == EXIT_FAILED:
         summary["error"] = frames_lost(rows) or "no object found in any frame"
-    areas = [r["area_m2"] for r in rows if not r["error"] and "area_m2" in r]
-    summary.update(frames=len(rows), measured=len(areas), warnings=warning_counts(rows))
-    if areas:
-        summary["mean_area_m2"] = statistics.fmean(areas)
-        summary["std_area_m2"] = statistics.stdev(areas) if len(areas) > 1 else 0.0
+    series = series_summary(rows)
+    summary.update({key: series[key] for key in ("frames", "measured", "warnings", "not_measured")})
+    if series["measured"]:
+        summary.update({key: series[key] for key in ("mean_area_m2", "mean_area_std_m2", "frame_spread_m2")})
     return summary
 
 
@@ -135,8 +127,9 @@ def finish_batch(job: MeasureJob, folder: Path, rows: list[dict], interrupted: b
         if job.json:  # one object per input (the frames are in its CSV)
             print(json.dumps(row), flush=True)
             continue
-        mean = f"Af = {row['mean_area_m2']:.6g} m² (sd {row['std_area_m2']:.2g}) over {row['measured']} frames" \
-            if row["measured"] else f"not measured: {row['error'] or 'no frame measured'}"
+        mean = (f"Af = {row['mean_area_m2']:.6g} ± {row['mean_area_std_m2']:.2g} m² (mean of {row['measured']} of "
+                f"{row['frames']} frames and its uncertainty; frame-to-frame sd {row['frame_spread_m2']:.2g} m²)"
+                if row["measured"] else f"not measured: {row['error'] or 'no frame measured'}")
         print(f"{row['input']}: {mean}", flush=True)
     say(f"batch summary: {summary_path}")
     if interrupted:

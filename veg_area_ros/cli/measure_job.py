@@ -355,6 +355,10 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError(f"no frame measured: {'; '.join(reasons)[:500] or 'the inputs hold no frame'}")
     if measured < len(rows):
         say(f"{len(rows) - measured} of {len(rows)} frames not measured (see 'error')")
+    if not part and len(rows) > 1:  # the run as a whole: its mean and that mean's uncertainty
+        from ..series import series_summary, summary_line
+
+        say(summary_line(series_summary(rows)))
     if no_object_anywhere(rows):
         where = "the frame" if measured == 1 else f"any of the {measured} frames"
         print(f"veg-area measure: no object found in {where} measured (see the warnings); check the threshold, "
