@@ -209,3 +209,23 @@ def test_an_image_declaring_an_absurd_size_is_skipped_before_decoding(tmp_path, 
     alone = run_cli("calibrate", str(folder / "zz_bomb.png"), "--board", BOARD, "-o", str(tmp_path / "d.yaml"))
     assert_clean_failure(alone, 1, "no readable image")
     assert time.perf_counter() - started < 120
+
+
+def test_a_video_cycling_through_its_poses_gives_every_pose_and_short_progress(tmp_path, air_views):
+    """A camera cycling through 15 poses, one per frame, for 420 frames: the default step (7, for about 60
+    views) aligned with the cycle kept only the poses at multiples of 7 mod 15 in a fixed phase; one frame from
+    each run of 7 at a varying place gives all 15. The 420 frames get a line each only at first, then one every
+    2 s, and the repeats are counted apart from rejections."""
+    video = tmp_path / "cycle.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30, (640, 480))
+    frames = [cv2.cvtColor(image, cv2.COLOR_GRAY2BGR) for image in air_views[2]]
+    for k in range(420):
+        writer.write(frames[k % 15])
+    writer.release()
+    result = run_cli("calibrate", str(video), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))
+    assert result.returncode == 0, result.stderr
+    lines = result.stderr.splitlines()
+    assert sum(1 for line in lines if line.startswith("[")) < 60, len(lines)
+    assert "60 frames: 60 views, 0 without a board, 0 repeats of the pose before" in result.stderr
+    summary = next(line for line in result.stdout.splitlines() if line.startswith("views used"))
+    assert summary.startswith("views used 15, repeats counted once 45, rejected 0;"), summary

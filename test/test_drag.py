@@ -102,7 +102,8 @@ def test_vogel_command_on_an_experiment_table(tmp_path):
     runs = json.loads(done.stdout)["per_run"]
     assert [r["cd"] for r in runs] == pytest.approx(cd, rel=1e-9)
     # Cd = 2F / (rho U² Af): relative std hypot(2 %, 2 x 1 %, 3 %); Cd·Af's without Af's
-    assert [r["cd_std"] / r["cd"] for r in runs] == pytest.approx([float(np.sqrt(0.02**2 + 0.02**2 + 0.03**2))] * 6, rel=1e-9)
+    expected = float(np.sqrt(0.02**2 + 0.02**2 + 0.03**2))
+    assert [r["cd_std"] / r["cd"] for r in runs] == pytest.approx([expected] * 6, rel=1e-9)
     assert [r["cd_area_std_m2"] / r["cd_area_m2"] for r in runs] == pytest.approx([np.hypot(0.02, 0.02)] * 6)
     text = run_cli("vogel", str(table)).stdout
     assert text.splitlines()[0].split() == ["run", "U", "[m/s]", "F", "[N]", "Af", "[m²]", "Cd"]

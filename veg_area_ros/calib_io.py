@@ -243,8 +243,8 @@ def camera_info_url_to_path(url: str) -> Path | None:
     return path
 
 
-FIT_KEYS = ("rms_px", "mean_px", "max_residual_px", "sigma0_px", "views_used", "views_rejected", "std",
-            "std_covariance", "std_views", "coverage", "warnings", "reach_px")
+FIT_KEYS = ("rms_px", "mean_px", "max_residual_px", "sigma0_px", "views_used", "views_rejected", "views_repeated",
+            "std", "std_covariance", "std_views", "coverage", "warnings", "reach_px")
 
 
 def provenance(producer: str) -> dict[str, str]:

@@ -38,6 +38,7 @@ RING_MIN_POINTS = 30
 SYSTEMATIC_PX = 0.05  # and 5 standard errors: synthetic and real cameras the model fits stay below 0.01 px
 RADIAL = {"k1", "k2", "k3", "k4", "k5", "k6"}  # a radial polynomial's terms always go together
 MAX_REJECTION_ROUNDS = 5
+REPEAT_REASON = "the same view as"  # how a repeat's entry in rejected_views begins
 INIT_VIEWS = 40  # views OpenCV's initial estimate is made from (all of a smaller set)
 
 
@@ -98,6 +99,11 @@ class CalibrationResult:
     def views_used(self) -> int:
         return len(self.views)
 
+    @property
+    def rejected(self) -> dict[str, str]:
+        """The views left out for what they showed (outliers), not the repeats of a view already counted."""
+        return {name: why for name, why in self.rejected_views.items() if not why.startswith(REPEAT_REASON)}
+
     def summary(self) -> dict:
         """Plain numbers for JSON: the CLI's --json output and the calibration file's metadata."""
         cam = self.camera
@@ -113,8 +119,9 @@ class CalibrationResult:
             "opencv_rms_px": self.opencv_rms_px,
             "opencv_rms_views": self.opencv_rms_views,
             "views_used": self.views_used,
-            "views_rejected": len(self.rejected_views),
-            "rejected": dict(self.rejected_views),
+            "views_rejected": len(self.rejected),
+            "views_repeated": len(self.rejected_views) - len(self.rejected),
+            "rejected": dict(self.rejected),
             "points_rejected": int(sum(v.rejected_points for v in self.views)),
             "image_width": cam.width,
             "image_height": cam.height,
@@ -568,7 +575,7 @@ def distinct_views(views: Sequence[View]) -> tuple[list[View], dict[str, str]]:
                 moved[k] = float(np.mean(np.hypot(*(pixels[mine] - earlier.image_points.reshape(-1, 2)[theirs]).T)))
         first = next((k for k in near_views if moved.get(k, math.inf) < SAME_VIEW_PX), None)
         if first is not None:
-            repeated[view.name] = (f"the same view as {kept[first].name} (its corners {moved[first]:.3f} px apart "
+            repeated[view.name] = (f"{REPEAT_REASON} {kept[first].name} (its corners {moved[first]:.3f} px apart "
                                    "on average): counted once")
             continue
         by_ids.setdefault(ids.tobytes(), {})[len(kept)] = pixels

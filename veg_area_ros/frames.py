@@ -221,9 +221,12 @@ def video_frame_count(path: Path) -> int:
         capture.release()
 
 
-def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = None) -> Iterator[Frame]:
+def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = None,
+               spread: bool = False) -> Iterator[Frame]:
     """Every `step`-th frame of a video (indices counted from its first frame), from index `start` up to
-    `stop` (exclusive): a range of a long video for one worker."""
+    `stop` (exclusive): a range of a long video for one worker. `spread`: one frame in each run of `step`, at a
+    place that varies from run to run (`spread_offset`), so that a motion repeating every few frames (a
+    camera's pose cycle) is not sampled at the same phase every time."""
     capture = cv2.VideoCapture(str(path))
     if not capture.isOpened():
         yield Frame(path.name, None, "is not a video OpenCV can open")
@@ -238,7 +241,7 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
                           and int(capture.get(cv2.CAP_PROP_POS_FRAMES)) == start):
             index = declared  # cannot be sought to: said below as frames that could not be read
         while index < declared or stop is None:
-            if index % step == 0:
+            if index % step == (spread_offset(index // step, step) if spread else 0):
                 ok, image = capture.read()
                 if not ok:
                     break
@@ -292,8 +295,15 @@ def _bag_frame(path: Path, frame) -> Frame:
                  frame.camera_info, position=frame.index, camera_info_problem=frame.camera_info_problem)
 
 
+def spread_offset(window: int, step: int) -> int:
+    """Where in the `window`-th run of `step` frames the frame is taken: the high bits of Knuth's 32-bit
+    multiplicative hash (its low bits repeat with short periods), the same for every run of the program."""
+    return ((window * 2654435761) % 2**32 >> 16) % step
+
+
 def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: str | None = None,
-                frame_range: tuple[int, int] | None = None, grey: bool = False) -> Iterator[Frame]:
+                frame_range: tuple[int, int] | None = None, grey: bool = False,
+                spread: bool = False) -> Iterator[Frame]:
     """Every frame of the inputs; unreadable ones come with image None and the reason. `frame_range`
     (start, stop): only those frames of a video or bag (one input). `grey`: every image in one channel (what
     a board's detection looks at; an image file is then decoded without its colour)."""
@@ -303,7 +313,7 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
         if is_bag(path):
             yield from _greyed(iter_bag(path, image_topic, start, stop), grey)
         elif suffix in VIDEO_SUFFIXES:
-            yield from _greyed(iter_video(path, video_step, start, stop), grey)
+            yield from _greyed(iter_video(path, video_step, start, stop, spread), grey)
         elif suffix in IMAGE_SUFFIXES:
             image, problem = read_image(path, grey)
             yield Frame(path.name, image, problem)

@@ -38,8 +38,10 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
     norms = np.hypot(residuals[:, 0], residuals[:, 1])
     scale = 0.05 * width / max(np.percentile(norms, 95), 1e-9)  # the longest usual arrow ~5 % of the width
     fig, ax = plt.subplots(figsize=(8, 6.5))
-    ax.quiver(points[inliers, 0], points[inliers, 1], residuals[inliers, 0] * scale, residuals[inliers, 1] * scale,
-              norms[inliers], angles="xy", scale_units="xy", scale=1, cmap="viridis", width=0.002)
+    arrows = ax.quiver(points[inliers, 0], points[inliers, 1], residuals[inliers, 0] * scale,
+                       residuals[inliers, 1] * scale, norms[inliers], angles="xy", scale_units="xy", scale=1,
+                       cmap="viridis", width=0.002)
+    fig.colorbar(arrows, ax=ax, shrink=0.8, label="residual length [px]")
     if (~inliers).any():
         ax.scatter(points[~inliers, 0], points[~inliers, 1], marker="x", color="red", label="rejected outliers")
         ax.legend(loc="upper right")
@@ -121,13 +123,13 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
         plt.close(fig)
 
     if guide is not None:
-        written.append(plot_variety(guide, folder / "variety.png"))
+        written.append(plot_variety(guide, folder / "variety.png", result.views_used))
     written.append(folder / "calibration.json")
     written[-1].write_text(json.dumps(result.summary(), indent=2))
     return written
 
 
-def plot_variety(guide, path: str | Path) -> Path:
+def plot_variety(guide, path: str | Path, distinct: int | None = None) -> Path:
     """The variety bars of the views (as the calibration node's feedback shows them) and what is still needed."""
     from .feedback import bar_rows
 
@@ -141,7 +143,9 @@ def plot_variety(guide, path: str | Path) -> Path:
     ax.set_xlim(0, 1)
     ax.set_xlabel("share of the variety each parameter needs")
     needed = guide.still_needed()
-    ax.set_title(f"{len(guide.kept)} views; " + (f"still needed: {needed}" if needed else "variety enough"),
+    views = (f"{len(guide.kept)} views" if distinct is None or distinct == len(guide.kept)
+             else f"{distinct} distinct views ({len(guide.kept)} looked at, the others repeats)")
+    ax.set_title(f"{views}; " + (f"still needed: {needed}" if needed else "variety enough"),
                  fontsize=10)
     path = Path(path)
     fig.savefig(path, dpi=110, bbox_inches="tight")

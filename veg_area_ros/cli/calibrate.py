@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,6 +14,10 @@ from .common import EXIT_REFUSED, EXIT_USAGE, CliError, check_outputs, check_wri
 
 VIEWS_PER_VIDEO = 60  # consecutive frames add little but time
 DETECT_WORKERS = 2  # board searches at once: the two cores of a lab PC (OpenCV runs them without the GIL)
+
+
+FRAME_LINES = 30  # frames with a line each; then one line every PROGRESS_EVERY_S
+PROGRESS_EVERY_S = 2.0
 
 
 def add_parser(sub) -> None:
@@ -39,7 +44,8 @@ def add_parser(sub) -> None:
                      help="reject points beyond this many robust standard deviations")
     cal.add_argument("--no-outlier-rejection", action="store_true")
     cal.add_argument("--video-step", type=int, default=0,
-                     help=f"use every Nth video frame (0: about {VIEWS_PER_VIDEO} per video)")
+                     help=f"use every Nth video frame (0: about {VIEWS_PER_VIDEO} per video, one from each run of "
+                          "frames at a varying place, so no pose cycle of the camera is sampled at one phase)")
     cal.add_argument("--replace", "--force", dest="replace", action="store_true",
                      help="write the output even where the calibration it holds is judged better (by projection "
                           "uncertainty, views and coverage, not RMS: fewer views always fit with a lower RMS)")
@@ -70,10 +76,12 @@ class BoardViews:
 
 
 def collect_views(files: list[Path], board, step: int, say, image_size: tuple[int, int] | None = None,
-                  size_source: str = "the first image") -> BoardViews:
-    """Detect the board in every frame (every `step`th of a video), with a progress line per frame. Frames of
-    another size than `image_size` (default: the first readable frame's) are skipped; in a video, a pose held
-    still over several frames counts once."""
+                  size_source: str = "the first image", spread: bool = False) -> BoardViews:
+    """Detect the board in every frame (every `step`th of a video; `spread`: one in each run of `step` at a
+    varying place, see frames.iter_video), with a progress line per frame for the first FRAME_LINES frames and
+    then one every PROGRESS_EVERY_S (a frame that could not be read or has another size is always said).
+    Frames of another size than `image_size` (default: the first readable frame's) are skipped; in a video, a
+    pose held still over several frames counts once."""
     from ..calibration import View, same_pose
     from ..frames import decodable_ahead, iter_frames
     from ..guidance import CalibrationGuide, view_stats
@@ -81,6 +89,15 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
 
     found = BoardViews(image_size=image_size)
     last_kept: dict[str, object] = {}  # per video: the last view kept
+    said_at = [-math.inf]
+
+    def frame_line(seen: int, text: str) -> None:
+        if seen <= FRAME_LINES:
+            say(text)
+        elif time.monotonic() - said_at[0] >= PROGRESS_EVERY_S:
+            said_at[0] = time.monotonic()
+            say(f"[{seen}] {len(found.views)} views so far, {len(found.no_board)} frames without a board, "
+                f"{len(found.repeated)} repeats; {text.split('] ', 1)[-1]}")
 
     def detect(frame):
         """The board, and the numbers the guidance judges the view by (on the worker, beside the search)."""
@@ -91,7 +108,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
 
     # frames searched by two threads (OpenCV releases Python's lock), judged here in their order; a video's
     # frames also decoded in a thread of their own
-    frames = iter_frames(files, step, grey=True)  # the board is found in grey: colour would only cost time
+    frames = iter_frames(files, step, grey=True, spread=spread)  # the board is found in grey: colour costs time
     if decodable_ahead(files):
         frames = prefetched(frames, depth=2 * DETECT_WORKERS)
     for frame, (detection, stats) in ordered_map(detect, frames, workers=DETECT_WORKERS):
@@ -111,13 +128,13 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
             continue
         if detection is None:
             found.no_board.append(frame.name)
-            say(f"[{seen}] {frame.name}: no {board.kind} board found")
+            frame_line(seen, f"[{seen}] {frame.name}: no {board.kind} board found")
             continue
         if frame.time_s is not None:  # a video frame: the board held still for a while is one view, not many
             video = frame.name.rsplit("#", 1)[0]
             if video in last_kept and same_pose(detection, last_kept[video], found.image_size):
                 found.repeated.append(frame.name)
-                say(f"[{seen}] {frame.name}: same pose as the view before it, counted once")
+                frame_line(seen, f"[{seen}] {frame.name}: same pose as the view before it, counted once")
                 continue
             last_kept[video] = detection
         found.views.append(View(frame.name, detection))
@@ -125,7 +142,10 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
             found.guide = CalibrationGuide(board, found.image_size)
         verdict = found.guide.offer(detection, frame.image, keep=True, stats=stats)  # the user chose them: advice
         advice = f" ({verdict.reason})" if not verdict.kept and verdict.kind != "similar" else ""
-        say(f"[{seen}] {frame.name}: {len(detection)} board points{advice}")
+        frame_line(seen, f"[{seen}] {frame.name}: {len(detection)} board points{advice}")
+    if found.seen > FRAME_LINES:
+        say(f"{found.seen} frames: {len(found.views)} views, {len(found.no_board)} without a board, "
+            f"{len(found.repeated)} repeats of the pose before")
     if found.guide is not None:
         needed = found.guide.still_needed()
         say(f"still needed: {needed}" if needed else "variety of the views: enough for every parameter")
@@ -178,7 +198,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if step <= 0:
         counts = [video_frame_count(f) for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
         step = max(1, max(counts, default=0) // VIEWS_PER_VIDEO)
-    found = collect_views(files, board, step, say)
+    found = collect_views(files, board, step, say, spread=args.video_step <= 0)
 
     if args.medium == "unspecified":
         say("warning: --medium not given: the calibration is recorded with medium 'unspecified' (say air or water: "
@@ -286,7 +306,8 @@ def format_calibration(result, output: Path) -> str:
     """The fit's quality indicators and parameters with their three uncertainties, as a table."""
     cam, std = result.camera, result.std
     lines = [f"calibration written to {output}",
-             f"views used {result.views_used}, rejected {len(result.rejected_views)}; "
+             f"views used {result.views_used}, repeats counted once "
+             f"{len(result.rejected_views) - len(result.rejected)}, rejected {len(result.rejected)}; "
              f"RMS {result.rms_px:.4f} px, mean {result.mean_px:.4f} px, max {result.max_residual_px:.4f} px",
              f"model {cam.model}" + (f": {result.model_choice['reason']}" if result.model_choice else ""),
              f"{'param':>6} {'value':>14} {'std':>12} {'(covariance':>12} {'views)':>10}"]

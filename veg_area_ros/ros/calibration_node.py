@@ -24,7 +24,7 @@ from ..calib_io import (
     read_calibration,
     write_calibration,
 )
-from ..calibration import CalibrationError, View, calibrate
+from ..calibration import CalibrationError, View, calibrate, coverage_grid
 from ..camera_model import MODELS, BrownCamera
 from ..cdr import decode_image
 from ..feedback import FitView, fit_reach, render_feedback
@@ -157,7 +157,7 @@ class CalibrationNode(Node):
             if verdict.kept:
                 self.views.append(View(f"frame{self.frames_seen}", detection))
                 self._report(f"view {len(self.views)} kept ({len(detection)} points, coverage "
-                             f"{self.guide.covered.mean():.0%})")
+                             f"{self._coverage():.0%} of an 8x6 grid)")
             elif verdict.kind != "similar":
                 self._report(f"view rejected: {verdict.reason}")
         if watched:
@@ -169,13 +169,20 @@ class CalibrationNode(Node):
         if verdict is not None and verdict.kept and self.auto_calibrate and self.guide.enough():
             self._fit()
 
+    def _coverage(self) -> float:
+        """The kept views' share of an 8x6 grid over the image: the figure the fit and its file report."""
+        if self.image_size is None or not self.views:
+            return 0.0
+        return float(coverage_grid([v.detection.image_points.reshape(-1, 2) for v in self.views],
+                                   *self.image_size, 8, 6).mean())
+
     def _report(self, text: str, **extra) -> None:
         self.get_logger().info(text)
         guide = self.guide.summary() if self.guide is not None else {}
         state = {"views_kept": len(self.views), "frames_seen": self.frames_seen,
                  "frames_looked": self.frames_looked, "frames_skipped": self.frames_skipped,
                  "feedback_published": self.feedback_published,
-                 "coverage": float(self.guide.covered.mean()) if self.guide is not None else 0.0,
+                 "coverage": self._coverage(),
                  "fitted": self.fitted, "rms_px": None if math.isinf(self.rms) else self.rms, "message": text,
                  **{k: v for k, v in guide.items() if k != "views_kept"}, **extra}
         publish_safely(self, self.progress_pub, String(data=json.dumps(state)))
