@@ -29,6 +29,15 @@ def shared(relative: str) -> Path:
     return path
 
 
+def children_cpu_seconds() -> float:
+    """CPU seconds (user + system) of every child process this one has waited for: what a command cost, which a
+    busy machine does not stretch as it stretches wall time."""
+    import resource
+
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def run_cli(*args: str, cwd: Path | None = None):
     """Run `veg-area` from the working tree as a user would run it; returns the CompletedProcess."""
     import subprocess

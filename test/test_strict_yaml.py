@@ -20,10 +20,10 @@ BOMB = "".join(f"l{k}: &l{k} [" + ",".join([f"*l{k - 1}"] * 10 if k else ["x"] *
 def test_an_alias_bomb_is_refused_at_once(tmp_path, reader, error):
     path = tmp_path / "bomb.yaml"
     path.write_text(BOMB)
-    started = time.perf_counter()
+    started = time.process_time()  # CPU time: a busy machine does not stretch it
     with pytest.raises(error, match=r"bomb.yaml: aliases \(\*l0\) are not allowed, at line 2"):
         reader(path)
-    assert time.perf_counter() - started < 2
+    assert time.process_time() - started < 2
 
 
 def test_a_calibration_with_a_key_twice_is_refused(tmp_path):
