@@ -56,6 +56,10 @@ MEASURE = ("measure", "--calibration", "cal.yaml", "--targets", "targets.yaml")
     ("--idealized", "frames", "frames"),
     ("--overlay", "frames/overlay.png", "frames"),
     ("--csv", "link.csv", "scene.png"),  # a symlink to the input: the same file by inode
+    # the folder holding the input: each frame's overlay or idealized image is named after its input
+    ("--overlay", ".", "scene.png"),
+    ("--idealized", ".", "scene.png"),
+    ("--overlay", "frames", "frames/f1.png"),
 ])
 def test_an_output_over_an_input_is_refused_before_any_work(workspace, option, value, input_):
     link = workspace / "link.csv"
@@ -69,6 +73,19 @@ def test_an_output_over_an_input_is_refused_before_any_work(workspace, option, v
     assert children_cpu_seconds() - started < 30  # CPU seconds: refused before the work
     after = {p: p.read_bytes() for p in workspace.rglob("*") if p.is_file() and not p.is_symlink()}
     assert after == before
+
+
+@pytest.mark.parametrize("options, said", [
+    (("--background", "scene.png", "--csv", "scene.csv"), "--csv: its plot scene.png is the input scene.png"),
+    (("--csv", "series.png"), "the series' plot is written beside it as series.png, over the CSV itself"),
+])
+def test_a_series_plot_is_never_written_over_an_input_or_its_own_csv(workspace, options, said):
+    """The plot beside the CSV (its name with .png) replaced the background image of the empty scene (--csv
+    scene.csv) or the CSV itself (--csv series.png), exit 0. Both refused before any work."""
+    before = {p: p.read_bytes() for p in workspace.rglob("*") if p.is_file() and not p.is_symlink()}
+    done = veg_area(workspace, *MEASURE, "frames", *options)
+    assert done.returncode == 2 and said in done.stderr, done.stderr
+    assert {p: p.read_bytes() for p in workspace.rglob("*") if p.is_file() and not p.is_symlink()} == before
 
 
 def test_calibrate_refuses_to_write_over_its_lens_or_an_image(workspace):

@@ -99,14 +99,18 @@ def overwrites_input(output: Path, inputs: Sequence[str | Path], writes_images: 
     return None
 
 
-def check_outputs(outputs: Sequence[tuple[str, str | None, bool]], inputs: Sequence[str | Path], what: str) -> None:
+def check_outputs(outputs: Sequence[tuple[str, str | None, bool]], inputs: Sequence[str | Path], what: str,
+                  written: str = "") -> None:
     """Refuse (exit 2, before any work, nothing written) an output (option, path, writes images) that is an
-    input or would put images inside an input folder (`overwrites_input`)."""
+    input or would put images inside an input folder (`overwrites_input`). `written`: what of the option's the
+    path is ('its plot ', 'its image '), when it is not the option's own value."""
     for option, value, writes_images in outputs:
         if value:
             problem = overwrites_input(Path(value), [i for i in inputs if i], writes_images)
             if problem:
-                raise CliError(f"{option} {value} {problem}: it would be written over; nothing was {what}",
+                raise CliError(f"{option}: {written}{value} {problem}: it would be written over; nothing was "
+                               f"{what}" if written else
+                               f"{option} {value} {problem}: it would be written over; nothing was {what}",
                                EXIT_USAGE)
 
 

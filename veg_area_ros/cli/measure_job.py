@@ -204,6 +204,18 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                   [*job.inputs, job.calibration if job.calibration.lower() not in ("none", "bag") else None,
                    job.targets, job.background], "measured")
     single_overlay = job.overlay and Path(job.overlay).suffix.lower() in IMAGE_SUFFIXES
+    sources = [*job.inputs, *files, job.calibration if job.calibration.lower() not in ("none", "bag") else None,
+               job.targets, job.background]
+    if csv_path is not None and csv_path.suffix.lower() == ".png":
+        raise CliError(f"--csv {csv_path}: the series' plot is written beside it as {csv_path.with_suffix('.png')}, "
+                       "over the CSV itself; name the CSV .csv", EXIT_USAGE)
+    if csv_path is not None:  # the plot beside the CSV, named after it
+        check_outputs([("--csv", str(csv_path.with_suffix(".png")), False)], sources, "measured",
+                      "its plot ")
+    for option, folder in (("--overlay", None if single_overlay else job.overlay), ("--idealized", job.idealized)):
+        if folder:  # each frame's image in the folder, named after its input: not over an input of the same name
+            check_outputs([(option, str(Path(folder) / frame_file_name(f.name)), False) for f in files], sources,
+                          "measured", "its image ")
     check_writable([("--overlay", job.overlay, not single_overlay), ("--csv", job.csv, False),
                     ("--idealized", job.idealized, True)], "measured")
     if single_overlay and total > 1:
