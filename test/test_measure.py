@@ -348,3 +348,15 @@ def test_bad_output_paths_and_radii_are_refused_before_any_work(workspace, optio
         assert done.returncode == 0, done.stderr
         return
     assert done.returncode == 2 and problem in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+def test_every_input_of_a_batch_gets_its_own_csv():
+    """clip.avi and sub/clip.avi were numbered 01_ and 02_, and an input named 01_clip.avi then wrote the same
+    out/01_clip_area.csv as the first: one series lost. Every input its own file."""
+    from pathlib import Path
+
+    from veg_area_ros.cli.batch import batch_csv_paths
+
+    paths = batch_csv_paths(["clip.avi", "sub/clip.avi", "01_clip.avi", "02_clip_area"], Path("out"))
+    assert len(set(paths)) == 4, paths
+    assert [p.name for p in batch_csv_paths(["a.avi", "b.avi"], Path("out"))] == ["a_area.csv", "b_area.csv"]

@@ -215,3 +215,32 @@ def test_a_spreadsheets_csv_with_a_bom_is_read(tmp_path):
     (tmp_path / "other.csv").write_bytes(rows.replace("force_n", "F").encode())
     with pytest.raises(DragError, match=r"needs columns .*; it has 'velocity_m_s', 'F', 'area_m2'"):
         read_runs(tmp_path / "other.csv")
+
+
+@pytest.mark.parametrize("args, message", [
+    (("demo", "--measurements", "0"), "--measurements: must be a whole number of 1 or more, got 0"),
+    (("vogel", "runs.csv", "--confidence", "1.5"), "--confidence: must lie between 0 and 1"),
+    (("vogel", "runs.csv", "--confidence", "nan"), "--confidence: must lie between 0 and 1"),
+    (("vogel", "runs.csv", "--confidence", "0"), "--confidence: must lie between 0 and 1"),
+    (("calibrate", "photos", "--board", "chessboard:9x6:1", "-o", "c.yaml", "--fit-water-index"),
+     "--fit-water-index fits the water's index from underwater views through a port"),
+])
+def test_numbers_and_options_that_cannot_apply_are_refused(tmp_path, args, message):
+    """`demo --measurements 0` printed "Af over 0 frames: nan"; a confidence of 1.5, nan or 0 fitted; and
+    --fit-water-index without a port's underwater views was ignored without a word."""
+    from helpers import run_cli
+
+    (tmp_path / "photos").mkdir()
+    done = run_cli(*args, cwd=tmp_path)
+    assert done.returncode == 2 and message in done.stderr, done.stderr
+
+
+def test_calibrate_writes_no_calibration_that_measure_would_refuse(tmp_path):
+    """OpenCV's 9x6 photos calibrated as a 7x5 board wrote fy/fx 44.5 and cx -306 (exit 0; measure then
+    refused the file). Refused, nothing written, the board named as the likely cause."""
+    from helpers import OPENCV_LEFT, run_cli
+
+    done = run_cli("calibrate", str(OPENCV_LEFT), "--board", "chessboard:7x5:1", "-o", str(tmp_path / "c.yaml"),
+                   "-q")
+    assert done.returncode == 1 and "is the board spec the board in the images?" in done.stderr, done.stderr
+    assert not (tmp_path / "c.yaml").exists()

@@ -748,8 +748,8 @@ def calibrate(
     if camera.reach is not None and not np.all(camera.within_reach(np.vstack(used_points))):
         raise CalibrationError(f"the {model} fit folds over {camera.reach_px():.0f} px from the principal point, "
                                "inside the region the board points cover: it passes near the points but bends "
-                               "between them, no lens (a ratio of polynomials can); use --model auto, or another "
-                               "model")
+                               "between them, which no lens does (is the board spec the board in the images? "
+                               "else another model suits this lens better: --model auto)")
     if not camera.holds_everywhere():
         warnings.append(f"the {model} model holds to {camera.reach_px():.0f} px from the principal point and "
                         "folds beyond (its polynomial bends back past the board's reach): frames are measured only "

@@ -37,10 +37,22 @@ PROGRESS_EVERY_S = 2.0
 
 
 def batch_csv_paths(inputs: list[str], folder: Path) -> list[Path]:
-    """<stem>_area.csv per input; inputs sharing a stem are told apart by their position."""
+    """<stem>_area.csv per input; inputs sharing a stem are told apart by their position, and a name that
+    still meets another (clip.avi and sub/clip.avi numbered 01_, 02_ beside an input named 01_clip.avi) gets
+    a further number: every input its own file."""
     stems = [Path(i.rstrip("/")).stem or "input" for i in inputs]
-    return [folder / (f"{k + 1:02d}_{stem}_area.csv" if stems.count(stem) > 1 else f"{stem}_area.csv")
-            for k, stem in enumerate(stems)]
+    names = [f"{k + 1:02d}_{stem}_area.csv" if stems.count(stem) > 1 else f"{stem}_area.csv"
+             for k, stem in enumerate(stems)]
+    taken: set[str] = set()
+    unique = []
+    for name in names:
+        candidate, extra = name, 2
+        while candidate in taken or (candidate != name and candidate in names):
+            candidate = name.replace("_area.csv", f"_{extra}_area.csv")
+            extra += 1
+        taken.add(candidate)
+        unique.append(folder / candidate)
+    return unique
 
 
 def _ignore_ctrl_c() -> None:

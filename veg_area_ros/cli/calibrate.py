@@ -169,6 +169,7 @@ def _board_and_files(args: argparse.Namespace):
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from ..calib_io import CalibrationFileError, fit_metadata, read_calibration, write_calibration
     from ..calibration import CalibrationError, calibrate
+    from ..camera_model import implausibility
     from ..frames import VIDEO_SUFFIXES, video_frame_count
     from ..replacement import judge
 
@@ -177,6 +178,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     check_outputs([("-o", args.output, False), ("--report", args.report, True)], [*args.inputs, args.lens],
                   "calibrated")
     check_writable([("-o", output, False), ("--report", args.report, True)], "calibrated")
+    if args.fit_water_index and not (args.port and args.lens and args.inputs):
+        raise CliError("--fit-water-index fits the water's index from underwater views through a port: it needs "
+                       "--port, --lens and the underwater views", EXIT_USAGE)
     if args.port or args.lens:
         if args.model is not None:
             raise CliError("--model does not apply with --port/--lens: the lens's model is its air calibration's "
@@ -219,6 +223,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                            model=args.model or "auto")
     except CalibrationError as exc:
         raise CliError(str(exc)) from exc
+    problem = implausibility(result.camera)
+    if problem:  # measure would refuse the file: it is not written
+        raise CliError(f"the fit is no lens's ({problem}; fx {result.camera.fx:.1f} px, fy/fx "
+                       f"{result.camera.aspect:.3g}, principal point ({result.camera.xp:.0f}, {result.camera.yp:.0f}) "
+                       f"px): is --board {board} the board in the images? Nothing was written")
 
     summary = result.summary()
     summary.update(unreadable=found.unreadable, no_board=found.no_board, wrong_size=found.wrong_size,

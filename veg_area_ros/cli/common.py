@@ -46,6 +46,27 @@ def positive_float(text: str) -> float:
     return value
 
 
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a whole number of 1 or more, got {text}")
+    return value
+
+
+def probability(text: str) -> float:
+    """A confidence level: strictly between 0 and 1."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"must lie between 0 and 1 (0.95 for 95 %), got {text}")
+    return value
+
+
 def unwritable(path: Path, folder: bool) -> str | None:
     """Why `path` (a file, or a folder to write into) cannot be written here, or None: checked before any work
     by creating (and removing) a temporary file where it would go (permissions alone miss /proc as root)."""

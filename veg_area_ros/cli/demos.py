@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .common import EXIT_FAILED, CliError, check_writable, positive_float
+from .common import EXIT_FAILED, CliError, check_writable, positive_float, positive_int
 
 
 def _check_output(folder: str) -> Path:
@@ -18,7 +18,8 @@ def add_parsers(sub) -> None:
     demo = sub.add_parser("demo", help="the main job on the built-in default: synthetic underwater camera -> "
                           "calibration node -> area node, Af against the true area")
     demo.add_argument("--output", default="veg_area_demo", help="folder for the served calibration")
-    demo.add_argument("--measurements", type=int, default=10, help="calibrated frames to average")
+    demo.add_argument("--measurements", type=positive_int, default=10,
+                      help="calibrated frames to average (default %(default)s)")
     demo.add_argument("--timeout", type=positive_float, default=300.0, help="seconds before giving up")
     demo.set_defaults(func=cmd_demo)
 

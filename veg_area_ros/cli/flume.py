@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from .common import EXIT_USAGE, CliError, check_outputs, check_writable, positive_float
+from .common import EXIT_USAGE, CliError, check_outputs, check_writable, positive_float, probability
 
 
 def add_parser(sub) -> None:
@@ -30,7 +30,7 @@ def add_parser(sub) -> None:
                      help="bags: Af topic (Vector3Stamped, x = Af, y = its std; default %(default)s)")
     vog.add_argument("--density", type=positive_float, default=998.2,
                      help="water density, kg/m³, where a table row gives none (default %(default)s: 20 °C)")
-    vog.add_argument("--confidence", type=float, default=0.95,
+    vog.add_argument("--confidence", type=probability, default=0.95,
                      help="of the exponent's interval (default %(default)s)")
     vog.add_argument("--plot", help="PNG (default: the first input's name + .vogel.png)")
     vog.add_argument("--json", action="store_true")
