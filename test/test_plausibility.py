@@ -244,3 +244,23 @@ def test_calibrate_writes_no_calibration_that_measure_would_refuse(tmp_path):
                    "-q")
     assert done.returncode == 1 and "is the board spec the board in the images?" in done.stderr, done.stderr
     assert not (tmp_path / "c.yaml").exists()
+
+
+@pytest.mark.parametrize("factor, unit", [(100.0, "centimetres"), (1 / 0.0254, "inches")])
+def test_targets_in_another_unit_are_refused(factor, unit):
+    """Targets written in cm or inches were read as metres: Af 105.5 m² and 16.4 m², exit 0, only a
+    "measuring at about 70.72 m" warning. A calibrated camera knows its focal length: such a plane would lie
+    tens of metres away. Refused with the likely cause."""
+    from veg_area_ros.area import AreaMeasurer
+    from veg_area_ros.classify import Classifier
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets_content
+    from veg_area_ros.targets import TargetsError, TargetsSpec
+
+    content = scene_targets_content()
+    content["markers"] = {k: [v * factor for v in xy] for k, xy in content["markers"].items()}
+    targets = TargetsSpec.from_dict(content)
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
+    with pytest.raises(TargetsError, match="are the targets file's coordinates in metres"):
+        AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120)).measure(frame)
+    right = AreaMeasurer(ENDOSCOPE, TargetsSpec.from_dict(scene_targets_content()), Classifier(threshold=120))
+    assert right.measure(frame).area_m2 == pytest.approx(cube_scene().true_area_m2, rel=0.01)
