@@ -339,7 +339,8 @@ def test_area_modes_levels_and_the_uncertainty_terms_from_the_command_line(works
 @pytest.mark.parametrize("option, value, problem", [
     ("--overlay", "/proc/overlay.png", "cannot be written"),
     ("--csv", "{workspace}/targets.yaml/rows.csv", "is a file, not a folder"),
-    ("--overlay", "{workspace}", None),  # a folder for a single frame's overlay is fine
+    ("--overlay", "{workspace}/overlays", None),  # a folder for a single frame's overlay is fine...
+    ("--overlay", "{workspace}", "is the input"),  # ...but not the one holding the input: cube.png over cube.png
     ("--close", "100000", "at most 100 px"),
 ])
 def test_bad_output_paths_and_radii_are_refused_before_any_work(workspace, option, value, problem):

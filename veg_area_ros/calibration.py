@@ -165,20 +165,20 @@ class _Problem:
 
     def __init__(self, object_points: list[np.ndarray], image_points: list[np.ndarray], model: str = "plumb_bob"):
         self.model = model
-        self.n = n = len(param_names(model))
+        self.n = len(param_names(model))
         self.object_points = object_points
         self.observed = np.concatenate([p.reshape(-1) for p in image_points])
         self.counts = [len(p) for p in object_points]
         self.row_starts = np.concatenate([[0], np.cumsum(self.counts) * 2])
         rows, cols = [], []
-        for v, n in enumerate(self.counts):
-            r = np.arange(self.row_starts[v], self.row_starts[v] + 2 * n)
-            c = np.concatenate([np.arange(n), n + 6 * v + np.arange(6)])
+        for v, count in enumerate(self.counts):
+            r = np.arange(self.row_starts[v], self.row_starts[v] + 2 * count)
+            c = np.concatenate([np.arange(self.n), self.n + 6 * v + np.arange(6)])
             rows.append(np.repeat(r, len(c)))
             cols.append(np.tile(c, len(r)))
         self.rows = np.concatenate(rows)
         self.cols = np.concatenate(cols)
-        self.shape = (len(self.observed), n + 6 * len(self.counts))
+        self.shape = (len(self.observed), self.n + 6 * len(self.counts))
 
     def _all(self, x: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
         n = self.n

@@ -42,6 +42,14 @@ def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence
         raise ValueError(f"camera_info image size {width}x{height} is more than any camera here "
                          f"({MAX_IMAGE_PIXELS} pixels at most)")
     dist = np.asarray(d, float).ravel()
+    matrix = np.asarray(k, float).ravel()
+    if matrix.size != 9:
+        raise ValueError(f"the camera matrix should hold 9 numbers, found {matrix.size}")
+    matrix = matrix.reshape(3, 3)
+    if not np.all(np.isfinite(matrix)) or matrix[0, 0] <= 0 or matrix[1, 1] <= 0:
+        raise ValueError("camera matrix fx, fy must be finite and positive (zero: an uncalibrated camera_info)")
+    if distortion_model == "" and not np.any(dist):  # camera_info_manager's default: no distortion given
+        distortion_model = "plumb_bob"
     if distortion_model in FISHEYE_MODELS:  # r = f·θ, not f·tan θ: no pinhole even with zero coefficients
         distortion_model = "equidistant"
     if distortion_model not in MODELS:
@@ -54,12 +62,6 @@ def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence
             raise ValueError(f"{dist.size} distortion coefficients do not fit equidistant's four (k1-k4)")
     elif dist.size not in PINHOLE_SIZES or np.any(dist[count:] != 0):
         raise ValueError(f"{dist.size} distortion coefficients do not fit {distortion_model}'s {count}")
-    matrix = np.asarray(k, float).ravel()
-    if matrix.size != 9:
-        raise ValueError(f"the camera matrix should hold 9 numbers, found {matrix.size}")
-    matrix = matrix.reshape(3, 3)
-    if not np.all(np.isfinite(matrix)) or matrix[0, 0] <= 0 or matrix[1, 1] <= 0:
-        raise ValueError("camera matrix fx, fy must be finite and positive (zero: an uncalibrated camera_info)")
     coefficients = np.pad(dist[:count], (0, count - min(count, dist.size)))
     return check_plausible(BrownCamera.from_opencv(matrix, coefficients, (int(width), int(height)), distortion_model))
 

@@ -82,6 +82,6 @@ _PortableDumper.add_representer(tuple, _represent_list)
 
 def dump_portable(content) -> str:
     """YAML text of plain data (dicts, lists, strings, numbers) that PyYAML, OpenCV's FileStorage and yaml-cpp
-    all read as it was written; keys in their order."""
-    return yaml.dump(content, Dumper=_PortableDumper, sort_keys=False, default_flow_style=None, width=120,
+    all read as it was written; keys in their order; no line folded (FileStorage cannot read a folded string)."""
+    return yaml.dump(content, Dumper=_PortableDumper, sort_keys=False, default_flow_style=None, width=10**9,
                      allow_unicode=True)

@@ -209,7 +209,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     if csv_path is not None and csv_path.suffix.lower() == ".png":
         raise CliError(f"--csv {csv_path}: the series' plot is written beside it as {csv_path.with_suffix('.png')}, "
                        "over the CSV itself; name the CSV .csv", EXIT_USAGE)
-    if csv_path is not None:  # the plot beside the CSV, named after it
+    if csv_path is not None and total > 1:  # the plot beside the CSV, named after it (drawn for 2+ frames)
         check_outputs([("--csv", str(csv_path.with_suffix(".png")), False)], sources, "measured",
                       "its plot ")
     for option, folder in (("--overlay", None if single_overlay else job.overlay), ("--idealized", job.idealized)):
