@@ -3,6 +3,7 @@ a proper format-3 ament_python manifest."""
 
 import os
 import subprocess
+import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -214,3 +215,17 @@ def test_the_ground_floor_imports_nothing_of_the_package():
     graph = _module_graph()
     assert graph["veg_area_ros.files"] == set()
     assert all("veg_area_ros.files" in graph[f"veg_area_ros.{module}"] for module in ("calib_io", "frames", "bags"))
+
+
+def test_a_node_refuses_a_choice_parameter_outside_its_choices(tmp_path):
+    """`-p medium:=lava` was accepted in silence (the calibration file then said medium 'lava'). A value that
+    is none of a parameter's choices stops the node at start with one line naming it and the choices. Kept on
+    this machine as the test above."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "AMENT_"))}
+    env.update(HOME=str(tmp_path), ROS_DOMAIN_ID="198", VEG_AREA_TRANSPORT="local", PYTHONPATH=str(REPO))
+    done = subprocess.run([sys.executable, "-m", "veg_area_ros.ros.calibration_node", "--ros-args", "-p",
+                           "medium:=lava", "-p", f"camera_info_url:=file://{tmp_path}/c.yaml"], env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode != 0, done.stdout + done.stderr
+    assert "parameter medium: 'lava' is not one of air, water" in done.stdout + done.stderr
+    assert "Traceback" not in done.stdout + done.stderr

@@ -224,10 +224,13 @@ def test_a_spreadsheets_csv_with_a_bom_is_read(tmp_path):
     (("vogel", "runs.csv", "--confidence", "0"), "--confidence: must lie between 0 and 1"),
     (("calibrate", "photos", "--board", "chessboard:9x6:1", "-o", "c.yaml", "--fit-water-index"),
      "--fit-water-index fits the water's index from underwater views through a port"),
+    (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler", "tcp://127.0.0.1:9",
+      "--overlay", "over"), "--overlay is not written by a --scheduler run"),
 ])
 def test_numbers_and_options_that_cannot_apply_are_refused(tmp_path, args, message):
-    """`demo --measurements 0` printed "Af over 0 frames: nan"; a confidence of 1.5, nan or 0 fitted; and
-    --fit-water-index without a port's underwater views was ignored without a word."""
+    """`demo --measurements 0` printed "Af over 0 frames: nan"; a confidence of 1.5, nan or 0 fitted;
+    --fit-water-index without a port's underwater views and --overlay with --scheduler were ignored without a
+    word."""
     from helpers import run_cli
 
     (tmp_path / "photos").mkdir()

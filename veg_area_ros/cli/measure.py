@@ -111,6 +111,9 @@ def add_parser(sub) -> None:
 def cmd_measure(args: argparse.Namespace) -> int:
     if args.jobs is not None and args.jobs < 0:
         raise CliError("--jobs must be 0 (every core) or more", EXIT_USAGE)
+    if args.scheduler and args.overlay:
+        raise CliError("--overlay is not written by a --scheduler run (the frames are measured on the cluster's "
+                       "workers); measure the inputs whose overlays you want on this machine", EXIT_USAGE)
     if args.scheduler and args.jobs is not None:
         raise CliError("--jobs counts this machine's processes; with --scheduler the cluster's workers measure",
                        EXIT_USAGE)

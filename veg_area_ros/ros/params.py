@@ -27,7 +27,10 @@ def declare(node: Node, name: str, default, description: str, *, low: float | No
         elif isinstance(default, float):
             descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high),
                                                                   step=0.0)]
-    return node.declare_parameter(name, default, descriptor).value
+    value = node.declare_parameter(name, default, descriptor).value
+    if choices and value not in choices:  # as a range is checked by rcl: a choice no code path knows is refused
+        raise ValueError(f"parameter {name}: {value!r} is not one of {', '.join(map(str, choices))}")
+    return value
 
 
 def read_start_file(node: Node, parameter: str, read: Callable[[], Loaded], without: str) -> Loaded | None:
