@@ -267,3 +267,24 @@ def test_targets_in_another_unit_are_refused(factor, unit):
         AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120)).measure(frame)
     right = AreaMeasurer(ENDOSCOPE, TargetsSpec.from_dict(scene_targets_content()), Classifier(threshold=120))
     assert right.measure(frame).area_m2 == pytest.approx(cube_scene().true_area_m2, rel=0.01)
+
+
+@pytest.mark.parametrize("option", ["--calibration", "--targets", "--background"])
+@pytest.mark.parametrize("special", ["/dev/zero", "fifo"])
+def test_a_device_or_pipe_given_as_a_file_is_refused_unread(folder, option, special):
+    """/dev/zero as --calibration, --targets or --background read 3 GB and died of a MemoryError; a FIFO hung
+    (Ctrl-C too). Refused unread, naming what it is."""
+    import os
+
+    path = folder / "pipe.fifo"
+    if special == "fifo" and not path.exists():
+        os.mkfifo(path)
+    given = str(path) if special == "fifo" else special
+    args = {"--calibration": ("--calibration", given, "--targets", str(folder / "targets.yaml")),
+            "--targets": ("--calibration", "none", "--targets", given),
+            "--background": ("--calibration", "none", "--targets", str(folder / "targets.yaml"), "--background",
+                             given)}[option]
+    done = run_cli("measure", str(folder / "cube.png"), *args, cwd=folder)
+    kind = "a pipe (FIFO)" if special == "fifo" else "a device"
+    assert done.returncode in (1, 2) and f"is {kind}, not a file" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr

@@ -5,11 +5,27 @@ from __future__ import annotations
 
 import glob
 import os
+import stat
 import tempfile
 from pathlib import Path
 
 MAX_IMAGE_PIXELS = 64_000_000  # six times the 3872x2592 DSLR; a 20000x20000 PNG took 9 GB and minutes to refuse
 MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in a camera_info are corrupt
+
+
+def special_file(path: str | os.PathLike) -> str | None:
+    """Why `path` cannot be read as a file, or None: a device (/dev/zero never ends: 3 GB read before a
+    MemoryError), a pipe (the read waits for a writer, Ctrl-C too) or a socket. A missing file or a folder is
+    left to the reader's own error."""
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kind = ("a pipe (FIFO)" if stat.S_ISFIFO(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else "a socket" if stat.S_ISSOCK(mode) else "no regular file")
+    return f"is {kind}, not a file (reading it would never end or would wait for a writer)"
 
 
 def _umask() -> int:

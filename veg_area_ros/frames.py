@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .files import MAX_IMAGE_PIXELS
+from .files import MAX_IMAGE_PIXELS, special_file
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp"}
 VIDEO_SUFFIXES = {".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv"}
@@ -91,7 +91,10 @@ def header_size(data: bytes) -> tuple[int, int] | None:
 def read_image(path: Path, grey: bool = False) -> tuple[np.ndarray | None, str]:
     """Decode an image file (`grey`: to one channel, which for a JPEG skips its colour entirely); a truncated
     JPEG is refused rather than measured half-grey, and a header that declares an absurd size is refused
-    before decoding."""
+    before decoding; a device or pipe is refused unread."""
+    problem = special_file(path)
+    if problem:
+        return None, problem
     try:
         data = path.read_bytes()
     except OSError as exc:

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import yaml
 
+from .files import special_file
+
 MAX_BYTES = 1_000_000  # a targets or calibration file is a few kB
 
 
@@ -48,7 +50,10 @@ def load_text(text: str):
 
 
 def read_text(path: Path) -> str:
-    """A file's text, refused unread when it is larger than MAX_BYTES."""
+    """A file's text, refused unread when it is larger than MAX_BYTES or no regular file (a device, a pipe)."""
+    problem = special_file(path)
+    if problem:
+        raise StrictYamlError(problem)
     size = path.stat().st_size
     if size > MAX_BYTES:
         raise StrictYamlError(f"{size} bytes: larger than any such file ({MAX_BYTES} at most)")
