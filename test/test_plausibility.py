@@ -226,6 +226,14 @@ def test_a_spreadsheets_csv_with_a_bom_is_read(tmp_path):
      "--fit-water-index fits the water's index from underwater views through a port"),
     (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler", "tcp://127.0.0.1:9",
       "--overlay", "over"), "--overlay is not written by a --scheduler run"),
+    (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler",
+      "tcp://127.0.0.1:eighty"), "the port 'eighty' is not a number from 1 to 65535"),
+    (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler",
+      "http://127.0.0.1:8787/status"), "is a web address (Dask's dashboard"),
+    (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler", "tpc://127.0.0.1:8786"),
+     "the scheme tpc:// is not one this command speaks"),
+    (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler", "tls://127.0.0.1:8786"),
+     "tls needs certificates"),
 ])
 def test_numbers_and_options_that_cannot_apply_are_refused(tmp_path, args, message):
     """`demo --measurements 0` printed "Af over 0 frames: nan"; a confidence of 1.5, nan or 0 fitted;

@@ -12,7 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .batch import _summary, catch_stop_signals, check_batch, finish_batch, input_job, input_summary, restore_signals
-from .common import EXIT_FAILED, EXIT_OK, CliError, progress, write_csv
+from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, CliError, progress, write_csv
 from .measure_job import CSV_COLUMNS, MeasureJob, csv_row, frames_lost, measure, no_object_anywhere, plot_series
 
 CONNECT_TIMEOUT_S = 6  # the whole refusal within 10 s, the interpreter and its imports included
@@ -49,7 +49,43 @@ def segments(frames: int, size: int) -> list[tuple[int, int]]:
     return [(start, min(start + size, frames)) for start in range(0, frames, size)] or [(0, 0)]
 
 
+def scheduler_address(text: str) -> tuple[str, str, int]:
+    """A Dask scheduler's address checked at once: (tcp://HOST:PORT, host, port); CliError (exit 2) naming what
+    is wrong with it. HOST:PORT alone is taken as tcp; a pasted dashboard URL (http://HOST:8787/status) is
+    recognised and the scheduler's usual address suggested."""
+    from urllib.parse import urlsplit
+
+    given = text.strip()
+    parts = urlsplit(given if "://" in given else f"tcp://{given}")
+    scheme = parts.scheme.lower()
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+        text_port = parts.netloc.rsplit(":", 1)[-1]
+        raise CliError(f"--scheduler {given}: the port {text_port!r} is not a number from 1 to 65535",
+                       EXIT_USAGE) from None
+    host = parts.hostname or ""
+    if scheme in ("http", "https"):
+        raise CliError(f"--scheduler {given} is a web address (Dask's dashboard, port 8787 by default); the "
+                       f"scheduler itself listens at tcp://{host or 'HOST'}:8786", EXIT_USAGE)
+    if scheme != "tcp":
+        raise CliError(f"--scheduler {given}: the scheme {scheme}:// is not one this command speaks (tcp://HOST:PORT"
+                       f"{'; tls needs certificates it does not take' if scheme == 'tls' else ''})", EXIT_USAGE)
+    if not host or port is None or not 0 < port < 65536 or parts.path not in ("", "/"):
+        raise CliError(f"--scheduler {given}: give it as tcp://HOST:PORT (tcp://head:8786)", EXIT_USAGE)
+    return f"tcp://{host}:{port}", host, port
+
+
 def _connect(address: str):
+    address, host, port = scheduler_address(address)
+    import socket
+
+    try:  # a closed port or an unknown host said at once, before Dask's own retries
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise CliError(f"the Dask scheduler at {address} cannot be reached ({exc.strerror or exc}); nothing was "
+                       "measured") from None
     try:
         from distributed import Client
     except ImportError as exc:  # optional on a ROS install (rosdep does not bring it)
