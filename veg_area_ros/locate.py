@@ -51,9 +51,6 @@ class Tracking:
         self.markers, self.last_scale, self.last_located = {}, None, None
 
 
-MAX_PLANE_DISTANCE_M = 20.0  # no flume or river measurement sees its targets from farther: a unit slip
-
-
 class Locator:
     """Locates one camera's targets (`TargetsSpec`) in its frames."""
 
@@ -111,15 +108,6 @@ class Locator:
         located.scale = PlaneScale.fit(np.array(located.pixels), np.array(planes), targets.distance_std_m,
                                        targets.pixel_std, offset,
                                        self.view.ideal_matrix if offset is not None else None)
-        if self.view.calibrated and located.scale.kind != "distance":
-            distance = located.scale.metres_per_pixel * float(self.view.ideal_matrix[0, 0])
-            if not distance <= MAX_PLANE_DISTANCE_M:
-                raise TargetsError(
-                    f"the targets put their plane {distance:.1f} m from the camera "
-                    f"({located.scale.metres_per_pixel:.4g} m per idealized pixel at a focal length of "
-                    f"{self.view.ideal_matrix[0, 0]:.0f} px): are the "
-                    "targets file's coordinates in metres? (centimetres read as metres give 100x the distance, "
-                    "inches 39x)")
         tracking.last_scale = located.scale
         if targets.markers:
             tracking.last_located = tracked, located

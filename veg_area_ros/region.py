@@ -18,6 +18,8 @@ from .locate import MARKER_EXCLUSION, Located
 from .scale import marker_layout_problem
 from .targets import TargetsError, TargetsSpec
 
+MAX_PLANE_DISTANCE_M = 20.0  # no flume or river measurement sees its targets from farther: a unit slip
+
 
 class Region:
     """The ROI of one camera's frames: `polygon` (idealized px) or None for the default inside the targets."""
@@ -69,6 +71,14 @@ class Region:
         problem = marker_layout_problem(located.scale, corners, self.targets.marker_side_m, roi_polygon)
         if problem:
             raise TargetsError(problem)
+        if self.view.calibrated and located.scale.kind != "distance":  # the layout holds: its unit may not
+            distance = located.scale.metres_per_pixel * float(self.view.ideal_matrix[0, 0])
+            if not distance <= MAX_PLANE_DISTANCE_M:
+                raise TargetsError(
+                    f"the targets put their plane {distance:.1f} m from the camera "
+                    f"({located.scale.metres_per_pixel:.4g} m per idealized pixel at a focal length of "
+                    f"{self.view.ideal_matrix[0, 0]:.0f} px): are the targets file's coordinates in metres? "
+                    "(centimetres read as metres give 100x the distance, inches 39x)")
 
 
 def centroid(mask: np.ndarray) -> np.ndarray:
