@@ -279,6 +279,10 @@ def test_our_mcap_is_written_as_ros2_bag_record_writes_it(tmp_path):
         metadata = [m.metadata["serialized_metadata"] for m in reader.iter_metadata()]
     assert times == [((k + 1) * 10**8, (k + 1) * 10**8 - 7) for k in range(20)]
     assert f"ros_distro: {ROS_DISTRO}" in metadata[0]
+    # every topic's type hash, as ros2 bag record writes it (it was empty in the embedded metadata)
+    embedded = yaml.safe_load(metadata[0])["topics_with_message_count"]
+    assert embedded and all(t["topic_metadata"]["type_description_hash"] == TYPES.hash_rihs01(
+        t["topic_metadata"]["type"]) for t in embedded), embedded
     records = list(StreamReader(path.open("rb"), validate_crcs=True).records)
     data_end = next(r for r in records if type(r).__name__ == "DataEnd")
     footer = next(r for r in records if type(r).__name__ == "Footer")

@@ -129,7 +129,7 @@ class _CheckedMcapWriter(McapWriter):
         self.bio.seek(end)
 
     def close(self, version: int, metadata: str) -> None:
-        super().close(version, metadata.replace("ros_distro: rosbags", f"ros_distro: {ROS_DISTRO}"))
+        super().close(version, _as_ros_writes_it(metadata))
         _write_section_crcs(self.path)
 
 
@@ -221,6 +221,20 @@ class BagRecorder:
     def close(self) -> None:
         self._writer.close()  # MCAP summary and footer, metadata.yaml
         _set_ros_distro(self.path / "metadata.yaml", ROS_DISTRO)
+
+
+def _as_ros_writes_it(metadata: str) -> str:
+    """The rosbag2 metadata embedded in the MCAP as `ros2 bag record` writes it: the real ROS distribution and
+    every topic's type hash (RIHS01, from the Kilted type descriptions; the writer leaves it empty there while
+    metadata.yaml has it)."""
+    information = yaml.safe_load(metadata)  # the bag's information itself, as rosbag2 embeds it
+    information["ros_distro"] = ROS_DISTRO
+    types = typestore()
+    for entry in information.get("topics_with_message_count", []):
+        topic = entry["topic_metadata"]
+        if not topic.get("type_description_hash") and topic.get("type") in types.types:
+            topic["type_description_hash"] = types.hash_rihs01(topic["type"])
+    return yaml.safe_dump(information, sort_keys=False).strip()
 
 
 def _set_ros_distro(metadata: Path, distro: str) -> None:
