@@ -839,7 +839,8 @@ def choose_model(views: Sequence[View], image_size: tuple[int, int], robust_loss
     if len(views) < MIN_VIEWS_TO_CHOOSE:
         result = calibrate(views, image_size, robust_loss, outlier_sigma, progress, True, "plumb_bob")
         result.model_choice = {"chosen": "plumb_bob", "reason": f"{len(views)} views are too few to compare models "
-                               f"on held-out views (at least {MIN_VIEWS_TO_CHOOSE}): plumb_bob", "candidates": {}}
+                               f"on held-out views (at least {MIN_VIEWS_TO_CHOOSE}): the common one",
+                               "candidates": {}}
         return result
     fits: dict[str, CalibrationResult] = {}
     candidates: dict[str, dict] = {}
@@ -865,11 +866,11 @@ def choose_model(views: Sequence[View], image_size: tuple[int, int], robust_loss
     figures = ", ".join(f"{m} {c['held_out_rms_px']:.3f} px" if "held_out_rms_px" in c else f"{m} failed"
                         for m, c in candidates.items())
     out = [f"{m} ({c.get('error') or c.get('problem')})" for m, c in candidates.items() if m not in fits]
-    reason = (f"{chosen}: each half of the views predicts the other half's corners to {figures} (RMS); "
+    reason = (f"each half of the views predicts the other half's corners to {figures} (RMS); "
               + (f"{chosen} is within {MODEL_MARGIN:.0%} of the best and earlier in {', '.join(MODEL_PREFERENCE)}"
                  if fits[chosen].halves["held_out_rms_px"] > best else f"{chosen} predicts best")
               + (f"; left out: {'; '.join(out)}" if out else ""))
     result = fits[chosen]
     result.model_choice = {"chosen": chosen, "reason": reason, "candidates": candidates}
-    say(f"model: {reason}")
+    say(f"model {chosen}: {reason}")
     return result
