@@ -351,3 +351,11 @@ def test_a_runs_last_line_is_its_mean_with_its_uncertainty_and_what_was_not_meas
     mean, uncertainty = (float(v) for v in line[len("Af = "):].split(" m²")[0].split(" ± "))
     assert mean == pytest.approx(np.mean(measured), rel=1e-5)
     assert uncertainty > 10 * np.std(measured, ddof=1) / np.sqrt(len(measured))  # the shared terms, once
+
+
+def test_playing_a_topic_the_bag_lacks_names_the_topics_it_has(workspace, scenes):
+    """`veg-area play bag --topics /nope` said "(it has )": the topics listed were the ones asked for."""
+    bag = workspace / "one_topic"
+    write_bag(bag, "mcap", [("/image_raw", "sensor_msgs/msg/Image", [_image(scenes["left"][0], 0, "cam")])])
+    done = run_cli("play", str(bag), "--topics", "/nope")
+    assert done.returncode == 1 and "no topic /nope in the bag (it has /image_raw)" in done.stderr, done.stderr

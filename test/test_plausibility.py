@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -296,3 +297,34 @@ def test_a_device_or_pipe_given_as_a_file_is_refused_unread(folder, option, spec
     kind = "a pipe (FIFO)" if special == "fifo" else "a device"
     assert done.returncode in (1, 2) and f"is {kind}, not a file" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr
+
+
+def test_a_plot_is_written_whole_or_not_at_all(tmp_path):
+    """A Ctrl-C while the Af(t) plot was drawn left a 124-byte PNG over the last whole one: plots are written
+    through a temporary file and a rename, as the CSV is."""
+    from veg_area_ros.files import save_figure
+
+    class Interrupted:
+        def savefig(self, target, **options):
+            Path(target).write_bytes(b"\x89PNG half")
+            raise KeyboardInterrupt
+
+    plot = tmp_path / "run_area.png"
+    plot.write_bytes(b"the last whole plot")
+    with pytest.raises(KeyboardInterrupt):
+        save_figure(Interrupted(), plot)
+    assert plot.read_bytes() == b"the last whole plot" and sorted(tmp_path.iterdir()) == [plot]
+
+
+def test_a_closed_stdout_ends_calibrate_quietly(tmp_path):
+    """`veg-area calibrate ... --json | head -c 10` ended in a BrokenPipeError traceback."""
+    import subprocess
+    import sys
+
+    from helpers import OPENCV_LEFT, REPO
+
+    command = (f"{sys.executable} -m veg_area_ros.cli calibrate {OPENCV_LEFT} --board chessboard:9x6:1 -o "
+               f"{tmp_path / 'c.yaml'} --json -q | head -c 10")
+    done = subprocess.run(["bash", "-o", "pipefail", "-c", command], capture_output=True, text=True, timeout=300,
+                          env={**__import__("os").environ, "PYTHONPATH": str(REPO)})
+    assert done.returncode == 0 and done.stdout == '{"distorti' and done.stderr == "", done.stderr

@@ -493,6 +493,7 @@ def play_topics(path: str | Path, names: list[str] | None = None) -> list[PlayTo
     reader = _open_reader(path)
     try:
         topics = {}
+        present = sorted({connection.topic for connection in reader.connections})
         for connection in reader.connections:
             if names and connection.topic not in names and connection.topic.lstrip("/") not in names:
                 continue
@@ -507,7 +508,7 @@ def play_topics(path: str | Path, names: list[str] | None = None) -> list[PlayTo
         reader.close()
     missing = [n for n in names or [] if n not in topics and f"/{n.lstrip('/')}" not in topics]
     if missing:
-        raise BagError(f"{path}: no topic {', '.join(missing)} in the bag (it has {', '.join(sorted(topics))})")
+        raise BagError(f"{path}: no topic {', '.join(missing)} in the bag (it has {', '.join(present)})")
     return list(topics.values())
 
 

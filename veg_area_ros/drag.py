@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
+from .files import save_figure
+
 WATER_DENSITY = 998.2  # kg/m³ at 20 °C
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")  # signed: a sensor may point against the flow; and a bare
 # "y" would be read as a boolean by the ROS parameter YAML parser
@@ -262,5 +264,5 @@ def plot_vogel(velocity, cd_area, fit: VogelFit, path: str | Path, cd_area_std=N
     axes.legend()
     axes.grid(True, which="both", alpha=0.3)
     figure.tight_layout()
-    figure.savefig(path, dpi=120)
+    save_figure(figure, path, dpi=120)
     plt.close(figure)

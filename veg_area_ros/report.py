@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .calibration import CalibrationResult, radial_residuals
+from .files import save_figure
 
 
 def _pyplot():
@@ -52,7 +53,7 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
     written.append(folder / "residuals.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    save_figure(fig, written[-1], dpi=110, bbox_inches="tight")
     plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(max(6, 0.35 * len(result.views)), 4))
@@ -64,7 +65,7 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
     ax.set_title("Residuals per view")
     ax.legend()
     written.append(folder / "per_view.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    save_figure(fig, written[-1], dpi=110, bbox_inches="tight")
     plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(8, 6.5))
@@ -78,7 +79,7 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
     ax.set_aspect("equal")
     ax.set_title(f"Board points of all views (coverage {100 * result.coverage:.0f} % of an 8x6 grid)")
     written.append(folder / "coverage.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    save_figure(fig, written[-1], dpi=110, bbox_inches="tight")
     plt.close(fig)
 
     # the lens beyond the model: residuals that lean outwards or inwards depending on the distance from the centre
@@ -95,7 +96,7 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
     ax.set_title("Radial residuals (a lens the model follows: every ring mean at zero)")
     ax.legend(loc="best")
     written.append(folder / "radial.png")
-    fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+    save_figure(fig, written[-1], dpi=110, bbox_inches="tight")
     plt.close(fig)
 
     # how well the calibration pins each viewing direction's pixel, and the std of each parameter two ways
@@ -119,7 +120,7 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
         right.set_title("Parameter std" + (f"; halves differ by up to {halves['max_z']:.1f} std" if halves else ""))
         right.legend()
         written.append(folder / "uncertainty.png")
-        fig.savefig(written[-1], dpi=110, bbox_inches="tight")
+        save_figure(fig, written[-1], dpi=110, bbox_inches="tight")
         plt.close(fig)
 
     if guide is not None:
@@ -148,7 +149,7 @@ def plot_variety(guide, path: str | Path, distinct: int | None = None) -> Path:
     ax.set_title(f"{views}; " + (f"still needed: {needed}" if needed else "variety enough"),
                  fontsize=10)
     path = Path(path)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    save_figure(fig, path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return path
 
@@ -176,6 +177,6 @@ def plot_area_series(times: list[float], areas: list[float], stds: list[float], 
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
     path = Path(path)
     # zlib's fastest level: the PNG encoded in 30 ms instead of 70 (600 frames), the file 20 % larger
-    fig.savefig(path, dpi=110, bbox_inches="tight", pil_kwargs={"compress_level": 1})
+    save_figure(fig, path, dpi=110, bbox_inches="tight", pil_kwargs={"compress_level": 1})
     plt.close(fig)
     return path

@@ -15,6 +15,8 @@ replace a better calibration, 130 interrupted (what was done so far is kept).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
 import signal
 import sys
 import threading
@@ -22,7 +24,7 @@ from collections.abc import Sequence
 
 from .. import __version__
 from . import bags, calibrate, demos, doctor, flume, measure
-from .common import EXIT_INTERRUPTED, CliError
+from .common import EXIT_INTERRUPTED, EXIT_OK, CliError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -79,3 +81,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"veg-area {args.command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except BrokenPipeError:  # stdout closed early (`... --json | head -c 10`): what was written stays written
+        with contextlib.suppress(OSError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return EXIT_OK
