@@ -229,3 +229,31 @@ def test_a_node_refuses_a_choice_parameter_outside_its_choices(tmp_path):
     assert done.returncode != 0, done.stdout + done.stderr
     assert "parameter medium: 'lava' is not one of air, water" in done.stdout + done.stderr
     assert "Traceback" not in done.stdout + done.stderr
+
+
+def test_a_mistyped_parameter_is_said_and_malformed_ros_args_in_one_line(tmp_path):
+    """`-p rate:=30.0` (for rate_hz) was accepted in silence; `-p rate_hz` (no :=) ended in an RCLError
+    traceback. The first is said with the parameter meant; the second is one line, exit 2."""
+    import signal
+    import time
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "AMENT_"))}
+    env.update(HOME=str(tmp_path), ROS_DOMAIN_ID="197", VEG_AREA_TRANSPORT="local", PYTHONPATH=str(REPO))
+    done = subprocess.run([sys.executable, "-m", "veg_area_ros.ros.camera_node", "--ros-args", "-p", "rate_hz"],
+                          env=env, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert done.stderr.strip().splitlines()[-1].startswith("veg_area_ros: the --ros-args cannot be read: ")
+    process = subprocess.Popen([sys.executable, "-m", "veg_area_ros.ros.camera_node", "--ros-args", "-p",
+                                "rate:=30.0"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        said, deadline = "", time.monotonic() + 60
+        while "did you mean" not in said and process.poll() is None and time.monotonic() < deadline:
+            said += process.stdout.readline()
+        assert "parameter 'rate' is not one of camera_node's parameters: ignored (did you mean 'rate_hz'?)" in said
+    finally:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(20)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()

@@ -66,6 +66,22 @@ class StopOnSignal:
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
+def warn_unknown_parameters(node: Node) -> None:
+    """A parameter given at start (-p, a params file) that the node does not have is said, with the one it was
+    likely meant for (`-p rate:=30.0` for rate_hz was ignored in silence)."""
+    import difflib
+
+    from rclpy.logging import get_logger
+
+    given = set(getattr(node, "_parameter_overrides", {}))
+    declared = set(getattr(node, "_parameters", {}))
+    for name in sorted(given - declared):
+        close = difflib.get_close_matches(name, sorted(declared), n=1)
+        get_logger(node.get_name()).warning(
+            f"parameter {name!r} is not one of {node.get_name()}'s parameters: ignored"
+            + (f" (did you mean {close[0]!r}?)" if close else ""))
+
+
 def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None,
               until: Callable[[], bool] | None = None) -> int:
     """Create the nodes, spin them in one executor until Ctrl-C / SIGTERM / shutdown or `until()` is true,
@@ -82,7 +98,12 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
         print(f"veg_area_ros: {exc}", file=sys.stderr)
         return EXIT_USAGE
     # rclpy's handlers stay out; ours go in after init, so a slow rcl_init is still interrupted as usual
-    rclpy.init(args=args if args is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args if args is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:  # rcl's RCLError for a malformed --ros-args (`-p rate_hz` without :=, a bad remap)
+        said = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
+        print(f"veg_area_ros: the --ros-args cannot be read: {said}", file=sys.stderr)
+        return EXIT_USAGE
     stop = StopOnSignal()
     log_transport(transport)
     executor = SingleThreadedExecutor()
@@ -92,6 +113,7 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
         for factory in factories:
             nodes.append(factory())
             executor.add_node(nodes[-1])
+            warn_unknown_parameters(nodes[-1])
         while rclpy.ok() and not stop.requested and not any(getattr(n, "stop_requested", False) for n in nodes) \
                 and not (until is not None and until()):
             try:
