@@ -328,3 +328,36 @@ def test_a_closed_stdout_ends_calibrate_quietly(tmp_path):
     done = subprocess.run(["bash", "-o", "pipefail", "-c", command], capture_output=True, text=True, timeout=300,
                           env={**__import__("os").environ, "PYTHONPATH": str(REPO)})
     assert done.returncode == 0 and done.stdout == '{"distorti' and done.stderr == "", done.stderr
+
+
+def test_a_video_whose_name_is_not_utf8_is_measured(tmp_path):
+    """A video named with the byte 0xff killed `measure` with a segmentation fault (OpenCV's VideoCapture on the
+    name), no message. Measured: OpenCV is given a plain-named link, the rows carry the name with U+FFFD, and
+    the CSV and plot are named after the file's own bytes."""
+    import os
+
+    from veg_area_ros.calib_io import write_calibration
+    from veg_area_ros.sim.synthetic import ENDOSCOPE
+
+    frame = render(cube_scene(), 0.0, 0)
+    writer = cv2.VideoWriter(str(tmp_path / "plain.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 10, (640, 480))
+    for _ in range(3):
+        writer.write(frame)
+    writer.release()
+    odd = os.fsdecode(b"run\xff.avi")
+    (tmp_path / "plain.avi").rename(tmp_path / odd)
+    write_calibration(tmp_path / "cal.yaml", ENDOSCOPE)
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    import subprocess
+    import sys
+
+    from helpers import REPO
+
+    done = subprocess.run([sys.executable, "-m", "veg_area_ros.cli", "measure", odd, "--calibration", "cal.yaml",
+                           "--targets", "targets.yaml", "--threshold", "120"], cwd=tmp_path, capture_output=True,
+                          env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert b"time series: run\xff_area.csv" in done.stderr  # the name's own bytes, as ls shows them
+    rows = list(csv.DictReader((tmp_path / os.fsdecode(b"run\xff_area.csv")).open(encoding="utf-8")))
+    assert [row["frame"] for row in rows] == ["run\ufffd.avi#0", "run\ufffd.avi#1", "run\ufffd.avi#2"]
+    assert (tmp_path / os.fsdecode(b"run\xff_area.png")).stat().st_size > 1000

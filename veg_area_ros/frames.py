@@ -216,8 +216,40 @@ def expand_inputs(paths: Sequence[str | Path]) -> list[Path]:
     return files
 
 
+def shown_name(path: Path) -> str:
+    """A file's name as frames and rows carry it: its own, with any byte that is no UTF-8 shown as U+FFFD (the
+    CSV and JSON are UTF-8)."""
+    return path.name.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+
+
+_LINKS: list[str] = []  # folders of the links opencv_path made, removed at exit
+
+
+def opencv_path(path: Path) -> str:
+    """A name OpenCV can be given for `path`: its own, or where that is no UTF-8 (a byte such as 0xff, kept by
+    Python as a surrogate: OpenCV's VideoCapture died of a segmentation fault on it) a symlink with a plain
+    name in a private temporary folder."""
+    text = str(path)
+    try:
+        text.encode("utf-8")
+        return text
+    except UnicodeEncodeError:
+        pass
+    import atexit
+    import shutil
+
+    if not _LINKS:
+        atexit.register(lambda: [shutil.rmtree(folder, ignore_errors=True) for folder in _LINKS])
+    folder = tempfile.mkdtemp(prefix="veg_area_name_")
+    _LINKS.append(folder)
+    suffix = "".join(c for c in path.suffix if c.isascii() and (c.isalnum() or c == "."))
+    link = os.path.join(folder, f"input{suffix}")
+    os.symlink(os.path.abspath(path), link)
+    return link
+
+
 def video_frame_count(path: Path) -> int:
-    capture = cv2.VideoCapture(str(path))
+    capture = cv2.VideoCapture(opencv_path(path))
     try:
         return int(capture.get(cv2.CAP_PROP_FRAME_COUNT)) if capture.isOpened() else 0
     finally:
@@ -230,9 +262,9 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
     `stop` (exclusive): a range of a long video for one worker. `spread`: one frame in each run of `step`, at a
     place that varies from run to run (`spread_offset`), so that a motion repeating every few frames (a
     camera's pose cycle) is not sampled at the same phase every time."""
-    capture = cv2.VideoCapture(str(path))
+    capture = cv2.VideoCapture(opencv_path(path))
     if not capture.isOpened():
-        yield Frame(path.name, None, "is not a video OpenCV can open")
+        yield Frame(shown_name(path), None, "is not a video OpenCV can open")
         return
     fps = capture.get(cv2.CAP_PROP_FPS)
     declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
@@ -248,7 +280,8 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
                 ok, image = capture.read()
                 if not ok:
                     break
-                yield Frame(f"{path.name}#{index}", image, time_s=index / fps if fps > 0 else None, position=index)
+                yield Frame(f"{shown_name(path)}#{index}", image, time_s=index / fps if fps > 0 else None,
+                            position=index)
             elif not capture.grab():
                 break
             index += 1
@@ -257,8 +290,8 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
     if index < declared:  # OpenCV cannot read past a frame it cannot decode: the rest of the video is lost
         lost = len(range(index + (-index % step), declared, step))
         if lost:
-            yield Frame(f"{path.name}#{index}", None, f"frames {index} to {declared - 1} could not be decoded: the "
-                        f"video is damaged or cut short ({index} of {declared} frames read)", lost=lost)
+            yield Frame(f"{shown_name(path)}#{index}", None, f"frames {index} to {declared - 1} could not be decoded: "
+                        f"the video is damaged or cut short ({index} of {declared} frames read)", lost=lost)
 
 
 def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: int | None = None) -> Iterator[Frame]:
@@ -280,8 +313,8 @@ def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: i
     except Exception as exc:  # rosbags raises its own classes for a damaged chunk: the rest is lost, said below
         problem = f" ({' '.join(str(exc).split())[:200]})"
     if read < end:  # the index lists more image messages than could be read: damaged chunks
-        yield Frame(f"{path.name}#{read}", None, f"image messages {read} to {end - 1} could not be read: the bag "
-                    f"is damaged{problem} ({read} of {declared} read); 'veg-area bag-recover' rebuilds what is "
+        yield Frame(f"{shown_name(path)}#{read}", None, f"image messages {read} to {end - 1} could not be read: the "
+                    f"bag is damaged{problem} ({read} of {declared} read); 'veg-area bag-recover' rebuilds what is "
                     "readable", lost=end - read)
 
 
@@ -294,7 +327,7 @@ def _bag_frame(path: Path, frame) -> Frame:
         image, problem = frame.image.pixels(), ""
     except ImageMessageError as exc:
         image, problem = None, str(exc)
-    return Frame(f"{path.name}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
+    return Frame(f"{shown_name(path)}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
                  frame.camera_info, position=frame.index, camera_info_problem=frame.camera_info_problem)
 
 
@@ -319,16 +352,16 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
             yield from _greyed(iter_video(path, video_step, start, stop, spread), grey)
         elif suffix in IMAGE_SUFFIXES:
             image, problem = read_image(path, grey)
-            yield Frame(path.name, image, problem)
+            yield Frame(shown_name(path), image, problem)
         else:
             # unknown extension: try as an image, then as a video, before giving up
             image, problem = read_image(path, grey)
             if image is not None:
-                yield Frame(path.name, image)
+                yield Frame(shown_name(path), image)
             elif video_frame_count(path) > 0:
                 yield from _greyed(iter_video(path, video_step), grey)
             else:
-                yield Frame(path.name, None, "is neither an image nor a video")
+                yield Frame(shown_name(path), None, "is neither an image nor a video")
 
 
 def with_grey(frames: Iterator[Frame]) -> Iterator[Frame]:

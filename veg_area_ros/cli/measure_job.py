@@ -260,8 +260,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         """The header stamp of the first image of the bag named `name` (once per bag)."""
         if name not in starts:
             from ..bags import bag_first_stamp
+            from ..frames import shown_name
 
-            path = next(f for f in files if Path(f).name == name)
+            path = next(f for f in files if shown_name(Path(f)) == name)
             starts[name] = bag_first_stamp(path, job.image_topic) or 0.0
         return starts[name]
 
@@ -413,7 +414,7 @@ def plot_series(rows: list[dict], csv_path: Path) -> Path:
     from ..report import plot_area_series
 
     nan = float("nan")
-    times, title, label = series_axis(rows, csv_path.stem)
+    times, title, label = series_axis(rows, csv_path.stem.encode("utf-8", "surrogateescape").decode("utf-8", "replace"))
     return plot_area_series(times, [r.get("area_m2", nan) for r in rows], [r.get("area_std_m2", nan) for r in rows],
                             csv_path.with_suffix(".png"), title=title, time_label=label)
 
