@@ -361,3 +361,19 @@ def test_a_video_whose_name_is_not_utf8_is_measured(tmp_path):
     rows = list(csv.DictReader((tmp_path / os.fsdecode(b"run\xff_area.csv")).open(encoding="utf-8")))
     assert [row["frame"] for row in rows] == ["run\ufffd.avi#0", "run\ufffd.avi#1", "run\ufffd.avi#2"]
     assert (tmp_path / os.fsdecode(b"run\xff_area.png")).stat().st_size > 1000
+
+
+@pytest.mark.parametrize("points, said", [
+    ([[[-50, 10], [0, 0]], [[600, 12], [0.4, 0]], [[610, 450], [0.4, 0.3]], [[20, 440], [0, 0.3]]],
+     r"point 0 at \(-50, 10\) px lies outside the 640x480 frame"),
+    ([[[100, 100], [0, 0]], [[300, 200], [0.2, 0.1]], [[500, 300], [0.4, 0.2]]], "lie on one line"),
+])
+def test_hand_picked_points_off_the_image_or_on_one_line_are_refused(points, said):
+    """Points outside the image measured -76 %; three on one line gave 10.8 m², exit 0. Refused."""
+    from veg_area_ros.area import AreaMeasurer
+    from veg_area_ros.classify import Classifier
+    from veg_area_ros.targets import TargetsError, TargetsSpec
+
+    targets = TargetsSpec.from_dict({"points": [{"pixel": p, "plane": q} for p, q in points]})
+    with pytest.raises(TargetsError, match=said):
+        AreaMeasurer(None, targets, Classifier(threshold=120)).measure(render(cube_scene(), 0.0, 0))

@@ -51,6 +51,15 @@ class Tracking:
         self.markers, self.last_scale, self.last_located = {}, None, None
 
 
+COLLINEAR = 1e-3  # the targets' spread across their line, against along it, below which they span no plane
+
+
+def _collinear(planes: np.ndarray) -> bool:
+    centred = planes - planes.mean(axis=0)
+    spread = np.linalg.svd(centred, compute_uv=False)
+    return bool(spread[0] == 0 or spread[-1] / spread[0] < COLLINEAR)
+
+
 class Locator:
     """Locates one camera's targets (`TargetsSpec`) in its frames."""
 
@@ -102,6 +111,14 @@ class Locator:
         if len(located.pixels) < 2:
             raise TargetsError(f"only {len(located.pixels)} target(s) found in the frame; "
                                f"missing marker ids {located.missing}")
+        height, width = frame.shape[:2]
+        for k, (pixel, _) in enumerate(targets.points):
+            if not (-0.5 <= pixel[0] <= width - 0.5 and -0.5 <= pixel[1] <= height - 0.5):
+                raise TargetsError(f"point {k} at ({pixel[0]:g}, {pixel[1]:g}) px lies outside the {width}x{height} "
+                                   "frame: a hand-picked target must be a pixel of the image")
+        if len(planes) >= 3 and _collinear(np.array(planes)):
+            raise TargetsError(f"the {len(planes)} targets' plane coordinates lie on one line: they span no "
+                               "plane to scale an area by (give points off that line, or two for a distance)")
         offset = targets.object_plane_offset_m
         if offset is not None and not self.view.calibrated:
             raise TargetsError(NO_CALIBRATION_FOR_OFFSET)
