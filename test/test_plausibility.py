@@ -377,3 +377,10 @@ def test_hand_picked_points_off_the_image_or_on_one_line_are_refused(points, sai
     targets = TargetsSpec.from_dict({"points": [{"pixel": p, "plane": q} for p, q in points]})
     with pytest.raises(TargetsError, match=said):
         AreaMeasurer(None, targets, Classifier(threshold=120)).measure(render(cube_scene(), 0.0, 0))
+
+
+def test_the_frame_itself_as_its_background_is_refused(folder):
+    """`--background` naming the frame being measured evened the object away: -90 %, no warning. Refused."""
+    done = measure(folder, "cube.png", "--background", str(folder / "cube.png"))
+    assert done.returncode == 1 and "the --background image is this very frame" in done.stderr, done.stderr
+    assert measure(folder, "cube.png", "--background", str(folder / "empty.png")).returncode == 0

@@ -33,6 +33,7 @@ from .weights import Weights
 
 LIGHT_REFRESH_FRAMES = 20  # a steady camera's light and levels are found afresh this often (and on a drift)
 INTERIOR_PX = 3  # a class's interior: this far inside it, a blurred edge (1 px sd) adds under 0.1 % of the contrast
+SAME_FRAME_DN = 1.0  # a background frame this close to the frame (mean over the ROI) is the frame itself
 MAX_INTERIOR_PX = 30  # ... or deeper while the levels still move (a DSLR's turbid water: 7 px sd), up to this
 
 
@@ -163,7 +164,11 @@ def _flat_field(band: np.ndarray, weights: Weights, threshold: float, settings: 
     """The flat field of this frame's window: from the background frame, or fitted to the background
     pixels at least `reach` - 1 pixels from any pixel of the object's class (blurred edges stay out)."""
     if settings.background_band is not None:
-        return flat_field(band, weights.roi, background_band=settings.background_band[weights.window])
+        background = settings.background_band[weights.window]
+        if cv2.mean(cv2.absdiff(band, background), weights.roi)[0] < SAME_FRAME_DN:
+            raise ClassifyError("the --background image is this very frame (they differ by under "
+                                f"{SAME_FRAME_DN:g} DN in the ROI): it must show the scene without the object")
+        return flat_field(band, weights.roi, background_band=background)
     size = 2 * (reach - 1) + 1
 
     def fitted_beyond(split: float) -> FlatField | None:
