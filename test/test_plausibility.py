@@ -384,3 +384,17 @@ def test_the_frame_itself_as_its_background_is_refused(folder):
     done = measure(folder, "cube.png", "--background", str(folder / "cube.png"))
     assert done.returncode == 1 and "the --background image is this very frame" in done.stderr, done.stderr
     assert measure(folder, "cube.png", "--background", str(folder / "empty.png")).returncode == 0
+
+
+@pytest.mark.parametrize("options, said", [
+    (("--levels", "0,255"), "the sub-pixel shares make Af"),
+    (("--threshold", "250"), "the object fills"),
+])
+def test_levels_or_a_threshold_that_take_the_background_are_said(folder, options, said):
+    """`--levels 0,255` measured +241 % and `--threshold 250` +1190 %, exit 0 without a word. Said in the result;
+    the right settings stay silent."""
+    done = measure(folder, "cube.png", "--json", *options)
+    row = json.loads(done.stdout.splitlines()[0])
+    assert any(w.startswith(said) for w in row["warnings"]), row["warnings"]
+    fine = json.loads(measure(folder, "cube.png", "--json", "--threshold", "120").stdout.splitlines()[0])
+    assert not any(w.startswith(("the sub-pixel shares", "the object fills")) for w in fine["warnings"])

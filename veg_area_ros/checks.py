@@ -27,6 +27,8 @@ from .markers import DetectedMarker
 from .weights import Weights
 
 ROI_CUT_SHARE = 1e-3  # of the ROI without a pixel behind it: said (the remap's border is never counted)
+NEARLY_ALL = 0.98  # of the ROI's pixels taken for object: the classification took the background too
+SHARES_APART = 0.2  # sub-pixel Af this far from the count (real photos: a few %): the levels are not this frame's
 CLIP_HIGH, CLIP_LOW = 250, 5  # band values a sensor or JPEG has clipped: whites burnt out, shadows crushed
 CLIP_REACH_PX = 2  # blooming and the lens's blur carry a clipped pixel's light this far into its neighbours
 CLIP_EDGE_SHARE = 0.10  # clipping next to this share of the object's edge pixels matters (real photos: 17 %, Af -1.2 %)
@@ -155,6 +157,15 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
     if settings.area_mode == "subpixel" and not result.subpixel_applied:
         said.append("counted whole pixels: the object's and the background's levels could not be told apart "
                     "well enough for sub-pixel shares (uneven light or texture); the std is the count's")
+    roi_pixels = cv2.countNonZero(weights.roi)
+    if roi_pixels and result.pixel_count >= NEARLY_ALL * roi_pixels:
+        said.append(f"the object fills {100 * result.pixel_count / roi_pixels:.0f} % of the ROI: the threshold or "
+                    "levels take nearly everything for object (check --threshold, --levels and --object)")
+    if result.subpixel_applied and result.count_area_m2 > 0 and abs(result.area_m2 / result.count_area_m2 - 1) > \
+            SHARES_APART:
+        said.append(f"the sub-pixel shares make Af {100 * (result.area_m2 / result.count_area_m2 - 1):+.0f} % of the "
+                    "whole-pixel count: the levels do not match this frame's object and background (given "
+                    "--levels, or another light); Af is doubtful")
     if located.missing:
         said.append(f"targets missing: marker(s) {located.missing} not found; the scale comes from the others "
                     "and the ROI places the missing ones by their fit")
