@@ -220,9 +220,9 @@ def test_a_spreadsheets_csv_with_a_bom_is_read(tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (("demo", "--measurements", "0"), "--measurements: must be a whole number of 1 or more, got 0"),
-    (("vogel", "runs.csv", "--confidence", "1.5"), "--confidence: must lie between 0 and 1"),
-    (("vogel", "runs.csv", "--confidence", "nan"), "--confidence: must lie between 0 and 1"),
-    (("vogel", "runs.csv", "--confidence", "0"), "--confidence: must lie between 0 and 1"),
+    (("vogel", "runs.csv", "--confidence", "1.5"), "--confidence: must be between 0 and 1"),
+    (("vogel", "runs.csv", "--confidence", "nan"), "--confidence: must be between 0 and 1"),
+    (("vogel", "runs.csv", "--confidence", "0"), "--confidence: must be between 0 and 1"),
     (("calibrate", "photos", "--board", "chessboard:9x6:1", "-o", "c.yaml", "--fit-water-index"),
      "--fit-water-index fits the water's index from underwater views through a port"),
     (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler", "tcp://127.0.0.1:9",

@@ -39,32 +39,28 @@ def progress(quiet: bool) -> Callable[[str], None]:
     return say
 
 
-def positive_float(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+def _number(text: str, convert: Callable[[str], float], valid: Callable[[float], bool], wanted: str):
+    """`text` converted and checked, or argparse's error 'must be WANTED, got TEXT'."""
+    try:
+        value = convert(text)
+    except ValueError:
+        value = None
+    if value is None or not valid(value):
+        raise argparse.ArgumentTypeError(f"must be {wanted}, got {text}")
     return value
+
+
+def positive_float(text: str) -> float:
+    return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a positive number")
 
 
 def positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a whole number of 1 or more, got {text}")
-    return value
+    return _number(text, int, lambda v: v >= 1, "a whole number of 1 or more")
 
 
 def probability(text: str) -> float:
     """A confidence level: strictly between 0 and 1."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"must lie between 0 and 1 (0.95 for 95 %), got {text}")
-    return value
+    return _number(text, float, lambda v: 0 < v < 1, "between 0 and 1 (0.95 for 95 %)")
 
 
 def unwritable(path: Path, folder: bool) -> str | None:
