@@ -266,3 +266,14 @@ def test_a_broken_ost_ini_is_refused_with_its_reason(tmp_path, edit, problem):
     path.write_text(edit(OST_INI))
     with pytest.raises(CalibrationFileError, match=problem):
         read_calibration(path)
+
+
+def test_an_empty_distortion_list_is_refused_as_a_missing_one_is(tmp_path):
+    """`distortion_coefficients: {data: []}` was read as no distortion (Af +6 % on the endoscope) while a
+    missing key was refused."""
+    content = _valid(tmp_path)
+    content["distortion_coefficients"].update(data=[], cols=0)
+    path = tmp_path / "empty.yaml"
+    path.write_text(yaml.safe_dump(content))
+    with pytest.raises(CalibrationFileError, match="'distortion_coefficients' holds no numbers"):
+        read_calibration(path)

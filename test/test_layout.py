@@ -242,7 +242,12 @@ def test_a_mistyped_parameter_is_said_and_malformed_ros_args_in_one_line(tmp_pat
     done = subprocess.run([sys.executable, "-m", "veg_area_ros.ros.camera_node", "--ros-args", "-p", "rate_hz"],
                           env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
-    assert done.stderr.strip().splitlines()[-1].startswith("veg_area_ros: the --ros-args cannot be read: ")
+    assert done.stderr.strip().splitlines()[-1].startswith("veg_area_ros: ROS cannot start with these --ros-args")
+    env_lab = dict(env, ROS_DOMAIN_ID="lab")
+    lab = subprocess.run([sys.executable, "-m", "veg_area_ros.ros.camera_node"], env=env_lab, capture_output=True,
+                         text=True, timeout=120)
+    assert lab.returncode == 2 and "ROS_DOMAIN_ID is not an integral number" in lab.stderr, lab.stderr
+    assert "Traceback" not in lab.stderr
     process = subprocess.Popen([sys.executable, "-m", "veg_area_ros.ros.camera_node", "--ros-args", "-p",
                                 "rate:=30.0"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:

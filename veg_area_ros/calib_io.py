@@ -113,6 +113,9 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
     model = content.get("distortion_model", "plumb_bob")
     K = _numbers(path, content, "camera_matrix", 3, 3)
     dist = _numbers(path, content, "distortion_coefficients", 1, None)
+    if dist.size == 0 and model != "equidistant":  # a missing key is refused: an empty list is no answer either
+        raise CalibrationFileError(f"{path}: 'distortion_coefficients' holds no numbers; give the model's "
+                                   "coefficients (zeros for a lens without distortion)")
     try:
         camera = camera_from_info(content["image_width"], content["image_height"], str(model), dist, K)
     except ValueError as exc:

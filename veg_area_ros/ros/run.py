@@ -100,9 +100,9 @@ def run_nodes(factories: list[Callable[[], Node]], args: list[str] | None = None
     # rclpy's handlers stay out; ours go in after init, so a slow rcl_init is still interrupted as usual
     try:
         rclpy.init(args=args if args is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
-    except Exception as exc:  # rcl's RCLError for a malformed --ros-args (`-p rate_hz` without :=, a bad remap)
+    except Exception as exc:  # rcl's RCLError: a malformed --ros-args (`-p rate_hz` without :=), ROS_DOMAIN_ID=lab
         said = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
-        print(f"veg_area_ros: the --ros-args cannot be read: {said}", file=sys.stderr)
+        print(f"veg_area_ros: ROS cannot start with these --ros-args and ROS_ variables: {said}", file=sys.stderr)
         return EXIT_USAGE
     stop = StopOnSignal()
     log_transport(transport)
