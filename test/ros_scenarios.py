@@ -272,6 +272,14 @@ def scenario_calibration_trap(options: dict, nodes: Nodes) -> dict:
         out["b_commit"] = trigger("cal_b/commit")
         out["b_after"] = read_calibration(file_b).metadata["views_used"]
         out["b_commit_again"] = trigger("cal_b/commit")
+        file_c = Path("c.yaml").resolve()  # no calibration yet, and fewer views than min_views: served only
+        nodes.start("calibration_node", name="cal_c", camera_info_url=f"file://{file_c}", min_views=12,
+                    auto_calibrate=False)
+        feed(images[:8])
+        out["c_calibrate"] = trigger("cal_c/calibrate")
+        out["c_written_before_commit"] = file_c.exists()
+        out["c_commit"] = trigger("cal_c/commit")
+        out["c_written_after_commit"] = file_c.exists()
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()

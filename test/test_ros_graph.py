@@ -405,3 +405,7 @@ def test_the_node_replaces_a_calibration_on_evidence_not_rms(tmp_path):
     assert "~/commit" in message and trap["b_unchanged"]
     assert trap["b_commit"][0] is True and 4 <= trap["b_after"] < trap["a_after"]
     assert trap["b_commit_again"] == [False, "no fit is waiting (~/calibrate fits one)"]
+    # a fit of fewer views than min_views is served but written to camera_info_url only on ~/commit
+    assert trap["c_calibrate"][0] is True and "served but not written to camera_info_url" in trap["c_calibrate"][1]
+    assert trap["c_written_before_commit"] is False
+    assert trap["c_commit"][0] is True and trap["c_written_after_commit"] is True
