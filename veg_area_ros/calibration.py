@@ -24,7 +24,6 @@ from scipy.optimize import least_squares
 from .board import Detection
 from .camera_model import MODELS, PARAM_NAMES, BrownCamera, distort, distort_model, implausibility, param_names
 
-N_INTRINSIC = len(PARAM_NAMES)  # plumb_bob's; every function below takes the model's own count
 MIN_VIEWS = 3  # below this the nine camera parameters cannot be separated from the poses at all
 RECOMMENDED_VIEWS = 12
 SAME_VIEW_PX = 0.1  # views whose corners lie this close (mean) repeat one another: sensor noise moves them ~0.02
