@@ -22,6 +22,6 @@ setup(
     zip_safe=True,
     entry_points={
         "console_scripts": [f"{node}={PACKAGE}.ros.{module}:main" for node, module in NODES.items()]
-        + [f"veg-area={PACKAGE}.cli:main"],
+        + [f"veg-area={PACKAGE}.launcher:main"],
     },
 )

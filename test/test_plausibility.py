@@ -398,3 +398,24 @@ def test_levels_or_a_threshold_that_take_the_background_are_said(folder, options
     assert any(w.startswith(said) for w in row["warnings"]), row["warnings"]
     fine = json.loads(measure(folder, "cube.png", "--json", "--threshold", "120").stdout.splitlines()[0])
     assert not any(w.startswith(("the sub-pixel shares", "the object fills")) for w in fine["warnings"])
+
+
+def test_a_ctrl_c_while_the_command_starts_is_one_line():
+    """A Ctrl-C while `veg-area` loads its imports ended in a KeyboardInterrupt traceback."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from helpers import REPO
+
+    process = subprocess.Popen([sys.executable, "-c", "from veg_area_ros.launcher import main; "
+                                "import sys; sys.exit(main())", "measure", "--help"],
+                               env={**os.environ, "PYTHONPATH": str(REPO)}, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    time.sleep(0.05)  # the interpreter is up, the command line's imports are loading
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert "Traceback" not in stderr, stderr
+    assert process.returncode in (130, -signal.SIGINT, 0), (process.returncode, stderr)  # 0: --help came first
