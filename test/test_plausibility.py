@@ -419,3 +419,24 @@ def test_a_ctrl_c_while_the_command_starts_is_one_line():
     _, stderr = process.communicate(timeout=60)
     assert "Traceback" not in stderr, stderr
     assert process.returncode in (130, -signal.SIGINT, 0), (process.returncode, stderr)  # 0: --help came first
+
+
+def test_the_default_csv_is_checked_before_any_work(tmp_path):
+    """Run where nothing can be written (here /proc; a read-only folder alike), a video's default CSV
+    (<video>_area.csv in the current folder) failed with a traceback after every frame was measured; the docs
+    say outputs are checked first. Refused before any work."""
+    from helpers import run_cli
+
+    from veg_area_ros.calib_io import write_calibration
+    from veg_area_ros.sim.synthetic import ENDOSCOPE
+
+    writer = cv2.VideoWriter(str(tmp_path / "clip.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 10, (640, 480))
+    for _ in range(3):
+        writer.write(render(cube_scene(), 0.0, 0))
+    writer.release()
+    write_calibration(tmp_path / "cal.yaml", ENDOSCOPE)
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    done = run_cli("measure", str(tmp_path / "clip.avi"), "--calibration", str(tmp_path / "cal.yaml"), "--targets",
+                   str(tmp_path / "targets.yaml"), "--threshold", "120", cwd=Path("/proc"))
+    assert done.returncode == 2 and "--csv clip_area.csv: cannot be written" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and "[1/" not in done.stdout

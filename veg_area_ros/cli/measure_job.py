@@ -216,7 +216,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         if folder:  # each frame's image in the folder, named after its input: not over an input of the same name
             check_outputs([(option, str(Path(folder) / frame_file_name(f.name)), False) for f in files], sources,
                           "measured", "its image ")
-    check_writable([("--overlay", job.overlay, not single_overlay), ("--csv", job.csv, False),
+    check_writable([("--overlay", job.overlay, not single_overlay), ("--csv", csv_path, False),  # default too
                     ("--idealized", job.idealized, True)], "measured")
     if single_overlay and total > 1:
         raise CliError(f"--overlay {job.overlay} names one image but the input has {total} frames; "
