@@ -440,3 +440,20 @@ def test_the_default_csv_is_checked_before_any_work(tmp_path):
                    str(tmp_path / "targets.yaml"), "--threshold", "120", cwd=Path("/proc"))
     assert done.returncode == 2 and "--csv clip_area.csv: cannot be written" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr and "[1/" not in done.stdout
+
+
+@pytest.mark.parametrize("options, said", [
+    (("--csv", "a" * 300 + ".csv"), "has a name of 304 bytes, more than a file system allows (255)"),
+    (("--csv", "/".join(["d" * 200] * 22) + "/x.csv"), "longer than the system allows"),
+    (("--csv", "loop1"), "is a symlink loop"),
+    (("--csv", "res", "--overlay", "res"), "name the same path: a file and a folder cannot be one"),
+])
+def test_outputs_that_cannot_be_written_are_said_before_the_work(folder, options, said):
+    """A 300-character name, a 4.4 k path, a symlink loop as --csv and `--csv res --overlay res` all ended in
+    tracebacks after the work. Refused before it, in one line."""
+    loop = folder / "loop1"
+    if not loop.is_symlink():
+        loop.symlink_to(folder / "loop2")
+        (folder / "loop2").symlink_to(loop)
+    done = measure(folder, "cube.png", *options)
+    assert done.returncode == 2 and said in done.stderr and "Traceback" not in done.stderr, done.stderr

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import errno
 import io
 import math
 import os
@@ -63,9 +64,24 @@ def probability(text: str) -> float:
     return _number(text, float, lambda v: 0 < v < 1, "between 0 and 1 (0.95 for 95 %)")
 
 
+NAME_MAX, PATH_MAX = 255, 4096  # bytes: Linux's limits on a name and a whole path
+
+
 def unwritable(path: Path, folder: bool) -> str | None:
     """Why `path` (a file, or a folder to write into) cannot be written here, or None: checked before any work
-    by creating (and removing) a temporary file where it would go (permissions alone miss /proc as root)."""
+    by creating (and removing) a temporary file where it would go (permissions alone miss /proc as root); a name
+    or path longer than the file system allows is said as such."""
+    longest = max((len(os.fsencode(part)) for part in path.parts), default=0)
+    if longest > NAME_MAX:
+        return f"has a name of {longest} bytes, more than a file system allows ({NAME_MAX})"
+    if len(os.fsencode(str(path.absolute()))) >= PATH_MAX:
+        return f"is a path of more than {PATH_MAX} bytes, longer than the system allows"
+    if path.is_symlink():
+        try:
+            os.stat(path)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                return "is a symlink loop (it leads back to itself)"
     if path.exists() and folder and not path.is_dir():
         return "exists and is not a folder"
     if path.exists() and not folder and path.is_dir():
@@ -101,7 +117,7 @@ def overwrites_input(output: Path, inputs: Sequence[str | Path], writes_images: 
 
     try:
         target = output.resolve()
-    except OSError:
+    except (OSError, RuntimeError):  # a symlink loop (RuntimeError in Python 3.11): written over as a link
         return None
     media = writes_images or output.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES
     for given in inputs:

@@ -218,6 +218,13 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                           "measured", "its image ")
     check_writable([("--overlay", job.overlay, not single_overlay), ("--csv", csv_path, False),  # default too
                     ("--idealized", job.idealized, True)], "measured")
+    folders = {option: Path(value).absolute() for option, value in (("--overlay", job.overlay),
+                                                                    ("--idealized", job.idealized))
+               if value and not (option == "--overlay" and single_overlay)}
+    for option, folder in folders.items():
+        if csv_path is not None and Path(csv_path).absolute() == folder:
+            raise CliError(f"--csv {csv_path} and {option} {folder} name the same path: a file and a folder "
+                           "cannot be one; nothing was measured", EXIT_USAGE)
     if single_overlay and total > 1:
         raise CliError(f"--overlay {job.overlay} names one image but the input has {total} frames; "
                        "give a folder", EXIT_USAGE)
