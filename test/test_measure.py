@@ -361,3 +361,46 @@ def test_every_input_of_a_batch_gets_its_own_csv():
     paths = batch_csv_paths(["clip.avi", "sub/clip.avi", "01_clip.avi", "02_clip_area"], Path("out"))
     assert len(set(paths)) == 4, paths
     assert [p.name for p in batch_csv_paths(["a.avi", "b.avi"], Path("out"))] == ["a_area.csv", "b_area.csv"]
+
+
+def test_a_batch_killed_outright_takes_its_workers_along(workspace, long_video, tmp_path):
+    """SIGKILL of `measure --jobs 2` (the OOM killer, `kill -9`) left its workers measuring to the end for
+    nobody, and its manager process for ever. They now end with it (Linux's parent-death signal), and
+    multiprocessing's resource tracker with them."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from helpers import REPO
+
+    process = subprocess.Popen([sys.executable, "-m", "veg_area_ros.cli", "measure", str(long_video),
+                                str(long_video), "--calibration", str(workspace / "water.yaml"), "--targets",
+                                str(workspace / "targets.yaml"), "--jobs", "2", "--output-dir", str(tmp_path / "out")],
+                               cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True)
+
+    def children() -> set[int]:
+        found = set()
+        for task in Path(f"/proc/{process.pid}/task").iterdir():
+            found |= {int(p) for p in (task / "children").read_text().split()}
+        return found
+
+    workers: set[int] = set()
+    for line in process.stderr:  # the batch's progress: workers are measuring
+        if "frames measured in" in line:
+            workers = children()
+            break
+    assert len(workers) >= 3, workers  # the two workers, the manager (and the resource tracker)
+    process.kill()
+    process.wait(30)
+    deadline = time.monotonic() + 30
+    while any(Path(f"/proc/{pid}").exists() and "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()
+              for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    alive = [pid for pid in workers if Path(f"/proc/{pid}").exists()
+             and "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()]
+    for pid in alive:  # never left behind by the test itself
+        os.kill(pid, signal.SIGKILL)
+    assert not alive, alive

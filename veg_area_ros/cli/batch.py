@@ -9,6 +9,7 @@ import multiprocessing
 import os
 import queue
 import signal
+import sys
 import threading
 import time
 import traceback
@@ -34,6 +35,7 @@ from .measure_job import MeasureJob, frames_lost, measure
 BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "mean_area_std_m2", "frame_spread_m2", "warnings",
                  "not_measured", "csv", "error")
 PROGRESS_EVERY_S = 2.0
+PR_SET_PDEATHSIG = 1  # prctl option: the signal a process gets when its parent dies
 
 
 def batch_csv_paths(inputs: list[str], folder: Path) -> list[Path]:
@@ -57,14 +59,31 @@ def batch_csv_paths(inputs: list[str], folder: Path) -> list[Path]:
 
 def _ignore_ctrl_c() -> None:
     """Batch workers leave Ctrl-C to the main process, which asks them to stop between frames: interrupted
-    anywhere (an idle worker, one writing its CSV), a worker would break the pool and lose the others' work."""
+    anywhere (an idle worker, one writing its CSV), a worker would break the pool and lose the others' work.
+    And they end with it: a main process killed outright (SIGKILL, the OOM killer) takes its workers along
+    (Linux's parent-death signal) instead of leaving them measuring to the end for nobody."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
 def _summary(source: str, csv_path: str, error: str = "") -> dict:
     """One input's row of batch_summary.csv before anything was measured."""
     return {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "mean_area_std_m2": "",
             "frame_spread_m2": "", "warnings": "", "not_measured": "", "csv": csv_path, "error": error}
+
+
+def _started_manager(context):
+    """The batch's manager process (the progress queue, the stop flag), begun as the workers are: Ctrl-C left to
+    the main process, and ending with it."""
+    from multiprocessing.managers import SyncManager
+
+    manager = SyncManager(ctx=context)
+    manager.start(_ignore_ctrl_c)
+    return manager
 
 
 def _measure_one(job: MeasureJob, position: int, progress_queue, stopping) -> dict:
@@ -175,8 +194,8 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
     # worker interrupted before its initializer ran would break the pool); here it arrives once they run
     unblocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
-        with context.Manager() as manager, ProcessPoolExecutor(workers, mp_context=context,
-                                                               initializer=_ignore_ctrl_c) as pool:
+        with _started_manager(context) as manager, ProcessPoolExecutor(workers, mp_context=context,
+                                                                       initializer=_ignore_ctrl_c) as pool:
             progress_queue, stopping = manager.Queue(), manager.Event()
             pending = {}
             for k, source in enumerate(inputs):
