@@ -367,6 +367,7 @@ def test_a_batch_killed_outright_takes_its_workers_along(workspace, long_video, 
     """SIGKILL of `measure --jobs 2` (the OOM killer, `kill -9`) left its workers measuring to the end for
     nobody, and its manager process for ever. They now end with it (Linux's parent-death signal), and
     multiprocessing's resource tracker with them."""
+    import contextlib
     import os
     import signal
     import subprocess
@@ -384,8 +385,15 @@ def test_a_batch_killed_outright_takes_its_workers_along(workspace, long_video, 
     def children() -> set[int]:
         found = set()
         for task in Path(f"/proc/{process.pid}/task").iterdir():
-            found |= {int(p) for p in (task / "children").read_text().split()}
+            with contextlib.suppress(OSError):  # a thread that ended meanwhile
+                found |= {int(p) for p in (task / "children").read_text().split()}
         return found
+
+    def alive(pid: int) -> bool:
+        try:
+            return "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()
+        except OSError:  # gone, even between two looks
+            return False
 
     workers: set[int] = set()
     for line in process.stderr:  # the batch's progress: workers are measuring
@@ -396,11 +404,55 @@ def test_a_batch_killed_outright_takes_its_workers_along(workspace, long_video, 
     process.kill()
     process.wait(30)
     deadline = time.monotonic() + 30
-    while any(Path(f"/proc/{pid}").exists() and "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()
-              for pid in workers) and time.monotonic() < deadline:
+    while any(alive(pid) for pid in workers) and time.monotonic() < deadline:
         time.sleep(0.2)
-    alive = [pid for pid in workers if Path(f"/proc/{pid}").exists()
-             and "zombie" not in Path(f"/proc/{pid}/status").read_text().lower()]
-    for pid in alive:  # never left behind by the test itself
-        os.kill(pid, signal.SIGKILL)
-    assert not alive, alive
+    left = [pid for pid in workers if alive(pid)]
+    for pid in left:  # never left behind by the test itself
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    assert not left, left
+
+
+def test_a_videos_overlays_are_one_per_frame(workspace, tmp_path):
+    """`--overlay DIR` for a video wrote every frame's overlay to one DIR/VIDEO.png (the last frame's won):
+    one per frame now, named after it."""
+    video = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, ENDOSCOPE.image_size)
+    for _ in range(3):
+        writer.write(cv2.imread(str(workspace / "cube.png")))
+    writer.release()
+    done = run_cli("measure", str(video), "--calibration", str(workspace / "water.yaml"), "--targets",
+                   str(workspace / "targets.yaml"), "--threshold", "120", "--overlay", str(tmp_path / "over"),
+                   cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in (tmp_path / "over").iterdir()) == [f"clip_{k:06d}.png" for k in range(3)]
+
+
+def test_overlays_on_a_full_disk_are_said_and_fail_the_run(workspace, tmp_path):
+    """--overlay on a full disk: 60 libpng errors and exit 0. The first image that cannot be written is said,
+    no more are tried, the rows are kept, and the run exits 1. (A 64 kB tmpfs in a private mount namespace.)"""
+    import shutil
+    import subprocess
+    import sys
+
+    from helpers import REPO
+
+    if shutil.which("unshare") is None:
+        pytest.skip("unshare is not installed: no private mount namespace for a full disk")
+    full = tmp_path / "full"
+    full.mkdir()
+    video = tmp_path / "clip.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, ENDOSCOPE.image_size)
+    for _ in range(3):
+        writer.write(cv2.imread(str(workspace / "cube.png")))
+    writer.release()
+    command = (f"mount -t tmpfs -o size=64k none {full} && exec {sys.executable} -m veg_area_ros.cli measure "
+               f"{video} --calibration {workspace / 'water.yaml'} --targets {workspace / 'targets.yaml'} "
+               f"--threshold 120 --overlay {full}/over --csv {tmp_path / 'clip.csv'}")
+    done = subprocess.run(["unshare", "-m", "sh", "-c", command], capture_output=True, text=True, timeout=300,
+                          env={**__import__("os").environ, "PYTHONPATH": str(REPO)})
+    if done.stderr.startswith(("unshare:", "mount:")):  # the namespace or the mount refused, not the command
+        pytest.skip(f"no private mount namespace here: {done.stderr.strip()}")
+    assert done.returncode == 1 and "could not be written (a full disk?)" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and done.stderr.count("could not be written (a full disk?)") == 2
+    assert len(list(csv.DictReader((tmp_path / "clip.csv").open()))) == 3  # every row kept

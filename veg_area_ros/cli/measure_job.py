@@ -125,7 +125,11 @@ class MeasureJob:
 
 
 def frame_file_name(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in Path(name).stem) + ".png"
+    """The image file an overlay or idealized frame is written to, named after its frame: an image's stem, a
+    video's or bag's frame as stem_NNNNNN (every frame its own file; they all wrote STEM.png before)."""
+    base, _, index = name.rpartition("#")
+    stem = f"{Path(base).stem}_{int(index):06d}" if base and index.isdigit() else Path(name).stem
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in stem) + ".png"
 
 
 def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
@@ -260,6 +264,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     log = RowLog(csv_path, CSV_COLUMNS, lambda row: not row["error"] and not _no_object(row)) \
         if csv_path is not None else None
     warned: dict[str, int] = {}
+    unwritten: list[str] = []  # overlay or idealized images that could not be written
     stamps: list[tuple[float, float]] = []  # (stamp, since its bag's start) of the frames left out by the range
     starts: dict[str, float] = {}
 
@@ -323,13 +328,19 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                     line = (f"[{index}/{total}] {frame.name}: Af = {result.area_m2:.6g} ± {result.area_std_m2:.2g} m² "
                             f"({result.pixel_count} px, threshold {result.threshold:g}, {result.scale.kind} scale"
                             f"{'' if result.calibrated else ', UNCALIBRATED'})")
-                if job.overlay:
+                images = []  # the images this frame asks for, while they can be written (a full disk: none more)
+                if job.overlay and not unwritten:
                     target = Path(job.overlay) if single_overlay else Path(job.overlay) / frame_file_name(frame.name)
+                    images.append((target, draw_overlay(result)))
+                if job.idealized and camera is not None and not unwritten:
+                    images.append((Path(job.idealized) / frame_file_name(frame.name), result.image))
+                for target, image in images:
                     target.parent.mkdir(parents=True, exist_ok=True)
-                    if not cv2.imwrite(str(target), draw_overlay(result)):
-                        say(f"[{index}/{total}] {frame.name}: overlay {target} could not be written")
-                if job.idealized and camera is not None:
-                    cv2.imwrite(str(Path(job.idealized) / frame_file_name(frame.name)), result.image)
+                    if not cv2.imwrite(str(target), image):
+                        unwritten.append(str(target))
+                        say(f"[{index}/{total}] {frame.name}: {target} could not be written (a full disk?); no "
+                            "more overlay or idealized images are written, the rows go on")
+                        break
             rows.append(row)
             if log is not None:  # on disk before it is shown
                 log.add(csv_row(row))
@@ -383,6 +394,11 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         where = "the frame" if measured == 1 else f"any of the {measured} frames"
         print(f"veg-area measure: no object found in {where} measured (see the warnings); check the threshold, "
               "--object and the ROI", file=sys.stderr, flush=True)
+        return EXIT_FAILED, rows
+    if unwritten:  # the rows are whole, the images are not: said even when quiet, and not a success
+        print(f"veg-area measure: {unwritten[0]} could not be written (a full disk?), nor any image after it; the "
+              f"{measured} frames measured are kept" + (f" in {csv_path}" if csv_path is not None else ""),
+              file=sys.stderr, flush=True)
         return EXIT_FAILED, rows
     problem = frames_lost(rows, total)
     if problem:  # said even when quiet: the series has holes
