@@ -269,3 +269,13 @@ def test_a_wide_lens_behind_an_explicit_flat_port_measures_within_0_3_percent(mo
     result = measurer.measure(frame)
     assert measurer._inner.camera.model == model
     assert abs(result.area_m2 / scene.true_area_m2 - 1) < 0.003, result.area_m2 / scene.true_area_m2
+
+
+def test_auto_with_too_few_distinct_views_takes_plumb_bob_and_says_why():
+    """Ten photos of which four repeat others leave six distinct views, too few to split into halves: `auto`
+    ended in "no camera model fits these views"; it takes plumb_bob and says why."""
+    views = list(_views("equidistant", "air"))[:6]
+    repeated = views + [View(f"again {v.name}", v.detection) for v in views[:4]]
+    result = calibrate(repeated, FISHEYE.image_size, model="auto")
+    assert result.camera.model == "plumb_bob" and result.views_used == 6
+    assert "6 distinct views are too few to compare models" in result.model_choice["reason"]

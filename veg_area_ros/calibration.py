@@ -856,6 +856,13 @@ def choose_model(views: Sequence[View], image_size: tuple[int, int], robust_loss
         candidates[model] = {"rms_px": fit.rms_px, "held_out_rms_px": held_out, "problem": problem}
         if problem is None and np.isfinite(held_out):
             fits[model] = fit
+    if not fits and all("error" not in c and not c["problem"] for c in candidates.values()):
+        # no held-out figure anywhere: too few distinct views to split (repeats counted once)
+        result = calibrate(views, image_size, robust_loss, outlier_sigma, progress, True, "plumb_bob")
+        result.model_choice = {"chosen": "plumb_bob", "reason": f"{result.views_used} distinct views are too few to "
+                               f"compare models on held-out views (at least {MIN_VIEWS_TO_CHOOSE}): the common one",
+                               "candidates": candidates}
+        return result
     if not fits:
         raise CalibrationError("no camera model fits these views: " + "; ".join(
             f"{m}: {c.get('error') or c.get('problem') or 'no held-out figure'}" for m, c in candidates.items()))
