@@ -22,7 +22,7 @@ from scipy import sparse
 from scipy.optimize import least_squares
 
 from .board import Detection
-from .camera_model import MODELS, PARAM_NAMES, BrownCamera, distort, distort_model, implausibility, param_names
+from .camera_model import MODELS, PARAM_NAMES, BrownCamera, distort_model, implausibility, inside_hull, param_names
 
 MIN_VIEWS = 3  # below this the nine camera parameters cannot be separated from the poses at all
 RECOMMENDED_VIEWS = 12
@@ -368,8 +368,7 @@ def _bundle_lm(object_points: list[np.ndarray], image_points: list[np.ndarray], 
         camera = np.einsum("nij,nj->ni", rotations[owner], every_point) + poses[owner, 3:]
         fx, fy, cx, cy = x[:4]
         normalized = camera[:, :2] / camera[:, 2:3]
-        distorted = (distort(normalized, *x[4:n_camera]) if model == "plumb_bob"  # plumb_bob order, as x holds it
-                     else distort_model(normalized, model, x[4:n_camera]))
+        distorted = distort_model(normalized, model, x[4:n_camera])  # the model's order, as x holds it
         projected = (distorted * (fx, fy) + (cx, cy)).ravel()
         difference = projected - every_observed
         return float(difference @ difference)
@@ -501,9 +500,8 @@ def _covered_grid(camera: BrownCamera, covered: np.ndarray | None) -> np.ndarray
     (the whole grid without points, or where none lies inside)."""
     grid = _image_grid(camera)
     if covered is not None and len(covered) >= 3:
-        hull = cv2.convexHull(covered.astype(np.float32))
-        inside = [cv2.pointPolygonTest(hull, (float(u), float(v)), False) >= 0 for u, v in grid]
-        grid = grid[np.array(inside)] if any(inside) else grid
+        inside = inside_hull(grid, covered)
+        grid = inside if len(inside) else grid
     return grid
 
 
@@ -841,7 +839,8 @@ def choose_model(views: Sequence[View], image_size: tuple[int, int], robust_loss
                                f"on held-out views (at least {MIN_VIEWS_TO_CHOOSE}): the common one",
                                "candidates": {}}
         return result
-    fits: dict[str, CalibrationResult] = {}
+    fitted: dict[str, CalibrationResult] = {}  # every model that could be fitted
+    fits: dict[str, CalibrationResult] = {}  # ... of those, the ones with a held-out figure and no problem
     candidates: dict[str, dict] = {}
     for model in MODEL_PREFERENCE:
         say(f"model {model}")
@@ -850,6 +849,7 @@ def choose_model(views: Sequence[View], image_size: tuple[int, int], robust_loss
         except CalibrationError as exc:
             candidates[model] = {"error": str(exc)}
             continue
+        fitted[model] = fit
         problem = implausibility(fit.camera, covered=np.vstack([p[k] for p, k in zip(fit.image_points, fit.inliers,
                                                                                          strict=True)]))
         held_out = fit.halves.get("held_out_rms_px", math.nan)
@@ -858,7 +858,7 @@ def choose_model(views: Sequence[View], image_size: tuple[int, int], robust_loss
             fits[model] = fit
     if not fits and all("error" not in c and not c["problem"] for c in candidates.values()):
         # no held-out figure anywhere: too few distinct views to split (repeats counted once)
-        result = calibrate(views, image_size, robust_loss, outlier_sigma, progress, True, "plumb_bob")
+        result = fitted["plumb_bob"]
         result.model_choice = {"chosen": "plumb_bob", "reason": f"{result.views_used} distinct views are too few to "
                                f"compare models on held-out views (at least {MIN_VIEWS_TO_CHOOSE}): the common one",
                                "candidates": candidates}

@@ -242,8 +242,6 @@ class BrownCamera:
     # --- projection ---------------------------------------------------------------------------------
     def distort_normalized(self, xy: np.ndarray) -> np.ndarray:
         """Ideal normalized coordinates (N, 2) -> distorted normalized coordinates (N, 2)."""
-        if self.model == "plumb_bob":
-            return distort(xy, self.k1, self.k2, self.p1, self.p2, self.k3)
         return distort_model(xy, self.model, self.dist)
 
     def normalized_to_pixels(self, xy: np.ndarray) -> np.ndarray:
@@ -310,17 +308,7 @@ class BrownCamera:
 
     def _distortion_jacobian(self, xy: np.ndarray) -> tuple[np.ndarray, ...]:
         """d(x_d, y_d)/d(x, y) as the four entries (dxd/dx, dxd/dy, dyd/dx, dyd/dy)."""
-        if self.model != "plumb_bob":
-            return distortion_jacobian(xy, self.model, self.dist)
-        x, y = xy[:, 0], xy[:, 1]
-        r2 = x * x + y * y
-        radial = 1 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3))
-        dradial_dr2 = self.k1 + r2 * (2 * self.k2 + 3 * r2 * self.k3)
-        dxd_dx = radial + 2 * x * x * dradial_dr2 + 2 * self.p1 * y + 6 * self.p2 * x
-        dxd_dy = 2 * x * y * dradial_dr2 + 2 * self.p1 * x + 2 * self.p2 * y
-        dyd_dx = 2 * x * y * dradial_dr2 + 2 * self.p1 * x + 2 * self.p2 * y
-        dyd_dy = radial + 2 * y * y * dradial_dr2 + 6 * self.p1 * y + 2 * self.p2 * x
-        return dxd_dx, dxd_dy, dyd_dx, dyd_dy
+        return distortion_jacobian(xy, self.model, self.dist)
 
     @cached_property
     def reach(self) -> tuple[float, float] | None:
@@ -421,7 +409,7 @@ def implausibility(camera: BrownCamera, samples: int = 25, covered: np.ndarray |
     u, v = np.meshgrid(np.linspace(0, width - 1, samples), np.linspace(0, height - 1, samples))
     raw = np.column_stack([u.ravel(), v.ravel()])
     if covered is not None and len(covered) >= 3:
-        raw = np.vstack([_inside_hull(raw, covered), cv2.convexHull(covered.astype(np.float32)).reshape(-1, 2)])
+        raw = np.vstack([inside_hull(raw, covered), cv2.convexHull(covered.astype(np.float32)).reshape(-1, 2)])
     with np.errstate(all="ignore"):
         reach = camera.reach
     if reach is not None:
@@ -456,7 +444,8 @@ def implausibility(camera: BrownCamera, samples: int = 25, covered: np.ndarray |
     return None
 
 
-def _inside_hull(points: np.ndarray, hull_of: np.ndarray) -> np.ndarray:
+def inside_hull(points: np.ndarray, hull_of: np.ndarray) -> np.ndarray:
+    """The points (N, 2) that lie inside (or on) the convex hull of `hull_of`."""
     hull = cv2.convexHull(np.asarray(hull_of, np.float32).reshape(-1, 2))
     inside = [cv2.pointPolygonTest(hull, (float(u), float(v)), False) >= 0 for u, v in points]
     return points[np.array(inside, bool)]

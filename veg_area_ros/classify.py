@@ -352,9 +352,12 @@ def roi_area_inside(polygon, width: int, height: int) -> float:
     clipped = check_polygon(polygon)
     for axis, limit, below in ((0, -0.5, False), (0, width - 0.5, True), (1, -0.5, False), (1, height - 0.5, True)):
         clipped = _clip(clipped, axis, limit, below)
-    if len(clipped) < 3:
-        return 0.0
-    x, y = clipped[:, 0], clipped[:, 1]
+    return polygon_area(clipped) if len(clipped) >= 3 else 0.0
+
+
+def polygon_area(corners: np.ndarray) -> float:
+    """The area (px²) a simple polygon (N, 2) encloses (the shoelace formula)."""
+    x, y = corners[:, 0], corners[:, 1]
     return float(abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2)
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .classify import ClassifyError, check_polygon, check_roi_in_image, polygon_roi, roi_area_inside
+from .classify import ClassifyError, check_polygon, check_roi_in_image, polygon_area, polygon_roi, roi_area_inside
 from .idealize import IdealView
 from .locate import MARKER_EXCLUSION, Located
 from .scale import marker_layout_problem
@@ -53,8 +53,7 @@ class Region:
             check_roi_in_image(polygon, shape[1], shape[0])
         roi = polygon_roi(shape, polygon, holes)
         corners = np.asarray(polygon, float).reshape(-1, 2)
-        x, y = corners[:, 0], corners[:, 1]
-        area = abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2
+        area = polygon_area(corners)
         kept = min(roi_area_inside(corners, shape[1], shape[0]) / area, 1.0) if area > 0 else 1.0
         valid = self.view.valid_mask()
         if valid is not None:

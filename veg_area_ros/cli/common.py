@@ -141,10 +141,8 @@ def check_outputs(outputs: Sequence[tuple[str, str | None, bool]], inputs: Seque
         if value:
             problem = overwrites_input(Path(value), [i for i in inputs if i], writes_images)
             if problem:
-                raise CliError(f"{option}: {written}{value} {problem}: it would be written over; nothing was "
-                               f"{what}" if written else
-                               f"{option} {value} {problem}: it would be written over; nothing was {what}",
-                               EXIT_USAGE)
+                named = f"{option}: {written}{value}" if written else f"{option} {value}"
+                raise CliError(f"{named} {problem}: it would be written over; nothing was {what}", EXIT_USAGE)
 
 
 def write_csv(path: Path, columns: Sequence[str], rows: list[dict]) -> None:

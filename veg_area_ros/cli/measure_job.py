@@ -182,7 +182,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError(str(exc)) from exc
     videos = [f for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
     bags = [f for f in files if is_bag(f)]
-    if (math.isfinite(job.start_time.seconds) or math.isfinite(job.end_time.seconds)) and not bags:
+    trimmed = math.isfinite(job.start_time.seconds) or math.isfinite(job.end_time.seconds)
+    if trimmed and not bags:
         raise CliError("--start-time and --end-time pick bag frames by their header stamp; the inputs hold no bag",
                        EXIT_USAGE)
     if from_bag and len(bags) != len(files):
@@ -295,10 +296,11 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                     measurer.start_segment()
             if frame.stamp is not None:
                 row["stamp_sec"], row["stamp_nanosec"] = frame.stamp
-                since = frame.time_s - run_start(frame.name.rsplit("#", 1)[0])
-                if not (job.start_time.at(frame.time_s, since) <= 0 <= job.end_time.at(frame.time_s, since)):
-                    stamps.append((frame.time_s, since))
-                    continue
+                if trimmed:  # only then is the bag's first image read
+                    since = frame.time_s - run_start(frame.name.rsplit("#", 1)[0])
+                    if not (job.start_time.at(frame.time_s, since) <= 0 <= job.end_time.at(frame.time_s, since)):
+                        stamps.append((frame.time_s, since))
+                        continue
             try:
                 if frame.image is None:
                     row["lost"] = frame.lost  # not a CSV column: counted at the end

@@ -50,10 +50,7 @@ class CalibrationNode(Node):
                                  "enough variety: see ~/feedback).", low=4, high=500)
         declare(self, "model", "auto", "Camera model fitted (ROS's distortion_model); auto fits all three and picks "
                 "the one that best predicts held-out views (as `veg-area calibrate --model`); read at each fit.",
-                choices=("auto", *MODELS))
-        if self.get_parameter("model").value not in ("auto", *MODELS):
-            raise ValueError(f"parameter model: {self.get_parameter('model').value!r} is not one of auto, "
-                             f"{', '.join(MODELS)}")
+                choices=("auto", *MODELS))  # refused at start by `declare`, at each fit by `calibrate`
         self.auto_calibrate = declare(self, "auto_calibrate", True, "Fit once min_views varied views are in.")
         self.camera_name = declare(self, "camera_name", "camera", "camera_name written in the YAML.")
         url = declare(self, "camera_info_url", "file://" + os.path.expanduser("~/.ros/camera_info/veg_area.yaml"),
@@ -193,11 +190,8 @@ class CalibrationNode(Node):
         lacking = f"; the views still lack variety: {missing}" if missing else ""
         if self.image_size is None or len(self.views) < 4:
             return False, f"{len(self.views)} views kept; at least 4 are needed (12+ recommended){lacking}"
-        model = self.get_parameter("model").value
         try:
-            if model not in ("auto", *MODELS):
-                raise CalibrationError(f"parameter model: {model!r} is not one of auto, {', '.join(MODELS)}")
-            result = calibrate(self.views, self.image_size, model=model)
+            result = calibrate(self.views, self.image_size, model=self.get_parameter("model").value)
         except CalibrationError as exc:
             self._report(f"fit failed: {exc}{lacking}")
             return False, f"{exc}{lacking}"
