@@ -6,12 +6,12 @@ VENV := .venv
 PY := $(VENV)/bin/python
 SOURCES := $(shell find veg_area_ros resource -type f -not -name "*.pyc") $(wildcard config/*) setup.py setup.cfg package.xml
 
-.PHONY: demo test install lint bench clean
+.PHONY: demo test install browser lint bench clean
 
 demo: install
 	$(VENV)/bin/veg-area demo
 
-test: install
+test: install browser
 	$(PY) -m ruff check .
 	VEG_AREA_REQUIRE_INSTALL=1 $(PY) -m pytest
 
@@ -30,6 +30,13 @@ $(VENV)/.package-installed: $(VENV)/.deps-installed $(SOURCES)
 	    || { cat build/colcon.out; exit 1; }
 	ln -sf ../lib/veg_area_ros/veg-area $(VENV)/bin/veg-area
 	touch $@
+
+# the console's tests drive Debian's chromium (Playwright uses it; no browser is downloaded)
+browser:
+	@command -v chromium >/dev/null || { \
+	    if [ "$$(id -u)" != 0 ]; then echo "the console's tests need Debian's chromium: sudo apt-get install chromium"; exit 1; fi; \
+	    echo "installing Debian's chromium for the console's tests"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null; }
 
 lint: install
 	$(PY) -m ruff check .

@@ -287,6 +287,8 @@ def scenario_calibration_trap(options: dict, nodes: Nodes) -> dict:
 
 
 def main() -> int:
+    from console_scenario import scenario_console
+
     from veg_area_ros.ros.run import ensure_ros_environment
 
     name, options = sys.argv[1], json.loads(sys.argv[2])
@@ -301,7 +303,7 @@ def main() -> int:
                   "two_machines": scenario_two_machines, "bad_start_files": scenario_bad_start_files,
                   "guidance": scenario_guidance, "replay_into_recorder": scenario_replay_into_recorder,
                   "compressed_driver": scenario_compressed_driver,
-                  "calibration_trap": scenario_calibration_trap}[name](
+                  "calibration_trap": scenario_calibration_trap, "console": scenario_console}[name](
                       options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))

@@ -1,0 +1,275 @@
+"""The operator's console: its rules on numpy arrays and a stand-in for the nodes (no ROS), then the page in
+Debian's headless chromium against real nodes in the confined network (test/console_scenario.py)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import socket
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import REPO
+from ros_harness import run_scenario
+
+from veg_area_ros.console_server import ConsoleServer
+from veg_area_ros.console_state import (
+    MAX_RATE_HZ,
+    MAX_WIDTH_PX,
+    Access,
+    AreaSeries,
+    ConsoleInputError,
+    ImageFeed,
+    checked_parameters,
+    host_allowed,
+    roi_from_drag,
+)
+
+SCREENSHOTS = REPO / "docs" / "images"
+
+
+# --- the rules, without ROS ------------------------------------------------------------------------------------
+def test_images_to_the_page_are_bounded_in_size_and_rate():
+    feed = ImageFeed()
+    frame = np.random.default_rng(0).integers(0, 255, (2592, 3872, 3), dtype=np.uint8)  # a 10 MP frame
+    feed.offer(frame)
+    jpeg, number = feed.jpeg(100.0)
+    import cv2
+
+    shown = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+    assert shown.shape[1] == MAX_WIDTH_PX and shown.shape[0] == round(2592 * MAX_WIDTH_PX / 3872)
+    assert feed.frame_size == (3872, 2592) and feed.shown_size == (shown.shape[1], shown.shape[0])
+    # new frames at 100 Hz, asked for at 100 Hz for 2 s: encoded at most MAX_RATE_HZ times a second
+    for k in range(1, 201):
+        feed.offer(frame[:480, :640])
+        feed.jpeg(100.0 + k / 100)
+    assert feed.encodings <= 1 + 2 * MAX_RATE_HZ + 1
+    assert feed.encodings >= 2 * MAX_RATE_HZ - 1  # and it does keep up with the bound
+    # nothing new: the same JPEG again, no encoding
+    same, n = feed.jpeg(200.0)
+    encodings = feed.encodings
+    again, m = feed.jpeg(300.0)
+    assert n == 201 and again is same and m == n and feed.encodings == encodings
+
+
+def test_a_view_nobody_looks_at_is_let_go():
+    feed = ImageFeed()
+    assert not feed.wanted(10.0)
+    feed.jpeg(10.0)
+    assert feed.wanted(12.0) and not feed.wanted(20.0)
+
+
+def test_parameters_from_the_page_are_typed_and_checked():
+    assert checked_parameters({"threshold": 60, "open_px": 2.0, "object": "dark"}) == \
+        {"threshold": 60.0, "open_px": 2, "object": "dark"}
+    assert isinstance(checked_parameters({"threshold": 60})["threshold"], float)
+    for bad in ({"threshold": 300}, {"threshold": "x"}, {"threshold": float("nan")}, {"open_px": 1.5},
+                {"open_px": True}, {"object": "purple"}, {"targets_file": "/etc/passwd"}, {},
+                {"roi": [1, 2, 3, 4]}, {"roi": [1, 2, 3, 4, 5, float("inf")]}, {"roi": "0"}):
+        with pytest.raises(ConsoleInputError):
+            checked_parameters(bad)
+    assert checked_parameters({"roi": [0]}) == {"roi": [0.0]}
+
+
+def test_a_dragged_rectangle_becomes_the_roi_in_the_nodes_pixels():
+    # drawn on an 800x600 JPEG of a 3200x2400 frame, backwards, partly off the image
+    roi = roi_from_drag((700, 500), (100, -50), (800, 600), (3200, 2400))
+    assert roi == [400.0, 0.0, 2800.0, 0.0, 2800.0, 2000.0, 400.0, 2000.0]
+    with pytest.raises(ConsoleInputError, match="less than 2 pixels"):
+        roi_from_drag((10, 10), (10.2, 300), (800, 600), (3200, 2400))
+
+
+def test_who_may_change_what():
+    loopback = Access.for_host("127.0.0.1")
+    assert loopback.loopback_only and len(loopback.token) >= 20
+    assert loopback.page_token("127.0.0.1:8080") == loopback.token
+    assert loopback.page_token("localhost:8080") == loopback.token
+    assert loopback.page_token("attacker.example:8080") == ""  # DNS rebinding: no token, and refused
+    assert not host_allowed("attacker.example:8080", loopback) and host_allowed("[::1]:8080", loopback)
+    assert Access.for_host("127.0.0.1").token != loopback.token  # a new token at each start
+    lab = Access.for_host("0.0.0.0", "secret-token")
+    assert not lab.loopback_only and lab.page_token("127.0.0.1:8080") == ""
+    assert lab.may_change("secret-token") and not lab.may_change("secret") and not lab.may_change(None)
+    assert host_allowed("10.0.0.5:8080", lab)
+
+
+def test_the_series_starts_over_when_a_replay_restarts():
+    series = AreaSeries()
+    for t in (100.0, 100.1, 100.2):
+        series.add_area(t, 1e-2, 1e-5)
+    series.add_area(50.0, 2e-2, 1e-5)
+    assert [p[0] for p in series.as_dict()["points"]] == [0.0]
+
+
+class StandIn:
+    """The nodes as the server sees them: records what it was asked."""
+
+    def __init__(self):
+        self.asked: list = []
+
+    def set_parameters(self, values):
+        checked = checked_parameters(values)
+        self.asked.append(("parameters", checked))
+        return True, f"set: {checked}"
+
+    def calibration(self, action):
+        self.asked.append(("calibration", action))
+        return False, "calibration_node is not running: nothing was done"
+
+    def record(self, action):
+        self.asked.append(("record", action))
+        return True, action
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def served():
+    feeds = {"area": ImageFeed()}
+    feeds["area"].offer(np.zeros((480, 640), np.uint8))
+    controls, access, port = StandIn(), Access.for_host("127.0.0.1"), free_port()
+    server = ConsoleServer(feeds, lambda: {"parameters": {}}, controls, access, port)
+    server.start()
+    yield f"http://127.0.0.1:{port}", controls, access
+    server.stop()
+
+
+def ask(url: str, body=None, token: str | None = None, host: str | None = None) -> tuple[int, bytes]:
+    headers = {"Content-Type": "application/json"} | ({"X-Console-Token": token} if token else {}) | \
+        ({"Host": host} if host else {})
+    data = None if body is None else (body if isinstance(body, bytes) else json.dumps(body).encode())
+    try:
+        with urllib.request.urlopen(urllib.request.Request(url, data=data, headers=headers), timeout=10) as answer:
+            return answer.status, answer.read()
+    except urllib.error.HTTPError as error:
+        return error.code, error.read()
+
+
+def test_the_server_serves_the_page_with_its_files_and_refuses_what_it_must(served):
+    base, controls, access = served
+    status, page = ask(base + "/")
+    assert status == 200 and access.token.encode() in page and b"{{TOKEN}}" not in page
+    for name in ("/console.js", "/console.css"):
+        assert ask(base + name)[0] == 200
+    # everything the page loads is served here: no other origin in it
+    assert b"http" not in page.replace(b"http-equiv", b"")
+    status, jpeg = ask(base + "/api/frame/area")
+    assert status == 200 and jpeg[:2] == b"\xff\xd8"
+    assert ask(base + "/api/frame/nothing")[0] == 404
+    assert ask(base + "/api/parameters", {"threshold": 50})[0] == 403  # no token
+    assert ask(base + "/api/parameters", {"threshold": 50}, "wrong")[0] == 403
+    assert ask(base + "/api/state", host="attacker.example")[0] == 421
+    assert ask(base + "/api/parameters", b"not json", access.token)[0] == 400
+    assert ask(base + "/api/parameters", {"threshold": 500}, access.token)[0] == 400
+    assert ask(base + "/api/parameters", {"roi_drag": {"view": "area", "start": [0, 0], "end": [320, 240]}},
+               access.token)[0] == 200
+    assert controls.asked[-1] == ("parameters", {"roi": [0.0, 0.0, 320.0, 0.0, 320.0, 240.0, 0.0, 240.0]})
+    status, body = ask(base + "/api/calibration/fit", {}, access.token)
+    assert status == 409 and b"not running" in body
+    assert ask(base + "/api/calibration/delete-everything", {}, access.token)[0] == 404
+    assert ask(base + "/api/parameters", b"x" * 100_000, access.token)[0] == 413
+    state = json.loads(ask(base + "/api/state", token=access.token)[1])
+    assert state["access"]["may_change"] and state["views"]["area"]["frame_size"] == [640, 480]
+    assert not json.loads(ask(base + "/api/state")[1])["access"]["may_change"]
+
+
+def test_a_taken_port_stops_the_start_with_the_reason():
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        server = ConsoleServer({}, dict, StandIn(), Access.for_host("127.0.0.1"), taken.getsockname()[1])
+        with pytest.raises(OSError):
+            server.start()
+
+
+# --- the page in a real browser against real nodes ----------------------------------------------------------
+needs_browser = pytest.mark.skipif(not Path("/usr/bin/chromium").exists()
+                                   and not os.environ.get("VEG_AREA_REQUIRE_INSTALL"),
+                                   reason="Debian's chromium is not installed (make test installs it)")
+
+
+@pytest.fixture(scope="module")
+def console(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("console")
+    result = run_scenario("console", folder, timeout=900)
+    result["folder"] = folder
+    if os.environ.get("VEG_AREA_UPDATE_SCREENSHOTS"):  # the docs' pictures come from this run
+        for name in result["screenshots"]:
+            shutil.copy(folder / name, SCREENSHOTS / name)
+    return result
+
+
+@needs_browser
+def test_the_page_shows_the_calibration_and_its_buttons_fit_discard_and_commit(console):
+    assert console["access_on_loopback"] == "control"
+    assert console["views_kept_before_fit"] >= 10 and console["feedback_frame_size"] == "640x480"
+    assert "served but not written" in console["steps"]["fit"]  # fewer views than min_views 40
+    assert console["served_after_fit"] and not console["file_after_fit"]
+    assert not console["file_after_discard"]
+    assert console["file_after_commit"] and console["file_fx"] == pytest.approx(console["served_fx"], rel=1e-9)
+
+
+@needs_browser
+def test_the_page_shows_the_overlay_and_af(console):
+    assert console["overlay_natural_width"] == 640
+    assert "cm²" in console["af_text"] and "frames measured" in console["frames_text"]
+
+
+@needs_browser
+def test_the_threshold_slider_sets_the_nodes_parameter_and_the_next_af(console):
+    assert console["threshold_parameters"] == {"threshold": console["threshold_wanted"], "threshold_mode": "fixed"}
+    assert console["af_after_threshold"] is not None  # a frame measured with the slider's threshold
+    assert console["af_after_threshold"] != console["af_before_threshold"]
+
+
+@needs_browser
+def test_a_roi_drawn_on_the_page_becomes_the_nodes_roi(console):
+    roi = console["roi_parameter"]
+    assert len(roi) == 8
+    xs, ys = roi[0::2], roi[1::2]
+    # dragged from 5 % to 50 % of the shown width and 5 % to 95 % of its height, on a 640x480 frame
+    assert min(xs) == pytest.approx(0.05 * 640, abs=3) and max(xs) == pytest.approx(0.5 * 640, abs=3)
+    assert min(ys) == pytest.approx(0.05 * 480, abs=3) and max(ys) == pytest.approx(0.95 * 480, abs=3)
+    assert console["af_with_roi"] < 0.8 * console["af_before_roi"]  # half the cube is left out
+    assert console["roi_cleared"] == [0.0]
+
+
+@needs_browser
+def test_recording_starts_and_stops_from_the_page(console):
+    assert "MB" in console["recording_text"] and "closed" in console["steps"]["record_stop"]
+    counts = console["bag_counts"]
+    assert counts.get("/image_raw", 0) > 5 and counts.get("/projected_area", 0) > 5
+
+
+@needs_browser
+def test_beyond_loopback_nothing_changes_without_the_token(console):
+    assert console["viewer_access"].startswith("view only") and console["viewer_controls_disabled"]
+    assert console["viewer_post"] == 403 and console["wrong_token_post"] == 403
+    assert console["viewer_calibration_post"] == 403 and console["viewer_record_post"] == 403
+    assert console["threshold_after_viewer"] == console["threshold_before_viewer"]
+    assert console["holder_access"] == "control" and console["holder_post"] == 200
+    assert console["threshold_after_holder"] == 101.0
+    assert console["rebinding_status"] == 421
+
+
+@needs_browser
+def test_a_missing_node_is_said_and_nothing_is_sent(console):
+    assert "missing" in console["missing_badge"] and console["missing_controls_disabled"]
+    status, answer = console["missing_post"]
+    assert status == 409 and "not running" in answer["message"]
+
+
+@needs_browser
+def test_the_run_stays_on_this_machine_and_leaves_screenshots(console):
+    assert console["off_machine"] == []
+    for name in console["screenshots"]:
+        assert (console["folder"] / name).stat().st_size > 10_000
+    assert len(console["screenshots"]) == 6

@@ -1,0 +1,285 @@
+"""console_node: the operator's console, a web page (http://127.0.0.1:8080 by default) with the live image
+(the area node's overlay, the calibration node's feedback or the camera), Af over time with its std band, the
+warnings and frame counts, the calibration's progress with its fit / commit / discard services, the area
+node's tuned parameters (set through its parameter services, so `ros2 param get` sees the same values), a ROI
+drawn on the image, and the package's recorder started and stopped.
+
+Images reach the page at most MAX_RATE_HZ times a second, no wider than MAX_WIDTH_PX; a view's topic is
+subscribed only while a page shows it (the area node draws its overlay only for subscribers). Bound to
+127.0.0.1 by default; with host:=0.0.0.0 the page changes nothing without the token printed at start."""
+
+from __future__ import annotations
+
+import datetime as dt
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+from geometry_msgs.msg import Vector3Stamped
+from rcl_interfaces.srv import GetParameters, SetParametersAtomically
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from ..cdr import ImageMessageError, decode_camera_info, decode_image
+from ..console_server import ConsoleServer
+from ..console_state import (
+    TUNED,
+    VIEWS,
+    Access,
+    AreaSeries,
+    CalibrationLog,
+    ImageFeed,
+    checked_parameters,
+    folder_size,
+    now,
+)
+from .params import declare
+from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
+from .run import run_nodes
+
+SERVICE_WAIT_S = 1.0  # a node whose service is not there within this long is said to be missing
+FIT_TIMEOUT_S = 600.0  # a fit of many views with model auto takes minutes on a slow machine
+CALL_TIMEOUT_S = 20.0
+RECORDER_STOP_S = 60.0  # the recorder writes its bag's summary when stopped
+CALIBRATION_SERVICES = {"fit": "calibrate", "commit": "commit", "discard": "discard"}
+
+
+class ConsoleNode(Node):
+    def __init__(self, name: str = "console_node", **kwargs):
+        super().__init__(name, **kwargs)
+        host = declare(self, "host", "127.0.0.1", "Address the page is served on; beyond loopback (0.0.0.0, a "
+                       "lab address) the page changes nothing without the token printed at start.", read_only=True)
+        port = declare(self, "port", 8080, "TCP port of the page.", low=1, high=65535, read_only=True)
+        token = declare(self, "token", "", "The token that allows changes ('' = a new one at each start).",
+                        read_only=True)
+        self.area_name = declare(self, "area_node", "area_node", "The area node's name (its parameters and "
+                                 "topics).", read_only=True).strip("/")
+        self.calibration_name = declare(self, "calibration_node", "calibration_node", "The calibration node's name "
+                                        "(its services, ~/progress and ~/feedback).", read_only=True).strip("/")
+        folder = declare(self, "record_folder", "", "Folder the recorder's bags go in ('' = the current folder).",
+                         read_only=True)
+        self.record_folder = Path(folder or os.getcwd())
+        self.access = Access.for_host(host, token)
+        self.feeds = {view: ImageFeed() for view in VIEWS}
+        self.series = AreaSeries()
+        self.calibration_log = CalibrationLog()
+        self.parameters: dict = {}
+        self.present: dict[str, bool] = {self.area_name: False, self.calibration_name: False}
+        self.recorder: subprocess.Popen | None = None
+        self.bag: Path | None = None
+        self._recorder_lock = threading.Lock()
+        self._getting_parameters = False
+        self.view_topics = {"area": "overlay",
+                            "calibration": f"/{self.calibration_name}/feedback", "camera": "image_raw"}
+        self.view_subscriptions: dict = {}
+        self.create_subscription(Vector3Stamped, "projected_area", self._on_area, RESULT_QOS)
+        self.create_subscription(String, "projected_area/info", self._on_info, RESULT_QOS)
+        self.create_subscription(String, f"/{self.calibration_name}/progress", self._on_progress, RESULT_QOS)
+        self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, LATCHED_QOS, raw=True)
+        self.get_client = self.create_client(GetParameters, f"/{self.area_name}/get_parameters")
+        self.set_client = self.create_client(SetParametersAtomically, f"/{self.area_name}/set_parameters_atomically")
+        self.calibration_clients = {action: self.create_client(Trigger, f"/{self.calibration_name}/{service}")
+                                    for action, service in CALIBRATION_SERVICES.items()}
+        self.create_timer(0.5, self._look_around)
+        self.server = ConsoleServer(self.feeds, self.state, self, self.access, port)
+        self.server.start()  # an address in use or not on this machine: the node does not start, and says so
+        shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+        address = f"http://{shown if ':' not in shown else f'[{shown}]'}:{port}/"
+        if self.access.loopback_only:
+            self.get_logger().info(f"console on {address} (this machine only)")
+        else:
+            self.get_logger().warning(f"console open to the network on {host}:{port}; to change anything open "
+                                      f"{address}?token={self.access.token} (without the token it is view-only)")
+
+    # --- what comes from the graph ---------------------------------------------------------------------------
+    def _on_area(self, msg: Vector3Stamped) -> None:
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self.series.add_area(stamp, msg.vector.x, msg.vector.y)
+
+    def _on_info(self, msg: String) -> None:
+        try:
+            summary = json.loads(msg.data)
+        except ValueError:
+            return
+        if isinstance(summary, dict):
+            self.series.add_info(summary)
+
+    def _on_progress(self, msg: String) -> None:
+        try:
+            progress = json.loads(msg.data)
+        except ValueError:
+            return
+        if isinstance(progress, dict):
+            self.calibration_log.add_progress(progress)
+
+    def _on_camera_info(self, data: bytes) -> None:
+        try:
+            info = decode_camera_info(data)
+        except (ImageMessageError, ValueError):
+            return
+        k = list(info.k)
+        self.calibration_log.served = {"model": info.distortion_model, "width": info.width, "height": info.height,
+                                       "fx": k[0], "fy": k[4], "cx": k[2], "cy": k[5], "d": list(info.d)}
+
+    def _on_view(self, view: str, data: bytes) -> None:
+        try:
+            frame = decode_image(data).pixels()
+        except ImageMessageError:
+            return
+        self.feeds[view].offer(frame)
+
+    def _look_around(self) -> None:
+        """Which nodes are up, the area node's parameters, and the views' topics subscribed while shown."""
+        names = {name.strip("/") if not ns.strip("/") else f"{ns.strip('/')}/{name}"
+                 for name, ns in self.get_node_names_and_namespaces()}
+        self.present = {self.area_name: self.area_name in names, self.calibration_name: self.calibration_name in names}
+        if self.present[self.area_name] and not self._getting_parameters and self.get_client.service_is_ready():
+            self._getting_parameters = True
+            future = self.get_client.call_async(GetParameters.Request(names=list(TUNED)))
+            future.add_done_callback(self._got_parameters)
+        moment = now()
+        for view, feed in self.feeds.items():
+            subscribed = view in self.view_subscriptions
+            if feed.wanted(moment) and not subscribed:
+                self.view_subscriptions[view] = self.create_subscription(
+                    Image, self.view_topics[view], lambda data, v=view: self._on_view(v, data), IMAGE_QOS, raw=True)
+            elif subscribed and not feed.wanted(moment):
+                self.destroy_subscription(self.view_subscriptions.pop(view))
+
+    def _got_parameters(self, future) -> None:
+        self._getting_parameters = False
+        response = future.result()
+        if response is None:
+            return
+        values = {name: Parameter.from_parameter_msg(_named(name, value)).value
+                  for name, value in zip(TUNED, response.values, strict=False)}
+        self.parameters = {name: list(v) if isinstance(v, tuple | list) or hasattr(v, "tolist") else v
+                           for name, v in values.items()}
+
+    # --- what the page reads ---------------------------------------------------------------------------------
+    def state(self) -> dict:
+        recording = None
+        with self._recorder_lock:
+            if self.bag is not None:
+                running = self.recorder is not None and self.recorder.poll() is None
+                recording = {"bag": str(self.bag), "bytes": folder_size(self.bag), "running": running,
+                             "exit_code": None if running else self.recorder.returncode}
+        area = self.series.as_dict()
+        area["points"] = [p for p in area["points"] if all(math.isfinite(v) for v in p)]
+        return {"nodes": {"area": {"name": self.area_name, "present": self.present[self.area_name]},
+                          "calibration": {"name": self.calibration_name,
+                                          "present": self.present[self.calibration_name]}},
+                "area": area, "calibration": self.calibration_log.as_dict(),
+                "parameters": self.parameters, "recording": recording}
+
+    # --- what the page asks for (from the server's worker threads) --------------------------------------------
+    def _call(self, client, request, timeout: float, missing: str):
+        if not client.wait_for_service(timeout_sec=SERVICE_WAIT_S):
+            return None, missing
+        done = threading.Event()
+        future = client.call_async(request)
+        future.add_done_callback(lambda _: done.set())
+        if not done.wait(timeout):
+            future.cancel()
+            return None, f"no answer from {client.srv_name} within {timeout:.0f} s"
+        return future.result(), ""
+
+    def set_parameters(self, values: dict) -> tuple[bool, str]:
+        checked = checked_parameters(values)
+        request = SetParametersAtomically.Request(
+            parameters=[Parameter(name, value=value).to_parameter_msg() for name, value in checked.items()])
+        response, problem = self._call(self.set_client, request, CALL_TIMEOUT_S,
+                                       f"{self.area_name} is not running: nothing was changed")
+        if response is None:
+            return False, problem
+        if not response.result.successful:
+            return False, f"{self.area_name} refused: {response.result.reason}"
+        self.parameters.update(checked)
+        said = ", ".join(f"{k} {v}" for k, v in checked.items())
+        self.get_logger().info(f"set on {self.area_name} from the console: {said}")
+        return True, f"set: {said}"
+
+    def calibration(self, action: str) -> tuple[bool, str]:
+        response, problem = self._call(self.calibration_clients[action], Trigger.Request(),
+                                       FIT_TIMEOUT_S if action == "fit" else CALL_TIMEOUT_S,
+                                       f"{self.calibration_name} is not running: nothing was done")
+        if response is None:
+            return False, problem
+        self.calibration_log.add_result(f"{action}: {response.message}")
+        return bool(response.success), response.message
+
+    def record(self, action: str) -> tuple[bool, str]:
+        with self._recorder_lock:
+            running = self.recorder is not None and self.recorder.poll() is None
+            if action == "start":
+                if running:
+                    return False, f"already recording into {self.bag}"
+                bag = self.record_folder / dt.datetime.now().strftime("veg_area_%Y%m%d_%H%M%S")
+                if bag.exists():
+                    return False, f"{bag} exists (one bag a second at most)"
+                try:
+                    self.record_folder.mkdir(parents=True, exist_ok=True)
+                    log = open(self.record_folder / f"{bag.name}.log", "wb")  # noqa: SIM115 - the child's
+                except OSError as exc:
+                    return False, f"cannot record into {self.record_folder}: {exc.strerror or exc}"
+                with log:
+                    self.recorder = subprocess.Popen(
+                        [sys.executable, "-m", "veg_area_ros.ros.record_node", "--ros-args", "-r",
+                         f"__node:={self.get_name()}_recorder", "-p", f"output:={bag}"],
+                        stdout=log, stderr=subprocess.STDOUT, preexec_fn=_die_with_parent)
+                self.bag = bag
+                self.get_logger().info(f"recording into {bag}")
+                return True, f"recording into {bag}"
+            if not running:
+                return False, "not recording"
+            return self._stop_recorder()
+
+    def _stop_recorder(self) -> tuple[bool, str]:
+        self.recorder.send_signal(signal.SIGINT)
+        try:
+            code = self.recorder.wait(RECORDER_STOP_S)
+        except subprocess.TimeoutExpired:
+            self.recorder.kill()
+            code = self.recorder.wait()
+        size = folder_size(self.bag)
+        done = code == 0
+        said = (f"bag {self.bag} closed, {size / 1e6:.1f} MB" if done else
+                f"the recorder ended with exit code {code} (see {self.bag}.log); {size / 1e6:.1f} MB in {self.bag}")
+        self.get_logger().info(said)
+        return done, said
+
+    def destroy_node(self) -> None:
+        self.server.stop()
+        with self._recorder_lock:
+            if self.recorder is not None and self.recorder.poll() is None:
+                self._stop_recorder()
+        super().destroy_node()
+
+
+def _named(name: str, value):
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+
+    return ParameterMsg(name=name, value=value)
+
+
+def _die_with_parent() -> None:
+    """The recorder is stopped (SIGINT) when the console closes; if the console is killed, it is too."""
+    import ctypes
+
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGINT)  # PR_SET_PDEATHSIG: its bag is still closed
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_nodes([ConsoleNode], args)
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
