@@ -465,3 +465,21 @@ def test_outputs_that_cannot_be_written_are_said_before_the_work(folder, options
         (folder / "loop2").symlink_to(loop)
     done = measure(folder, "cube.png", *options)
     assert done.returncode == 2 and said in done.stderr and "Traceback" not in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("roi, holds", [
+    (None, ""),  # the default ROI cuts the marker squares out
+    ([190.0, 140.0, 450.0, 140.0, 450.0, 340.0, 190.0, 340.0], ""),  # between the targets
+    ([31.6, 23.8, 319.8, 23.8, 319.8, 455.7, 31.6, 455.7], "0, 3"),  # over the left markers
+])
+def test_a_roi_over_a_marker_is_said(roi, holds):
+    """A ROI drawn over a marker (in the console, or --roi) counts its dark print as object: said in the result."""
+    from veg_area_ros.settings import MeasurementSettings
+    from veg_area_ros.sources import SyntheticSource, default_targets
+
+    source = SyntheticSource(scene="cube")
+    result = MeasurementSettings(roi=roi).measurer(source.camera, default_targets()).measure(source.read())
+    said = [w for w in result.warnings if w.startswith("the ROI holds marker")]
+    assert said == ([f"the ROI holds marker(s) {holds}: their dark print is classified like the object and counted "
+                     "in Af (draw the ROI between the targets, or use the default ROI, which cuts the markers out)"]
+                    if holds else [])

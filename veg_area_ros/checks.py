@@ -75,6 +75,12 @@ def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, mas
     return mask
 
 
+def _roi_holds(roi_ideal: np.ndarray, pixel: np.ndarray) -> bool:
+    """Whether the ROI (idealized mask) covers this idealized pixel."""
+    x, y = round(float(pixel[0])), round(float(pixel[1]))
+    return 0 <= y < roi_ideal.shape[0] and 0 <= x < roi_ideal.shape[1] and bool(roi_ideal[y, x])
+
+
 def _outline(mask: np.ndarray) -> int:
     """The pixels of a class (uint8 mask) that touch the other class: its one-pixel outline."""
     return cv2.countNonZero(cv2.subtract(mask, cv2.erode(mask, np.ones((3, 3), np.uint8))))
@@ -176,6 +182,12 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
                        f"{reach:.0f} px from the principal point, where the lens model folds) " if reach else
                        "(outside the frame) ")
                     + "and is not measured; Af is the part inside")
+    held = [label.split()[1] for label, pixel in zip(located.labels, located.pixels, strict=False)
+            if label.startswith("marker ") and _roi_holds(weights.roi_ideal, pixel)]
+    if held:  # only a user's ROI can: the default one cuts the marker squares out
+        said.append(f"the ROI holds marker(s) {', '.join(held)}: their dark print is classified like the object "
+                    "and counted in Af (draw the ROI between the targets, or use the default ROI, which cuts the "
+                    "markers out)")
     border = weights.border()
     touching = cv2.countNonZero(mask & border)
     if touching >= max(5, BORDER_TOUCH_SHARE * max(result.pixel_count, 1)):

@@ -240,7 +240,8 @@ function showCalibration(calibration) {
 function showRecording(recording) {
   if (!recording) { $("recording").textContent = "not recording"; return; }
   const mb = (recording.bytes / 1e6).toFixed(1);
-  $("recording").textContent = recording.running ? `recording into ${recording.bag}: ${mb} MB` :
+  $("recording").textContent = recording.running && !recording.started ? "starting the recorder..." :
+    recording.running ? `recording into ${recording.bag}: ${mb} MB` :
     `last bag ${recording.bag}: ${mb} MB (recorder exit code ${recording.exit_code})`;
 }
 

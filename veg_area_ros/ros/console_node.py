@@ -76,7 +76,7 @@ class ConsoleNode(Node):
         self.recorder: subprocess.Popen | None = None
         self.bag: Path | None = None
         self._recorder_lock = threading.Lock()
-        self._getting_parameters = False
+        self._parameters_asked_at: float | None = None  # a get_parameters call in flight since
         self.view_topics = {"area": "overlay",
                             "calibration": f"/{self.calibration_name}/feedback", "camera": "image_raw"}
         self.view_subscriptions: dict = {}
@@ -141,11 +141,12 @@ class ConsoleNode(Node):
         names = {name.strip("/") if not ns.strip("/") else f"{ns.strip('/')}/{name}"
                  for name, ns in self.get_node_names_and_namespaces()}
         self.present = {self.area_name: self.area_name in names, self.calibration_name: self.calibration_name in names}
-        if self.present[self.area_name] and not self._getting_parameters and self.get_client.service_is_ready():
-            self._getting_parameters = True
+        moment = now()
+        in_flight = self._parameters_asked_at is not None and moment - self._parameters_asked_at < CALL_TIMEOUT_S
+        if self.present[self.area_name] and not in_flight and self.get_client.service_is_ready():
+            self._parameters_asked_at = moment  # an answer lost with a node that went: asked again after a while
             future = self.get_client.call_async(GetParameters.Request(names=list(TUNED)))
             future.add_done_callback(self._got_parameters)
-        moment = now()
         for view, feed in self.feeds.items():
             subscribed = view in self.view_subscriptions
             if feed.wanted(moment) and not subscribed:
@@ -155,7 +156,7 @@ class ConsoleNode(Node):
                 self.destroy_subscription(self.view_subscriptions.pop(view))
 
     def _got_parameters(self, future) -> None:
-        self._getting_parameters = False
+        self._parameters_asked_at = None
         response = future.result()
         if response is None:
             return
@@ -171,6 +172,7 @@ class ConsoleNode(Node):
             if self.bag is not None:
                 running = self.recorder is not None and self.recorder.poll() is None
                 recording = {"bag": str(self.bag), "bytes": folder_size(self.bag), "running": running,
+                             "started": self.bag.exists(),  # the recorder creates it once it is up
                              "exit_code": None if running else self.recorder.returncode}
         area = self.series.as_dict()
         area["points"] = [p for p in area["points"] if all(math.isfinite(v) for v in p)]
