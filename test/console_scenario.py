@@ -180,6 +180,8 @@ def scenario_console(options: dict, nodes) -> dict:
 
             # --- a ROI dragged on the image -------------------------------------------------------------------
             box = page.locator("#frame").bounding_box()
+            spin(0.5)
+            out["af_before_roi"] = infos[-1]["area_m2"]  # the threshold's frames: the probe spins while it waits
             page.click("#draw-roi")
             # between the targets (a ROI over a marker counts its print: said in the result), through the cube
             start = (box["x"] + 0.3 * box["width"], box["y"] + 0.3 * box["height"])
@@ -196,7 +198,6 @@ def scenario_console(options: dict, nodes) -> dict:
             spin(2.0)
             out["af_with_roi"] = infos[-1]["area_m2"] if len(infos) > mark else None
             out["warnings_with_roi"] = infos[-1]["warnings"] if len(infos) > mark else None
-            out["af_before_roi"] = infos[mark - 1]["area_m2"]
             page.wait_for_timeout(1200)
             shot(page, "console-roi")
             out["steps"]["clear_roi"] = click_and_wait(page, "#clear-roi", "set: roi")

@@ -276,3 +276,24 @@ def test_the_run_stays_on_this_machine_and_leaves_screenshots(console):
     for name in console["screenshots"]:
         assert (console["folder"] / name).stat().st_size > 10_000
     assert len(console["screenshots"]) == 6
+
+
+def test_a_frame_is_decoded_only_when_a_page_is_shown_it():
+    decoded = []
+
+    def decode():
+        decoded.append(1)
+        return np.zeros((480, 640, 3), np.uint8)
+
+    feed = ImageFeed()
+    for _ in range(30):  # a second of a 30 Hz camera, nobody asking
+        feed.offer(decode)
+    assert decoded == [] and feed.frame_size is None
+    jpeg, _ = feed.jpeg(1.0)
+    assert len(decoded) == 1 and feed.frame_size == (640, 480) and jpeg[:2] == b"\xff\xd8"
+
+    def broken():
+        raise ValueError("truncated message")
+
+    feed.offer(broken)
+    assert feed.jpeg(2.0)[0] is jpeg  # the last good image stays

@@ -11,7 +11,8 @@ import pytest
 import yaml
 from helpers import REPO
 
-NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node"]
+NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node",
+         "console_node"]
 PREFIX = Path(os.environ.get("VEG_AREA_PREFIX", REPO / ".venv"))
 
 
@@ -94,6 +95,46 @@ def test_installed_node_executable_starts_and_stops_cleanly(prefix, tmp_path):
         if process.poll() is None:
             process.kill()
             process.wait()
+
+
+def test_the_installed_console_serves_its_page_from_the_install(prefix, tmp_path):
+    """`ros2 run veg_area_ros console_node`: the page's files come from the installed package (run outside the
+    source tree), every file the page loads is served by the node, and it stops cleanly on SIGINT."""
+    import signal
+    import socket
+    import time
+    import urllib.request
+
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "AMENT_"))}
+    env.pop("PYTHONPATH", None)
+    env.update(HOME=str(tmp_path), ROS_DOMAIN_ID="198", VEG_AREA_TRANSPORT="local")
+    process = subprocess.Popen([str(prefix / "lib" / "veg_area_ros" / "console_node"), "--ros-args", "-p",
+                                f"port:={port}"], env=env, cwd=tmp_path, stdout=subprocess.PIPE,
+                               stderr=subprocess.STDOUT, text=True)
+    try:
+        started = ""
+        deadline = time.monotonic() + 60
+        while "console on" not in started and process.poll() is None and time.monotonic() < deadline:
+            started += process.stdout.readline()
+        assert f"console on http://127.0.0.1:{port}/ (this machine only)" in started, started + process.stdout.read()
+        import re
+
+        page = urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=10).read().decode()
+        loaded = re.findall(r'(?:src|href)="([^"]+)"', page)
+        assert sorted(loaded) == ["/console.css", "/console.js"]
+        for path in loaded:
+            assert urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=10).status == 200
+        process.send_signal(signal.SIGINT)
+        assert process.wait(20) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    installed = [p for p in (prefix / "lib").glob("python3*/site-packages/veg_area_ros/console_page/*")]
+    assert sorted(p.name for p in installed) == ["console.css", "console.js", "index.html"]
 
 
 def _package_imports(path: Path) -> set[str]:

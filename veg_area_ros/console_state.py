@@ -11,6 +11,7 @@ import secrets
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import cv2
@@ -55,11 +56,13 @@ class ImageFeed:
     asked_at: float = -math.inf
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
-    def offer(self, frame: np.ndarray) -> None:
-        """A new frame (BGR or grey uint8); kept by reference, the last one wins."""
+    def offer(self, frame: np.ndarray | Callable[[], np.ndarray]) -> None:
+        """A new frame (BGR or grey uint8), or what decodes it (called only if it is shown: a camera's every
+        frame is not decoded for a page that shows five a second); kept by reference, the last one wins."""
         with self._lock:
             self._frame, self._frame_number = frame, self._frame_number + 1
-            self.frame_size = (frame.shape[1], frame.shape[0])
+            if isinstance(frame, np.ndarray):
+                self.frame_size = (frame.shape[1], frame.shape[0])
 
     def wanted(self, now: float) -> bool:
         return now - self.asked_at < VIEW_KEPT_S
@@ -73,10 +76,15 @@ class ImageFeed:
                 return self._jpeg, self._jpeg_number
             frame, number = self._frame, self._frame_number
             self._encoded_at = now
+        try:
+            frame = frame if isinstance(frame, np.ndarray) else frame()
+        except ValueError:  # a message that does not decode: the previous image stays
+            return self._jpeg, self._jpeg_number
         jpeg, shown = encode_small(frame, self.max_width)
         with self._lock:
             if number > self._jpeg_number:
                 self._jpeg, self._jpeg_number, self.shown_size = jpeg, number, shown
+                self.frame_size = (frame.shape[1], frame.shape[0])
                 self.encodings += 1
             return self._jpeg, self._jpeg_number
 

@@ -1,7 +1,9 @@
 """area_node: idealizes each frame with the calibration from `camera_info` (or a file), classifies it and
 publishes Af (`projected_area`, geometry_msgs/Vector3Stamped: x = Af m², y = its standard deviation m²,
 z = object pixels; header = the source frame's), `projected_area/info` (JSON with everything else), the
-binary `mask` (mono8, same header), and on demand (when subscribed) `image_rect` and `overlay`.
+binary `mask` (mono8, same header), and on demand (when subscribed) `image_rect`, `overlay` (every frame) and
+`overlay/preview` (the overlay at most `preview_rate_hz` times a second: for viewers such as the console,
+which then cost the measurement a few remaps a second, not one per frame).
 
 Frames arrive as raw CDR bytes (`raw=True`: the pixels are a view, never copied in Python) on a depth-1
 best-effort subscription and are measured in its callback: while a frame is measured the middleware keeps
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import time
 from collections import deque
 from pathlib import Path
@@ -75,6 +78,8 @@ class AreaNode(Node):
                 "from each frame.")
         declare(self, "background_file", "", "Sub-pixel mode: an image of the empty scene (the flume before the "
                 "plant goes in), same camera and settings, to even the light with; '' = fitted in each frame.")
+        declare(self, "preview_rate_hz", 5.0, "overlay/preview is drawn at most this often (viewers, the console).",
+                low=0.1, high=100.0)
         self.uncalibrated = declare(self, "uncalibrated_frames", "drop",
                                     "Frames before any calibration: 'drop' (throttled warning) or 'measure' "
                                     "(as an uncalibrated camera, flagged calibrated=false).",
@@ -100,6 +105,8 @@ class AreaNode(Node):
         self.mask_pub = self.create_publisher(Image, "mask", IMAGE_QOS)
         self.rect_pub = self.create_publisher(Image, "image_rect", IMAGE_QOS)
         self.overlay_pub = self.create_publisher(Image, "overlay", IMAGE_QOS)
+        self.preview_pub = self.create_publisher(Image, "overlay/preview", IMAGE_QOS)
+        self._preview_at = -math.inf  # monotonic s of the last preview
         self.warn = CountedWarnings(self.get_logger())
         self.file_camera = None
         self.file_conditions = None  # calibration_file's medium and distance, said when frames leave them
@@ -334,8 +341,10 @@ class AreaNode(Node):
                       "uncalibrated_frames:=measure to measure them uncalibrated")
             return
         wanted = [pub.get_subscription_count() > 0 for pub in (self.mask_pub, self.rect_pub, self.overlay_pub)]
+        preview = (self.preview_pub.get_subscription_count() > 0 and time.monotonic() - self._preview_at
+                   >= 1.0 / self.get_parameter("preview_rate_hz").value)
         try:
-            result = self.measurer.measure(frame, keep_images=any(wanted))
+            result = self.measurer.measure(frame, keep_images=any(wanted) or preview)
         except FrameSizeError as exc:
             self.warn("frame refused", str(exc))
             return
@@ -358,11 +367,14 @@ class AreaNode(Node):
                        frames_measured=self.frames_measured)
         publish_safely(self, self.info_pub, String(data=json.dumps(summary)))
         # the images cost a remap each: made only for topics somebody listens to (rosbag2 counts)
+        overlay = draw_overlay(result) if wanted[2] or preview else None
         for publisher, image, want in ((self.mask_pub, result.mask, wanted[0]),
                                        (self.rect_pub, result.image, wanted[1]),
-                                       (self.overlay_pub, wanted[2] and draw_overlay(result), wanted[2])):
+                                       (self.overlay_pub, overlay, wanted[2]), (self.preview_pub, overlay, preview)):
             if want:
                 publish_safely(self, publisher, image_bytes(image, stamp, header.frame_id))
+        if preview:
+            self._preview_at = time.monotonic()
 
 
 def main(args: list[str] | None = None) -> int:

@@ -77,7 +77,8 @@ class ConsoleNode(Node):
         self.bag: Path | None = None
         self._recorder_lock = threading.Lock()
         self._parameters_asked_at: float | None = None  # a get_parameters call in flight since
-        self.view_topics = {"area": "overlay",
+        # the area node's preview: its overlay at a bounded rate (every frame's overlay would cost it a remap each)
+        self.view_topics = {"area": "overlay/preview",
                             "calibration": f"/{self.calibration_name}/feedback", "camera": "image_raw"}
         self.view_subscriptions: dict = {}
         self.create_subscription(Vector3Stamped, "projected_area", self._on_area, RESULT_QOS)
@@ -130,11 +131,7 @@ class ConsoleNode(Node):
                                        "fx": k[0], "fy": k[4], "cx": k[2], "cy": k[5], "d": list(info.d)}
 
     def _on_view(self, view: str, data: bytes) -> None:
-        try:
-            frame = decode_image(data).pixels()
-        except ImageMessageError:
-            return
-        self.feeds[view].offer(frame)
+        self.feeds[view].offer(lambda: decode_image(data).pixels())  # decoded only if a page is shown it
 
     def _look_around(self) -> None:
         """Which nodes are up, the area node's parameters, and the views' topics subscribed while shown."""

@@ -1,0 +1,134 @@
+"""Does the operator's console slow the measurement? The area node's Af rate with no page open and with two
+pages open on the measurement view (the area node then draws its overlay for the console, the console decodes
+it and makes small JPEGs, and two headless chromium pages show them), alternated in rounds in one run, confined
+to this machine like the tests. Two camera rates: a real camera's (the area node keeps up) and as fast as the
+camera node can (the area node saturated: any CPU the console takes shows).
+
+    .venv/bin/python bench/console_load.py [--seconds 10] [--rounds 3] [--rates 30,200]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "test"))
+
+from veg_area_ros.ros.confine import confined, netns_available, ros_environment  # noqa: E402
+
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--disable-dev-shm-usage"]
+
+
+def start(module: str, **parameters) -> subprocess.Popen:
+    args = [sys.executable, "-m", f"veg_area_ros.ros.{module}", "--ros-args"]
+    for key, value in parameters.items():
+        args += ["-p", f"{key}:={value}"]
+    return subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def count_areas(probe, counter: list[int], seconds: float) -> float:
+    import rclpy
+
+    before, end = counter[0], time.monotonic() + seconds
+    started = time.monotonic()
+    while time.monotonic() < end:
+        rclpy.spin_once(probe, timeout_sec=0.02)
+    return (counter[0] - before) / (time.monotonic() - started)
+
+
+def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path) -> dict:
+    import rclpy
+    from geometry_msgs.msg import Vector3Stamped
+    from playwright.sync_api import sync_playwright
+    from rclpy.node import Node
+
+    from veg_area_ros.ros.qos import RESULT_QOS
+
+    processes = [start("camera_node", rate_hz=rate_hz, synthetic_scene="cube", camera_info_url=f"file://{calibration}"),
+                 start("area_node"), start("console_node")]
+    counter = [0]
+    rclpy.init()
+    probe = Node("console_load_probe")
+    probe.create_subscription(Vector3Stamped, "projected_area", lambda _: counter.__setitem__(0, counter[0] + 1),
+                              RESULT_QOS)
+    without, with_pages = [], []
+    try:
+        count_areas(probe, counter, 15.0)  # discovery, the first frames' weights
+        with sync_playwright() as playwright:
+            browser = playwright.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
+            for _ in range(rounds):
+                without.append(count_areas(probe, counter, seconds))
+                pages = [browser.new_page() for _ in range(2)]
+                for page in pages:
+                    page.goto("http://127.0.0.1:8080/")
+                for page in pages:
+                    page.wait_for_function("document.getElementById('frame').naturalWidth > 0", timeout=60000)
+                count_areas(probe, counter, 2.0)
+                with_pages.append(count_areas(probe, counter, seconds))
+                shown = [page.evaluate("Number(document.getElementById('frame').dataset.frameNumber)")
+                         for page in pages]
+                for page in pages:
+                    page.close()
+                count_areas(probe, counter, 6.0)  # the console lets the overlay go after 5 s unasked
+            browser.close()
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+        for process in processes:
+            process.send_signal(signal.SIGINT)
+        for process in processes:
+            try:
+                process.wait(15)
+            except subprocess.TimeoutExpired:
+                process.kill()
+    ratios = [w / n for w, n in zip(with_pages, without, strict=True)]
+    return {"camera_hz": rate_hz, "without_pages_hz": without, "with_two_pages_hz": with_pages, "ratios": ratios,
+            "last_frame_numbers_shown": shown}
+
+
+def inside(args: argparse.Namespace) -> int:
+    from veg_area_ros.calib_io import write_calibration
+    from veg_area_ros.sources import SyntheticSource
+
+    calibration = Path("true_camera.yaml").resolve()
+    write_calibration(calibration, SyntheticSource(scene="cube").camera, "synthetic")
+    print(f"{'camera Hz':>9}  {'Af/s without pages':>24}  {'Af/s with two pages':>24}  ratio min / median / max")
+    for rate in (float(r) for r in args.rates.split(",")):
+        result = measure_rate(rate, args.seconds, args.rounds, calibration)
+        ratios = result["ratios"]
+        print(f"{rate:9.0f}  {' '.join(f'{v:7.1f}' for v in result['without_pages_hz']):>24}  "
+              f"{' '.join(f'{v:7.1f}' for v in result['with_two_pages_hz']):>24}  "
+              f"{min(ratios):.3f} / {statistics.median(ratios):.3f} / {max(ratios):.3f}", flush=True)
+        print("RESULT " + json.dumps(result), flush=True)
+    return 0
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=10.0)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rates", default="30,200")
+    parser.add_argument("--inside", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.inside:
+        return inside(args)
+    print("confinement:", "private network namespace (loopback only)" if netns_available() else
+          "none available: loopback transport", flush=True)
+    with tempfile.TemporaryDirectory(prefix="veg_area_console_bench_") as home:
+        env = ros_environment(Path(home), 3)
+        return subprocess.run(confined([sys.executable, __file__, "--inside", *sys.argv[1:]]), env=env,
+                              cwd=home).returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main())
