@@ -555,7 +555,23 @@ def scenario_record(options: dict, nodes: Nodes) -> dict:
                 camera_info_url=f"file://{calibration}")
     time.sleep(float(options["settle_s"]))
     nodes.start("area_node")
-    time.sleep(float(options["seconds"]))
+    # until the area node has measured `results` frames (a loaded machine starts it slower), at least `seconds`
+    import rclpy
+    from geometry_msgs.msg import Vector3Stamped
+    from rclpy.node import Node
+
+    from veg_area_ros.ros.qos import RESULT_QOS
+
+    rclpy.init()
+    probe = Node("record_probe")
+    results: list[int] = []
+    probe.create_subscription(Vector3Stamped, "projected_area", lambda _: results.append(1), RESULT_QOS)
+    started, deadline = time.monotonic(), time.monotonic() + 180
+    while (len(results) < int(options.get("results", 30)) or time.monotonic() - started < float(options["seconds"])) \
+            and time.monotonic() < deadline:
+        rclpy.spin_once(probe, timeout_sec=0.05)
+    probe.destroy_node()
+    rclpy.try_shutdown()
     killed.kill()
     killed.wait(10)
     time.sleep(1.0)

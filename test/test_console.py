@@ -247,9 +247,10 @@ def test_a_roi_drawn_on_the_page_becomes_the_nodes_roi(console):
 
 @needs_browser
 def test_recording_starts_and_stops_from_the_page(console):
-    assert "MB" in console["recording_text"] and "closed" in console["steps"]["record_stop"]
+    assert "MB" in console["recording_text"]
+    assert "closed" in console["steps"]["record_stop"], console["recorder_log"]
     counts = console["bag_counts"]
-    assert counts.get("/image_raw", 0) > 5 and counts.get("/projected_area", 0) > 5
+    assert counts.get("/image_raw", 0) > 5 and counts.get("/projected_area", 0) > 5, counts
 
 
 @needs_browser
