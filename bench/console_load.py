@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import statistics
 import subprocess
@@ -36,14 +37,49 @@ def start(module: str, **parameters) -> subprocess.Popen:
     return subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
-def count_areas(probe, counter: list[int], seconds: float) -> float:
+def spin(probe, seconds: float) -> None:
     import rclpy
 
-    before, end = counter[0], time.monotonic() + seconds
-    started = time.monotonic()
+    end = time.monotonic() + seconds
     while time.monotonic() < end:
         rclpy.spin_once(probe, timeout_sec=0.02)
-    return (counter[0] - before) / (time.monotonic() - started)
+
+
+def count_areas(probe, stamps: list[float], seconds: float) -> float:
+    """Af results per second of frames the camera stamped within the window (a result that arrives after it
+    still counts; a backlog of earlier frames does not)."""
+    start = time.time()
+    spin(probe, seconds)
+    end = time.time()
+    spin(probe, 1.5)
+    return sum(start <= s < end for s in stamps) / (end - start)
+
+
+def cpu_ticks(pids: dict[str, list[int]]) -> dict[str, int]:
+    """user + system clock ticks of each role's processes."""
+    ticks = {}
+    for role, group in pids.items():
+        total = 0
+        for pid in group:
+            try:
+                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                total += int(fields[11]) + int(fields[12])
+            except (OSError, IndexError, ValueError):
+                continue
+        ticks[role] = total
+    return ticks
+
+
+def chromium_pids() -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if "chrom" in (entry / "comm").read_text():
+                    found.append(int(entry.name))
+            except OSError:
+                continue
+    return found
 
 
 def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path) -> dict:
@@ -56,30 +92,35 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path)
 
     processes = [start("camera_node", rate_hz=rate_hz, synthetic_scene="cube", camera_info_url=f"file://{calibration}"),
                  start("area_node"), start("console_node")]
-    counter = [0]
+    stamps: list[float] = []
     rclpy.init()
     probe = Node("console_load_probe")
-    probe.create_subscription(Vector3Stamped, "projected_area", lambda _: counter.__setitem__(0, counter[0] + 1),
-                              RESULT_QOS)
-    without, with_pages = [], []
+    probe.create_subscription(Vector3Stamped, "projected_area",
+                              lambda m: stamps.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), RESULT_QOS)
+    roles = {"camera": [processes[0].pid], "area": [processes[1].pid], "console": [processes[2].pid]}
+    without, with_pages, cpu = [], [], []
     try:
-        count_areas(probe, counter, 15.0)  # discovery, the first frames' weights
+        spin(probe, 15.0)  # discovery, the first frames' weights
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
             for _ in range(rounds):
-                without.append(count_areas(probe, counter, seconds))
+                without.append(count_areas(probe, stamps, seconds))
                 pages = [browser.new_page() for _ in range(2)]
                 for page in pages:
                     page.goto("http://127.0.0.1:8080/")
                 for page in pages:
                     page.wait_for_function("document.getElementById('frame').naturalWidth > 0", timeout=60000)
-                count_areas(probe, counter, 2.0)
-                with_pages.append(count_areas(probe, counter, seconds))
+                spin(probe, 2.0)
+                roles["chromium"] = chromium_pids()
+                before, started = cpu_ticks(roles), time.monotonic()
+                with_pages.append(count_areas(probe, stamps, seconds))
+                after, elapsed = cpu_ticks(roles), time.monotonic() - started
+                cpu.append({role: (after[role] - before[role]) / os.sysconf("SC_CLK_TCK") / elapsed for role in roles})
                 shown = [page.evaluate("Number(document.getElementById('frame').dataset.frameNumber)")
                          for page in pages]
                 for page in pages:
                     page.close()
-                count_areas(probe, counter, 6.0)  # the console lets the overlay go after 5 s unasked
+                spin(probe, 6.0)  # the console lets the preview go after 5 s unasked
             browser.close()
     finally:
         probe.destroy_node()
@@ -93,7 +134,8 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path)
                 process.kill()
     ratios = [w / n for w, n in zip(with_pages, without, strict=True)]
     return {"camera_hz": rate_hz, "without_pages_hz": without, "with_two_pages_hz": with_pages, "ratios": ratios,
-            "last_frame_numbers_shown": shown}
+            "last_frame_numbers_shown": shown,
+            "cpu_cores_with_pages": {role: statistics.median(c[role] for c in cpu) for role in cpu[0]}}
 
 
 def inside(args: argparse.Namespace) -> int:
@@ -109,6 +151,8 @@ def inside(args: argparse.Namespace) -> int:
         print(f"{rate:9.0f}  {' '.join(f'{v:7.1f}' for v in result['without_pages_hz']):>24}  "
               f"{' '.join(f'{v:7.1f}' for v in result['with_two_pages_hz']):>24}  "
               f"{min(ratios):.3f} / {statistics.median(ratios):.3f} / {max(ratios):.3f}", flush=True)
+        print("           CPU (cores) with the pages open: " + ", ".join(
+            f"{role} {value:.2f}" for role, value in result["cpu_cores_with_pages"].items()), flush=True)
         print("RESULT " + json.dumps(result), flush=True)
     return 0
 

@@ -164,6 +164,8 @@ def test_the_server_serves_the_page_with_its_files_and_refuses_what_it_must(serv
     assert b"http" not in page.replace(b"http-equiv", b"")
     status, jpeg = ask(base + "/api/frame/area")
     assert status == 200 and jpeg[:2] == b"\xff\xd8"
+    assert ask(base + "/api/frame/area?after=1")[0] == 304  # the page has frame 1: not sent again
+    assert ask(base + "/api/frame/area?after=0")[0] == 200
     assert ask(base + "/api/frame/nothing")[0] == 404
     assert ask(base + "/api/parameters", {"threshold": 50})[0] == 403  # no token
     assert ask(base + "/api/parameters", {"threshold": 50}, "wrong")[0] == 403
@@ -298,3 +300,14 @@ def test_a_frame_is_decoded_only_when_a_page_is_shown_it():
 
     feed.offer(broken)
     assert feed.jpeg(2.0)[0] is jpeg  # the last good image stays
+
+
+def test_the_newest_result_is_read_from_its_json_only_when_asked():
+    series = AreaSeries()
+    series.add_info(json.dumps({"warnings": ["clipped highlights: ..."], "frames_measured": 7, "threshold": 99.5}))
+    shown = series.as_dict()
+    assert shown["warnings"] == ["clipped highlights: ..."] and shown["frames"]["measured"] == 7
+    assert shown["threshold"] == 99.5
+    for broken in ("{not json", "[1, 2]"):
+        series.add_info(broken)
+        assert series.as_dict()["warnings"] == [] and series.as_dict()["frames"]["measured"] is None

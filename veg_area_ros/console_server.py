@@ -130,6 +130,12 @@ class ConsoleServer:
             return web.json_response({"error": f"no view {request.match_info['view']!r}: "
                                       f"{', '.join(self.feeds)}"}, status=404)
         jpeg, number = await asyncio.get_running_loop().run_in_executor(None, feed.jpeg, now())
+        try:
+            shown = int(request.query.get("after", "-1"))
+        except ValueError:
+            shown = -1
+        if jpeg is not None and number <= shown:  # the page has this one: not sent (nor decoded) again
+            return web.Response(status=304, headers={"Cache-Control": "no-store", "X-Frame-Number": str(number)})
         if jpeg is None:
             return web.Response(status=204, headers={"Cache-Control": "no-store"})
         return web.Response(body=jpeg, content_type="image/jpeg",

@@ -6,6 +6,7 @@ rule for who may change anything (a token). The console node fills it; the conso
 from __future__ import annotations
 
 import ipaddress
+import json
 import math
 import secrets
 import threading
@@ -107,7 +108,7 @@ class AreaSeries:
 
     points: deque = field(default_factory=lambda: deque(maxlen=SERIES_POINTS))  # (s since first, Af, std)
     first_stamp_s: float | None = None
-    latest: dict = field(default_factory=dict)
+    latest: dict | str = field(default_factory=dict)
     received: int = 0
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
@@ -119,13 +120,22 @@ class AreaSeries:
             self.points.append((round(stamp_s - self.first_stamp_s, 4), area_m2, std_m2))
             self.received += 1
 
-    def add_info(self, summary: dict) -> None:
+    def add_info(self, summary: dict | str) -> None:
+        """The newest result's summary, or its JSON text (parsed only when a page reads it: results come at
+        the camera's rate, pages ask twice a second)."""
         with self._lock:
             self.latest = summary
 
     def as_dict(self) -> dict:
         with self._lock:
             latest = self.latest
+        if isinstance(latest, str):
+            try:
+                latest = json.loads(latest)
+            except ValueError:
+                latest = {}
+            latest = latest if isinstance(latest, dict) else {}
+        with self._lock:
             return {"points": list(self.points), "received": self.received,
                     "warnings": latest.get("warnings", []),
                     "frames": {"measured": latest.get("frames_measured"), "skipped": latest.get("frames_dropped"),

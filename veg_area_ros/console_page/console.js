@@ -36,15 +36,17 @@ async function post(path, body) {
 async function imageLoop() {
   for (;;) {
     const asked = view;
+    const img = $("frame");
+    const after = img.dataset.view === asked && img.dataset.frameNumber ? img.dataset.frameNumber : "-1";
     try {
-      const answer = await fetch("/api/frame/" + asked, { headers: HEADERS });
+      const answer = await fetch(`/api/frame/${asked}?after=${after}`, { headers: HEADERS });
       if (answer.status === 200 && asked === view) {
         const url = URL.createObjectURL(await answer.blob());
-        const img = $("frame");
         const old = img.src;
         await new Promise((done) => { img.onload = done; img.onerror = done; img.src = url; });
         if (old.startsWith("blob:")) URL.revokeObjectURL(old);
         img.dataset.frameNumber = answer.headers.get("X-Frame-Number");
+        img.dataset.view = asked;
         img.dataset.frameSize = answer.headers.get("X-Frame-Size");
         $("no-frame").style.display = "none";
       } else if (answer.status === 204 && asked === view) {

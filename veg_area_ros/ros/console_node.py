@@ -106,12 +106,7 @@ class ConsoleNode(Node):
         self.series.add_area(stamp, msg.vector.x, msg.vector.y)
 
     def _on_info(self, msg: String) -> None:
-        try:
-            summary = json.loads(msg.data)
-        except ValueError:
-            return
-        if isinstance(summary, dict):
-            self.series.add_info(summary)
+        self.series.add_info(msg.data)
 
     def _on_progress(self, msg: String) -> None:
         try:
