@@ -15,9 +15,9 @@ from ros_harness import netns_available
 pytestmark = pytest.mark.timeout(300)
 
 
-def run_bench(script: str, *args: str) -> str:
+def run_bench(script: str, *args: str, timeout: float = 240) -> str:
     done = subprocess.run([sys.executable, str(REPO / "bench" / script), *args], capture_output=True, text=True,
-                          timeout=240, cwd=REPO)
+                          timeout=timeout, cwd=REPO)
     assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-3000:]
     return done.stdout
 
@@ -26,8 +26,10 @@ def numbers(line: str) -> list[float]:
     return [float(x) for x in re.findall(r"-?\d+(?:\.\d+)?", line)]
 
 
+@pytest.mark.timeout(960)
 def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
-    out = run_bench("area_speed.py", "--repeats", "1", "--video-frames", "30", "--video-runs", "2")
+    out = run_bench("area_speed.py", "--repeats", "1", "--video-frames", "30", "--video-runs", "2",
+                    "--dslr-video-frames", "4", timeout=900)
     cores = [line for line in out.splitlines() if "area core" in line]
     assert len(cores) == 4, out  # count and sub-pixel mode at each size
     for line in cores:
@@ -42,6 +44,10 @@ def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
     spread = re.search(r"over 2 run\(s\): min ([\d.]+)x, median ([\d.]+)x, max ([\d.]+)x; at most 3x in (\d) of 2", out)
     ratios = sorted(numbers(video.split("(")[-1])[0] for video in videos)
     assert spread and float(spread[1]) == round(ratios[0], 2) and float(spread[3]) == round(ratios[1], 2), out
+    dslr = [line for line in out.splitlines() if "veg-area measure of a 4-frame 3872x2592 video" in line]
+    assert len(dslr) == 2 and re.search(r"at most 2x in \d of 2", out), out
+    memory = re.findall(r"peak memory of the command as its own process: (\d+) MB \(exit 0\)", out)
+    assert len(memory) == 2 and all(int(m) > 50 for m in memory), out
 
 
 def test_calibration_speed_ours_fits_no_worse_than_opencv():

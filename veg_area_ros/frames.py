@@ -256,13 +256,68 @@ def video_frame_count(path: Path) -> int:
         capture.release()
 
 
+# Motion-JPEG frames this large are decoded by OpenCV's JPEG decoder on two threads (`decoded`); smaller ones by
+# FFmpeg in one (their rows unchanged). The two decoders differ by up to 3 DN, which can flip a frame's sub-pixel
+# decision: Af moved by up to 0.7 of its std on a 640x480 test video, 0.1 at 10 MP (test_pipeline).
+PACKETS_FROM_PIXELS = 2_000_000
+
+
+@dataclass(frozen=True)
+class Packet:
+    """A frame of a Motion-JPEG video not yet decoded: its JPEG, decoded where it is wanted (`decoded`), so that
+    a 10 MP video's frames are decoded on both cores while they are measured."""
+    name: str
+    data: np.ndarray  # the frame's JPEG bytes
+    time_s: float | None
+    position: int
+
+
+def _motion_jpeg_capture(path: Path) -> cv2.VideoCapture | None:
+    """A capture that gives a large Motion-JPEG video's frames as their JPEG bytes (no decoding), or None:
+    another codec, frames under PACKETS_FROM_PIXELS (decoded by FFmpeg as before: one core keeps up), or JPEGs
+    without their Huffman tables (as some webcams write them, which only FFmpeg decodes)."""
+    probe = cv2.VideoCapture(opencv_path(path))
+    try:
+        fourcc = int(probe.get(cv2.CAP_PROP_FOURCC)) if probe.isOpened() else 0
+        pixels = probe.get(cv2.CAP_PROP_FRAME_WIDTH) * probe.get(cv2.CAP_PROP_FRAME_HEIGHT)
+    finally:
+        probe.release()
+    if fourcc.to_bytes(4, "little").upper() != b"MJPG" or pixels < PACKETS_FROM_PIXELS:
+        return None
+    capture = cv2.VideoCapture(opencv_path(path), cv2.CAP_FFMPEG)
+    if not (capture.isOpened() and capture.set(cv2.CAP_PROP_FORMAT, -1)):
+        capture.release()
+        return None
+    ok, first = capture.read()
+    header = first.tobytes() if ok and first is not None else b""
+    scan = header.find(b"\xff\xda")
+    if not header.startswith(b"\xff\xd8") or scan < 0 or header.find(b"\xff\xc4", 0, scan) < 0:
+        capture.release()
+        return None
+    capture.release()  # opened again at its start: a read cannot be put back
+    capture = cv2.VideoCapture(opencv_path(path), cv2.CAP_FFMPEG)
+    capture.set(cv2.CAP_PROP_FORMAT, -1)
+    return capture
+
+
+def _whole_jpeg(packet: np.ndarray) -> bool:
+    """Whether a Motion-JPEG packet holds a whole JPEG (its end marker): a cut one would decode with a grey
+    bottom and only a warning on stderr."""
+    tail = packet.reshape(-1)[-64:].tobytes().rstrip(b"\x00")
+    return packet.size > 4 and packet.reshape(-1)[:2].tobytes() == b"\xff\xd8" and tail.endswith(b"\xff\xd9")
+
+
 def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = None,
-               spread: bool = False) -> Iterator[Frame]:
+               spread: bool = False, encoded: bool = False) -> Iterator[Frame | Packet]:
     """Every `step`-th frame of a video (indices counted from its first frame), from index `start` up to
     `stop` (exclusive): a range of a long video for one worker. `spread`: one frame in each run of `step`, at a
     place that varies from run to run (`spread_offset`), so that a motion repeating every few frames (a
-    camera's pose cycle) is not sampled at the same phase every time."""
-    capture = cv2.VideoCapture(opencv_path(path))
+    camera's pose cycle) is not sampled at the same phase every time. `encoded`: a Motion-JPEG video's frames
+    come as `Packet`s (see `decoded`), other videos' as frames."""
+    capture = _motion_jpeg_capture(path) if encoded else None
+    packets = capture is not None
+    if capture is None:
+        capture = cv2.VideoCapture(opencv_path(path))
     if not capture.isOpened():
         yield Frame(shown_name(path), None, "is not a video OpenCV can open")
         return
@@ -278,10 +333,11 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
         while index < declared or stop is None:
             if index % step == (spread_offset(index // step, step) if spread else 0):
                 ok, image = capture.read()
-                if not ok:
+                if not ok or (packets and not _whole_jpeg(image)):  # a cut JPEG: the video ends here, as FFmpeg's
                     break
-                yield Frame(f"{shown_name(path)}#{index}", image, time_s=index / fps if fps > 0 else None,
-                            position=index)
+                name, time_s = f"{shown_name(path)}#{index}", index / fps if fps > 0 else None
+                yield (Packet(name, image.reshape(-1), time_s, index) if packets else
+                       Frame(name, image, time_s=time_s, position=index))
             elif not capture.grab():
                 break
             index += 1
@@ -339,17 +395,20 @@ def spread_offset(window: int, step: int) -> int:
 
 def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: str | None = None,
                 frame_range: tuple[int, int] | None = None, grey: bool = False,
-                spread: bool = False) -> Iterator[Frame]:
+                spread: bool = False, encoded: bool = False) -> Iterator[Frame | Packet]:
     """Every frame of the inputs; unreadable ones come with image None and the reason. `frame_range`
     (start, stop): only those frames of a video or bag (one input). `grey`: every image in one channel (what
-    a board's detection looks at; an image file is then decoded without its colour)."""
+    a board's detection looks at; an image file is then decoded without its colour). `encoded`: Motion-JPEG
+    videos' frames as `Packet`s, for `decoded` (not with `grey`)."""
+    if encoded and grey:
+        raise ValueError("encoded frames are decoded by `decoded`, in colour")
     start, stop = frame_range if frame_range is not None else (0, None)
     for path in expand_inputs(paths):
         suffix = path.suffix.lower()
         if is_bag(path):
             yield from _greyed(iter_bag(path, image_topic, start, stop), grey)
         elif suffix in VIDEO_SUFFIXES:
-            yield from _greyed(iter_video(path, video_step, start, stop, spread), grey)
+            yield from _greyed(iter_video(path, video_step, start, stop, spread, encoded), grey)
         elif suffix in IMAGE_SUFFIXES:
             image, problem = read_image(path, grey)
             yield Frame(shown_name(path), image, problem)
@@ -370,6 +429,30 @@ def with_grey(frames: Iterator[Frame]) -> Iterator[Frame]:
     for frame in frames:
         if frame.image is not None and frame.image.ndim == 3:
             frame = replace(frame, grey=cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY))
+        yield frame
+
+
+def decode_with_grey(item: Frame | Packet) -> Frame:
+    """A `Packet` decoded (OpenCV's JPEG decoder, as the same frame saved as a .jpg file would be read), and a
+    colour frame's grey conversion beside it (`Frame.grey`)."""
+    if isinstance(item, Packet):
+        image = cv2.imdecode(item.data, cv2.IMREAD_COLOR)
+        if image is None:
+            return Frame(item.name, None, "this frame's JPEG could not be decoded (the video is damaged here)",
+                         time_s=item.time_s, position=item.position)
+        item = Frame(item.name, image, time_s=item.time_s, position=item.position)
+    if item.image is not None and item.image.ndim == 3 and item.grey is None:
+        item = replace(item, grey=cv2.cvtColor(item.image, cv2.COLOR_BGR2GRAY))
+    return item
+
+
+def decoded(items: Iterator[Frame | Packet], workers: int = 2) -> Iterator[Frame]:
+    """The frames of `iter_frames(..., encoded=True)` in order, read ahead by a thread and decoded (with their
+    grey) by `workers` threads while earlier ones are used: a Motion-JPEG video's decoding, the larger part of
+    measuring it at 10 MP, then runs on both cores. Same frames as decoding them one after another."""
+    from .pipeline import ordered_map, prefetched
+
+    for _, frame in ordered_map(decode_with_grey, prefetched(items), workers=workers, ahead=2 * workers):
         yield frame
 
 

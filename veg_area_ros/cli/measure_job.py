@@ -149,17 +149,16 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         VIDEO_SUFFIXES,
         InputError,
         decodable_ahead,
+        decoded,
         expand_inputs,
         is_bag,
         iter_frames,
         video_frame_count,
-        with_grey,
     )
     from ..idealize import FrameSizeError
     from ..light import LightError
     from ..locate import NO_CALIBRATION_FOR_OFFSET
     from ..overlay import draw_overlay
-    from ..pipeline import prefetched
     from ..targets import TargetsError, TargetsSpec
 
     say = progress(job.quiet)
@@ -283,9 +282,10 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     segment = None
     try:
         # the next frames decoded while this one is measured (same frames, same order)
-        frames = iter_frames(files, job.video_step, job.image_topic, job.frame_range)
-        if decodable_ahead(files):  # each frame's grey made there too, off this thread
-            frames = prefetched(with_grey(frames))
+        ahead = decodable_ahead(files)
+        frames = iter_frames(files, job.video_step, job.image_topic, job.frame_range, encoded=ahead)
+        if ahead:  # decoded (a Motion-JPEG video's frames by two threads) and greyed off this thread
+            frames = decoded(frames)
         for index, frame in enumerate(frames, 1):
             row = {"frame": frame.name, "time_s": frame.time_s, "error": ""}
             line = ""
