@@ -75,7 +75,6 @@ def test_installed_node_executable_starts_and_stops_cleanly(prefix, tmp_path):
     Without any ament or Fast DDS setting (an unsourced .venv), so the node finds its own profile; kept on this
     machine by the shipped local profile (shared memory, UDP on 127.0.0.1 only), private domain. The README's
     test runs the same with the default profile, confined to a private network namespace."""
-    import signal
     import time
 
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "AMENT_"))}
@@ -89,18 +88,28 @@ def test_installed_node_executable_starts_and_stops_cleanly(prefix, tmp_path):
             started += process.stdout.readline()
         assert "transport:" in started and process.poll() is None, started + process.stdout.read()
         assert "fastdds_local.xml (found via" in started, started
-        process.send_signal(signal.SIGINT)
-        assert process.wait(20) == 0
+        stop_cleanly(process)
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
+        reap(process)
+
+
+def stop_cleanly(process: subprocess.Popen) -> None:
+    """Ctrl-C, and the node must end with exit code 0."""
+    import signal
+
+    process.send_signal(signal.SIGINT)
+    assert process.wait(20) == 0
+
+
+def reap(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        process.kill()
+        process.wait()
 
 
 def test_the_installed_console_serves_its_page_from_the_install(prefix, tmp_path):
     """`ros2 run veg_area_ros console_node`: the page's files come from the installed package (run outside the
     source tree), every file the page loads is served by the node, and it stops cleanly on SIGINT."""
-    import signal
     import socket
     import time
     import urllib.request
@@ -127,12 +136,9 @@ def test_the_installed_console_serves_its_page_from_the_install(prefix, tmp_path
         assert sorted(loaded) == ["/console.css", "/console.js"]
         for path in loaded:
             assert urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=10).status == 200
-        process.send_signal(signal.SIGINT)
-        assert process.wait(20) == 0
+        stop_cleanly(process)
     finally:
-        if process.poll() is None:
-            process.kill()
-            process.wait()
+        reap(process)
     installed = [p for p in (prefix / "lib").glob("python3*/site-packages/veg_area_ros/console_page/*")]
     assert sorted(p.name for p in installed) == ["console.css", "console.js", "index.html"]
 

@@ -60,18 +60,27 @@ def test_ordered_map_keeps_the_order_whatever_finishes_first():
     assert list(ordered_map(slow_on_even, range(5), workers=1)) == [(k, k * k) for k in range(5)]
 
 
-def test_a_video_measured_with_decoding_overlapped_gives_the_plain_loops_rows(tmp_path):
-    video = tmp_path / "run.avi"
-    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30, ENDOSCOPE.image_size)
-    rng = np.random.default_rng(0)
-    clean = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=0.0)
-    for _ in range(20):
+def noisy_cube_video(path, camera, distance_m: float, count: int, seed: int, supersample: int):
+    """An MJPG video of the cube in air, 3 DN of fresh noise per frame."""
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, camera.image_size)
+    rng = np.random.default_rng(seed)
+    clean = render_scene(camera, cube_scene(), distance_m, noise_sigma=0.0, supersample=supersample)
+    for _ in range(count):
         writer.write(np.clip(clean + rng.normal(0, 3, clean.shape), 0, 255).astype(np.uint8))
     writer.release()
+    return path
+
+
+def measured_rows(camera, frames) -> list[dict]:
+    measurer = AreaMeasurer(camera, scene_targets(), Classifier(threshold=120))
+    return [measurer.measure(frame.image, grey=frame.grey).summary() for frame in frames]
+
+
+def test_a_video_measured_with_decoding_overlapped_gives_the_plain_loops_rows(tmp_path):
+    video = noisy_cube_video(tmp_path / "run.avi", ENDOSCOPE, 0.7, 20, seed=0, supersample=3)
 
     def rows(frames) -> list[dict]:
-        measurer = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
-        return [measurer.measure(frame.image, grey=frame.grey).summary() for frame in frames]
+        return measured_rows(ENDOSCOPE, frames)
 
     plain = rows(iter_video(video))
     assert len(plain) == 20
@@ -84,17 +93,10 @@ def test_a_video_measured_with_decoding_overlapped_gives_the_plain_loops_rows(tm
 
 def test_a_10_megapixel_video_decoded_on_two_threads_gives_the_plain_loops_rows(tmp_path):
     """The DSLR case of bench/area_speed.py, short: 3872x2592 Motion-JPEG, 3 DN of noise per frame."""
-    video = tmp_path / "dslr.avi"
-    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30, DSLR.image_size)
-    rng = np.random.default_rng(1)
-    clean = render_scene(DSLR, cube_scene(), 1.0, noise_sigma=0.0, supersample=1)
-    for _ in range(6):
-        writer.write(np.clip(clean + rng.normal(0, 3, clean.shape), 0, 255).astype(np.uint8))
-    writer.release()
+    video = noisy_cube_video(tmp_path / "dslr.avi", DSLR, 1.0, 6, seed=1, supersample=1)
 
     def rows(frames) -> list[dict]:
-        measurer = AreaMeasurer(DSLR, scene_targets(), Classifier(threshold=120))
-        return [measurer.measure(frame.image, grey=frame.grey).summary() for frame in frames]
+        return measured_rows(DSLR, frames)
 
     packets = list(iter_frames([video], encoded=True))
     assert len(packets) == 6 and all(isinstance(p, Packet) for p in packets)
