@@ -311,3 +311,13 @@ def test_the_newest_result_is_read_from_its_json_only_when_asked():
     for broken in ("{not json", "[1, 2]"):
         series.add_info(broken)
         assert series.as_dict()["warnings"] == [] and series.as_dict()["frames"]["measured"] is None
+
+
+def test_a_result_without_a_finite_af_is_counted_not_plotted():
+    series = AreaSeries()
+    series.add_area(10.0, 1e-2, 1e-5)
+    series.add_area(10.1, float("nan"), 0.0)
+    series.add_area(10.2, 1e-2, float("inf"))
+    shown = series.as_dict()
+    assert shown["received"] == 3 and shown["points"] == [(0.0, 1e-2, 1e-5)]
+    json.dumps(shown, allow_nan=False)  # the page's JSON takes no NaN

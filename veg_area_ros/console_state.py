@@ -113,12 +113,15 @@ class AreaSeries:
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     def add_area(self, stamp_s: float, area_m2: float, std_m2: float) -> None:
+        """A result; one without a finite Af or std (no object, a refused frame) is counted, not plotted."""
         with self._lock:
+            self.received += 1
+            if not all(math.isfinite(v) for v in (stamp_s, area_m2, std_m2)):
+                return
             if self.first_stamp_s is None or stamp_s < self.first_stamp_s:  # a replay that restarted: new run
                 self.first_stamp_s = stamp_s
                 self.points.clear()
             self.points.append((round(stamp_s - self.first_stamp_s, 4), area_m2, std_m2))
-            self.received += 1
 
     def add_info(self, summary: dict | str) -> None:
         """The newest result's summary, or its JSON text (parsed only when a page reads it: results come at

@@ -276,16 +276,11 @@ def _motion_jpeg_capture(path: Path) -> cv2.VideoCapture | None:
     """A capture that gives a large Motion-JPEG video's frames as their JPEG bytes (no decoding), or None:
     another codec, frames under PACKETS_FROM_PIXELS (decoded by FFmpeg as before: one core keeps up), or JPEGs
     without their Huffman tables (as some webcams write them, which only FFmpeg decodes)."""
-    probe = cv2.VideoCapture(opencv_path(path))
-    try:
-        fourcc = int(probe.get(cv2.CAP_PROP_FOURCC)) if probe.isOpened() else 0
-        pixels = probe.get(cv2.CAP_PROP_FRAME_WIDTH) * probe.get(cv2.CAP_PROP_FRAME_HEIGHT)
-    finally:
-        probe.release()
-    if fourcc.to_bytes(4, "little").upper() != b"MJPG" or pixels < PACKETS_FROM_PIXELS:
-        return None
     capture = cv2.VideoCapture(opencv_path(path), cv2.CAP_FFMPEG)
-    if not (capture.isOpened() and capture.set(cv2.CAP_PROP_FORMAT, -1)):
+    fourcc = int(capture.get(cv2.CAP_PROP_FOURCC)) if capture.isOpened() else 0
+    pixels = capture.get(cv2.CAP_PROP_FRAME_WIDTH) * capture.get(cv2.CAP_PROP_FRAME_HEIGHT)
+    if fourcc.to_bytes(4, "little").upper() != b"MJPG" or pixels < PACKETS_FROM_PIXELS or \
+            not capture.set(cv2.CAP_PROP_FORMAT, -1):
         capture.release()
         return None
     ok, first = capture.read()
@@ -427,9 +422,7 @@ def with_grey(frames: Iterator[Frame]) -> Iterator[Frame]:
     """The frames with each colour image's grey conversion beside it (`Frame.grey`): made where the frames are
     decoded (a reader thread), what the markers and a grey band are read from."""
     for frame in frames:
-        if frame.image is not None and frame.image.ndim == 3:
-            frame = replace(frame, grey=cv2.cvtColor(frame.image, cv2.COLOR_BGR2GRAY))
-        yield frame
+        yield decode_with_grey(frame)
 
 
 def decode_with_grey(item: Frame | Packet) -> Frame:

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-import math
 import os
 import signal
 import subprocess
@@ -166,12 +165,10 @@ class ConsoleNode(Node):
                 recording = {"bag": str(self.bag), "bytes": folder_size(self.bag), "running": running,
                              "started": self.bag.exists(),  # the recorder creates it once it is up
                              "exit_code": None if running else self.recorder.returncode}
-        area = self.series.as_dict()
-        area["points"] = [p for p in area["points"] if all(math.isfinite(v) for v in p)]
         return {"nodes": {"area": {"name": self.area_name, "present": self.present[self.area_name]},
                           "calibration": {"name": self.calibration_name,
                                           "present": self.present[self.calibration_name]}},
-                "area": area, "calibration": self.calibration_log.as_dict(),
+                "area": self.series.as_dict(), "calibration": self.calibration_log.as_dict(),
                 "parameters": self.parameters, "recording": recording}
 
     # --- what the page asks for (from the server's worker threads) --------------------------------------------
