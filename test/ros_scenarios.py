@@ -679,8 +679,12 @@ def scenario_foreign(options: dict, nodes: Nodes) -> dict:
         sent.append(1)
 
     node.create_timer(0.05, publish_force)
-    end = time.monotonic() + float(options["seconds"])
-    while time.monotonic() < end:
+    # at least `seconds`; then on until the counts asked for arrived (a busy machine starts the nodes late)
+    start = time.monotonic()
+    least_images, least_areas = int(options.get("least_images", 0)), int(options.get("least_areas", 0))
+    while time.monotonic() < start + float(options["seconds"]) or (
+            (len(images) < least_images or len(areas) < least_areas)
+            and time.monotonic() < start + float(options["seconds"]) + 60):
         rclpy.spin_once(node, timeout_sec=0.05)
     node.destroy_node()
     rclpy.try_shutdown()
@@ -703,7 +707,9 @@ def scenario_interop(options: dict, nodes: Nodes) -> dict:
     ours = [nodes.start("camera_node", rate_hz=10.0, synthetic_scene="cube", synthetic_medium="air",
                         camera_info_url=f"file://{calibration}"), nodes.start("area_node")]
     defaults = {k: v for k, v in GIVEN_ENVIRONMENT.items() if not k.startswith(("FASTDDS_", "VEG_AREA_"))}
-    foreign = subprocess.Popen([sys.executable, __file__, "foreign", json.dumps({"seconds": options["seconds"]})],
+    wanted = {"seconds": options["seconds"], "least_images": options.get("least_images", 0),
+              "least_areas": options.get("least_areas", 0)}
+    foreign = subprocess.Popen([sys.executable, __file__, "foreign", json.dumps(wanted)],
                                env=defaults, stdout=subprocess.PIPE, stderr=sys.stderr, text=True)
     nodes.processes.append(("foreign", foreign))
     rclpy.init()
@@ -712,7 +718,7 @@ def scenario_interop(options: dict, nodes: Nodes) -> dict:
     probe.create_subscription(WrenchStamped, "force", lambda m: forces.append(m.wrench.force.x), 10)
     sockets: list[dict] = []
     try:
-        deadline = time.monotonic() + float(options["seconds"]) + 60
+        deadline = time.monotonic() + float(options["seconds"]) + 120
         while foreign.poll() is None and time.monotonic() < deadline:
             rclpy.spin_once(probe, timeout_sec=0.05)
             if forces and not sockets:  # everyone is up: our processes' sockets, while they are open
@@ -826,7 +832,8 @@ def scenario_two_machines(options: dict, nodes: Nodes) -> dict:
     listeners = {}
     for pc in ("a", "b"):
         listeners[pc] = subprocess.Popen(
-            [*pcs[pc], sys.executable, __file__, "foreign", json.dumps({"seconds": seconds + 15, "images": False})],
+            [*pcs[pc], sys.executable, __file__, "foreign", json.dumps({"seconds": seconds + 15, "images": False,
+                                                                 "least_areas": options.get("least_areas", 0)})],
             env=defaults, stdout=subprocess.PIPE, stderr=sys.stderr, text=True)
         nodes.processes.append((f"listener_{pc}", listeners[pc]))
     ours = dict(GIVEN_ENVIRONMENT)
@@ -840,7 +847,7 @@ def scenario_two_machines(options: dict, nodes: Nodes) -> dict:
         nodes.processes.append((module, subprocess.Popen(args, env=ours, stdout=sys.stderr, stderr=sys.stderr)))
     results = {}
     for pc, listener in listeners.items():
-        lines = [line for line in listener.communicate(timeout=seconds + 90)[0].splitlines()
+        lines = [line for line in listener.communicate(timeout=seconds + 120)[0].splitlines()
                  if line.startswith("RESULT ")]
         results[pc] = json.loads(lines[-1][len("RESULT "):]) if lines else None
     return {"camera_pc": results["a"], "measuring_pc": results["b"], "truth_m2": cube_scene().true_area_m2}
