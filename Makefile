@@ -4,7 +4,7 @@
 SHELL := /bin/bash
 VENV := .venv
 PY := $(VENV)/bin/python
-SOURCES := $(shell find veg_area_ros resource -type f -not -name "*.pyc") $(wildcard config/*) setup.py setup.cfg package.xml
+SOURCES := $(shell find veg_area_ros veg_area_msgs -type f -not -name "*.pyc")
 
 .PHONY: demo test install browser lint bench clean
 
@@ -23,11 +23,18 @@ $(VENV)/.deps-installed: requirements.txt
 	$(PY) -m pip install --quiet -r requirements.txt
 	touch $@
 
-$(VENV)/.package-installed: $(VENV)/.deps-installed $(SOURCES)
+# both packages (veg_area_msgs with CMake and the rosidl generators from the wheels, then veg_area_ros), with
+# .venv as the only prefix; the wheels' CMake files first get this machine's Python and NumPy include folders
+$(VENV)/.package-installed: $(VENV)/.deps-installed $(SOURCES) tools/wheel_cmake.py
+	@command -v cmake >/dev/null && command -v c++ >/dev/null || { \
+	    echo "building veg_area_msgs needs cmake and a C++ compiler: sudo apt-get install cmake g++"; exit 1; }
+	$(PY) tools/wheel_cmake.py $(VENV)
 	mkdir -p build
-	$(VENV)/bin/colcon --log-base build/log build --base-paths . --build-base build \
-	    --install-base $(VENV) --merge-install >build/colcon.out 2>&1 \
-	    || { cat build/colcon.out; exit 1; }
+	PATH="$(abspath $(VENV))/bin:$$PATH" AMENT_PREFIX_PATH="$(abspath $(VENV))" CMAKE_PREFIX_PATH="$(abspath $(VENV))" \
+	    $(VENV)/bin/colcon --log-base build/log build --base-paths veg_area_msgs veg_area_ros --build-base build \
+	    --install-base $(VENV) --merge-install \
+	    --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$(abspath $(PY))" >build/colcon.out 2>&1 \
+	    || { cat build/colcon.out; tail -n 40 build/log/latest_build/veg_area_msgs/stdout_stderr.log 2>/dev/null; exit 1; }
 	ln -sf ../lib/veg_area_ros/veg-area $(VENV)/bin/veg-area
 	touch $@
 

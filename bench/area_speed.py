@@ -15,6 +15,7 @@ import argparse
 import contextlib
 import io
 import itertools
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -23,7 +24,7 @@ import cv2
 import numpy as np
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "veg_area_ros"))
 
 from timing import median_seconds  # bench/ is the script's folder, first on sys.path
 
@@ -206,8 +207,10 @@ def video_case(targets: TargetsSpec, count: int, runs: int = 1, camera=ENDOSCOPE
         helper = ("import os, subprocess, sys; child = subprocess.Popen(sys.argv[1:], stdout=subprocess.DEVNULL); "
                   "_, status, usage = os.wait4(child.pid, 0); "
                   "print(usage.ru_maxrss // 1024, os.waitstatus_to_exitcode(status))")
+        repository = Path(__file__).resolve().parents[1]
         done = subprocess.run([sys.executable, "-c", helper, sys.executable, "-m", "veg_area_ros.cli", *command],
-                              capture_output=True, text=True, cwd=str(Path(__file__).resolve().parents[1]))
+                              capture_output=True, text=True, cwd=str(repository),
+                              env={**os.environ, "PYTHONPATH": str(repository / "veg_area_ros")})
         peak_mb, code = done.stdout.split()
         print(f"  peak memory of the command as its own process: {peak_mb} MB (exit {code})")
     return 0

@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "veg_area_ros"))
 sys.path.insert(0, str(REPO / "test"))
 
 from veg_area_ros.ros.confine import confined, netns_available, ros_environment  # noqa: E402
@@ -84,10 +84,10 @@ def chromium_pids() -> list[int]:
 
 def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path) -> dict:
     import rclpy
-    from geometry_msgs.msg import Vector3Stamped
     from playwright.sync_api import sync_playwright
     from rclpy.node import Node
 
+    from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.ros.qos import RESULT_QOS
 
     processes = [start("camera_node", rate_hz=rate_hz, synthetic_scene="cube", camera_info_url=f"file://{calibration}"),
@@ -95,7 +95,7 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path)
     stamps: list[float] = []
     rclpy.init()
     probe = Node("console_load_probe")
-    probe.create_subscription(Vector3Stamped, "projected_area",
+    probe.create_subscription(ProjectedArea, "projected_area",
                               lambda m: stamps.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), RESULT_QOS)
     roles = {"camera": [processes[0].pid], "area": [processes[1].pid], "console": [processes[2].pid]}
     without, with_pages, cpu = [], [], []

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "veg_area_ros"))
 
 from timing import median_seconds  # bench/ is the script's folder, first on sys.path
 

@@ -67,14 +67,14 @@ def plain_camera(spec: dict):
 
 def plain_area(spec: dict):
     """An area node as one would write it with plain rclpy: deserialized Image, measured in the callback."""
-    from geometry_msgs.msg import Vector3Stamped
     from rclpy.node import Node
     from sensor_msgs.msg import Image
 
+    from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.area import AreaMeasurer
     from veg_area_ros.calib_io import read_calibration
     from veg_area_ros.classify import Classifier
-    from veg_area_ros.ros.messages import msg_to_image
+    from veg_area_ros.ros.messages import msg_to_image, projected_area
     from veg_area_ros.ros.qos import IMAGE_QOS, RESULT_QOS
     from veg_area_ros.sim.synthetic import scene_targets
 
@@ -83,40 +83,37 @@ def plain_area(spec: dict):
             super().__init__("plain_area")
             camera = read_calibration(Path(spec["calibration"])).camera
             self.measurer = AreaMeasurer(camera, scene_targets(), Classifier(threshold=120.0))
-            self.areas = self.create_publisher(Vector3Stamped, "projected_area", RESULT_QOS)
+            self.areas = self.create_publisher(ProjectedArea, "projected_area", RESULT_QOS)
             self.create_subscription(Image, "image_raw", self.on_image, IMAGE_QOS)
 
         def on_image(self, msg: Image) -> None:
             result = self.measurer.measure(msg_to_image(msg))
-            area = Vector3Stamped()
-            area.header = msg.header
-            area.vector.x, area.vector.y, area.vector.z = result.area_m2, result.area_std_m2, float(result.pixel_count)
-            self.areas.publish(area)
+            self.areas.publish(projected_area(result, msg.header.stamp, msg.header.frame_id, "calibration_file"))
 
     return PlainArea()
 
 
 def probe(spec: dict) -> dict:
     """Af results arriving in a third process over spec['seconds'] after the first: rate, latency, drops."""
-    from geometry_msgs.msg import Vector3Stamped
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import String
 
+    from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.ros.qos import RESULT_QOS
 
     node = Node("bench_probe")
     latencies: list[float] = []
     infos: deque[bytes] = deque(maxlen=1)  # the newest, raw: the probe must not slow down what it measures
 
-    def on_area(msg: Vector3Stamped) -> None:
+    def on_area(msg: ProjectedArea) -> None:
         latencies.append(time.time() - (msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9))
 
     def info(raw: bytes) -> dict:
         return json.loads(deserialize_message(raw, String).data)
 
-    node.create_subscription(Vector3Stamped, "projected_area", on_area, RESULT_QOS)
+    node.create_subscription(ProjectedArea, "projected_area", on_area, RESULT_QOS)
     node.create_subscription(String, "projected_area/info", lambda raw: infos.append(raw), RESULT_QOS,
                              raw=True)
     executor = SingleThreadedExecutor()  # one executor: rclpy.spin_once(node) makes one per call (~ms each)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))  # the source tree's package, not an installed copy
+sys.path.insert(0, str(REPO / "veg_area_ros"))  # the source tree's package, not an installed copy
 
 from veg_area_ros.ros.confine import confined, netns_available, remove_new_shm, ros_environment, shm_files  # noqa: E402
 

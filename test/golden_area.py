@@ -18,7 +18,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-sys.path[:0] = [str(Path(__file__).resolve().parents[1]), str(Path(__file__).resolve().parent)]  # the working tree
+HERE = Path(__file__).resolve().parent
+sys.path[:0] = [str(HERE.parent / "veg_area_ros"), str(HERE)]  # the working tree
 from board_photos import board_photos, calibrated  # noqa: E402
 from helpers import OPENCV_LEFT, TEST_DATA, calibrated_camera  # noqa: E402
 

@@ -14,6 +14,7 @@ from veg_area_ros.board import BoardSpec
 from veg_area_ros.sim.synthetic import ENDOSCOPE, FlatPort, board_views, render_board_views
 
 REPO = Path(__file__).resolve().parents[1]
+SOURCE = REPO / "veg_area_ros"  # the ament_python package: the folder holding the veg_area_ros module
 TEST_DATA = REPO / "test" / "data"
 SHARED_DATA = REPO.parent / "shared" / "data"
 OPENCV_LEFT = TEST_DATA / "opencv-left"
@@ -42,7 +43,7 @@ def run_cli(*args: str, cwd: Path | None = None):
     """Run `veg-area` from the working tree as a user would run it; returns the CompletedProcess."""
     import subprocess
 
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env = dict(os.environ, PYTHONPATH=str(SOURCE))
     return subprocess.run([sys.executable, "-m", "veg_area_ros.cli", *args], capture_output=True, text=True,
                           env=env, cwd=cwd, timeout=600)
 

@@ -18,7 +18,7 @@ import numpy as np
 import yaml
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "veg_area_ros"))
 
 # what the harness gave this process (a user's shell, confined): the nodes and commands it starts get exactly
 # this; the probes in this process take the nodes' transport (main() applies it to os.environ)
@@ -557,15 +557,15 @@ def scenario_record(options: dict, nodes: Nodes) -> dict:
     nodes.start("area_node")
     # until the area node has measured `results` frames (a loaded machine starts it slower), at least `seconds`
     import rclpy
-    from geometry_msgs.msg import Vector3Stamped
     from rclpy.node import Node
 
+    from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.ros.qos import RESULT_QOS
 
     rclpy.init()
     probe = Node("record_probe")
     results: list[int] = []
-    probe.create_subscription(Vector3Stamped, "projected_area", lambda _: results.append(1), RESULT_QOS)
+    probe.create_subscription(ProjectedArea, "projected_area", lambda _: results.append(1), RESULT_QOS)
     started, deadline = time.monotonic(), time.monotonic() + 180
     while (len(results) < int(options.get("results", 30)) or time.monotonic() - started < float(options["seconds"])) \
             and time.monotonic() < deadline:
@@ -644,7 +644,8 @@ def scenario_full_rate(options: dict, nodes: Nodes) -> dict:
 
 def scenario_foreign(options: dict, nodes: Nodes) -> dict:
     """A node as a lab's force-balance driver or rviz runs it: Fast DDS's defaults, none of our settings. It
-    counts the images and Af it receives and publishes force readings at 20 Hz."""
+    counts the images and Af it receives (ProjectedArea, and the deprecated Vector3Stamped as an instrument node
+    written for it reads it) and publishes force readings at 20 Hz."""
     import rclpy
     from geometry_msgs.msg import Vector3Stamped, WrenchStamped
     from rclpy.node import Node
@@ -652,21 +653,32 @@ def scenario_foreign(options: dict, nodes: Nodes) -> dict:
     from sensor_msgs.msg import Image
     from std_msgs.msg import String
 
+    from veg_area_msgs.msg import ProjectedArea
+
     rclpy.init()
     node = Node("force_balance")
     images: list[list[int]] = []
     areas: list[float] = []
     area_stamps: list[str] = []
     last_info: list[str] = []
+    fields: list[dict] = []  # the last ProjectedArea, every field by name
+    vector_areas: dict[str, list[float]] = {}  # stamp -> [x, y, z] of projected_area/vector
 
-    def on_area(msg: Vector3Stamped) -> None:
-        areas.append(msg.vector.x)
+    def on_area(msg: ProjectedArea) -> None:
+        areas.append(msg.area_m2)
         area_stamps.append(f"{msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d}")
+        fields[:] = [{name: getattr(msg, name) for name in msg.get_fields_and_field_types() if name != "header"}]
+        fields[0]["warnings"] = list(msg.warnings)
+
+    def on_vector(msg: Vector3Stamped) -> None:
+        vector_areas[f"{msg.header.stamp.sec}.{msg.header.stamp.nanosec:09d}"] = [msg.vector.x, msg.vector.y,
+                                                                                  msg.vector.z]
 
     if options.get("images", True):
         node.create_subscription(Image, "image_raw", lambda m: images.append([m.width, m.height]),
                                  qos_profile_sensor_data)
-    node.create_subscription(Vector3Stamped, "projected_area", on_area, 10)
+    node.create_subscription(ProjectedArea, "projected_area", on_area, 10)
+    node.create_subscription(Vector3Stamped, "projected_area/vector", on_vector, 10)
     node.create_subscription(String, "projected_area/info", lambda m: last_info.append(m.data), 10)
     force = node.create_publisher(WrenchStamped, "force", 10)
     sent = []
@@ -690,6 +702,7 @@ def scenario_foreign(options: dict, nodes: Nodes) -> dict:
     rclpy.try_shutdown()
     return {"images": len(images), "image_sizes": sorted({tuple(size) for size in images}), "areas": areas,
             "area_stamps": area_stamps, "last_info": json.loads(last_info[-1]) if last_info else None,
+            "last_fields": fields[0] if fields else None, "vector_areas": vector_areas,
             "forces_sent": len(sent), "profile": os.environ.get("FASTDDS_DEFAULT_PROFILES_FILE")}
 
 
@@ -737,6 +750,7 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
     from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
     from rclpy.node import Node
 
+    from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.ros.qos import RESULT_QOS
 
     cd, density, area, velocity = options["cd"], 998.2, options["area_m2"], options["velocity_m_s"]
@@ -755,7 +769,7 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
     results = probe.create_subscription(Vector3Stamped, "drag_coefficient", on_drag, RESULT_QOS)
     publishers = {name: probe.create_publisher(kind, name, RESULT_QOS)
                   for name, kind in (("force", WrenchStamped), ("velocity", TwistStamped),
-                                     ("projected_area", Vector3Stamped))}
+                                     ("projected_area", ProjectedArea))}
     rng = np.random.default_rng(5)
     try:
         # every way matched, the drag node's output to us too: a Cd published before that would be lost (seen
@@ -778,9 +792,9 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
                 msg.twist.linear.x = velocity
                 publishers["velocity"].publish(msg)
             if tick % 20 == 10:
-                msg = Vector3Stamped()
+                msg = ProjectedArea()
                 msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
-                msg.vector.x, msg.vector.y = area, 0.002 * area
+                msg.area_m2, msg.area_std_m2 = area, 0.002 * area
                 publishers["projected_area"].publish(msg)
                 area_stamps.append([sec, nanosec])
             rclpy.spin_once(probe, timeout_sec=0.0)
@@ -886,17 +900,17 @@ def scenario_replay(options: dict, nodes: Nodes) -> dict:
     """A recorded bag's image_raw and camera_info replayed by `veg-area play` to a fresh area node; this probe
     keeps the replayed run's Af by stamp."""
     import rclpy
-    from geometry_msgs.msg import Vector3Stamped
     from rclpy.node import Node
 
+    from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.ros.qos import RESULT_QOS
 
     rclpy.init()
     probe = Node("replay_probe")
     areas: dict[str, float] = {}
     probe.create_subscription(
-        Vector3Stamped, "projected_area",
-        lambda m: areas.__setitem__(f"{m.header.stamp.sec}.{m.header.stamp.nanosec:09d}", m.vector.x), RESULT_QOS)
+        ProjectedArea, "projected_area",
+        lambda m: areas.__setitem__(f"{m.header.stamp.sec}.{m.header.stamp.nanosec:09d}", m.area_m2), RESULT_QOS)
     area = nodes.start("area_node")
     try:
         deadline = time.monotonic() + 30
@@ -929,12 +943,12 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
     """A camera driver in this probe: image_raw (sensor data QoS) and camera_info with every frame, offered with
     options["qos"] (INFO_QOS_OF); the area node (started after the driver's first frames) must measure."""
     import rclpy
-    from geometry_msgs.msg import Vector3Stamped
     from rclpy.node import Node
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
     from std_msgs.msg import String
 
+    from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.ros.messages import camera_to_info, image_to_msg
     from veg_area_ros.ros.qos import RESULT_QOS
     from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene
@@ -948,7 +962,7 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
     info_pub = probe.create_publisher(CameraInfo, "camera_info", info_qos)
     areas: list[float] = []
     infos: list[str] = []
-    probe.create_subscription(Vector3Stamped, "projected_area", lambda m: areas.append(m.vector.x), RESULT_QOS)
+    probe.create_subscription(ProjectedArea, "projected_area", lambda m: areas.append(m.area_m2), RESULT_QOS)
     probe.create_subscription(String, "projected_area/info", lambda m: infos.append(m.data), RESULT_QOS)
     frame = render_scene(ENDOSCOPE, cube_scene(), 0.7, roll_deg=0.0)
     published = 0
@@ -1180,11 +1194,11 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     import cv2
     import numpy as np
     import rclpy
-    from geometry_msgs.msg import Vector3Stamped
     from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, CompressedImage
 
+    from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.ros.messages import camera_to_info
     from veg_area_ros.ros.qos import RESULT_QOS
     from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene
@@ -1194,7 +1208,7 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     image_pub = probe.create_publisher(CompressedImage, "image_raw/compressed", qos_profile_sensor_data)
     info_pub = probe.create_publisher(CameraInfo, "camera_info", qos_profile_sensor_data)
     areas: list[float] = []
-    probe.create_subscription(Vector3Stamped, "projected_area", lambda m: areas.append(m.vector.x), RESULT_QOS)
+    probe.create_subscription(ProjectedArea, "projected_area", lambda m: areas.append(m.area_m2), RESULT_QOS)
     jpeg = cv2.imencode(".jpg", render_scene(ENDOSCOPE, cube_scene(), 0.7), [cv2.IMWRITE_JPEG_QUALITY, 90])[1]
     published = 0
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import cv2
 import pytest
 import yaml
-from helpers import REPO, run_cli
+from helpers import REPO, SOURCE, run_cli
 
 from veg_area_ros.calib_io import write_calibration
 from veg_area_ros.ros.confine import confined
@@ -47,7 +47,7 @@ def scenario(tmp_path_factory) -> tuple[Path, dict]:
     for k in range(120):
         writer.write(frames[k % 40])
     writer.release()
-    env = dict(os.environ, PYTHONPATH=str(REPO), HOME=str(folder), PYTHONUNBUFFERED="1",
+    env = dict(os.environ, PYTHONPATH=str(SOURCE), HOME=str(folder), PYTHONUNBUFFERED="1",
                DASK_DISTRIBUTED__DIAGNOSTICS__NVML="False")
     done = subprocess.run(confined([sys.executable, str(REPO / "test" / "dask_scenario.py"), str(folder)]),
                           env=env, capture_output=True, text=True, timeout=1500, cwd=folder)

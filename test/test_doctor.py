@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from helpers import REPO
+from helpers import REPO, SOURCE
 
 from veg_area_ros import doctor
 from veg_area_ros.ros.confine import confined, netns_available
@@ -35,8 +35,9 @@ def run_doctor(tmp_path: Path, *options: str, confine: bool = False, before: str
     command = [sys.executable, "-m", "veg_area_ros.cli", "doctor", "--json", *options]
     if confine:  # made inside a private namespace: a /dev/shm of its own that the test may fill or shrink
         command = confined(["sh", "-c", f'{before}\nexec "$@"', "sh", *command])
-    done = subprocess.run(command, env=scrubbed(tmp_path / "home", **extra), cwd=REPO, capture_output=True,
-                          text=True, timeout=120)
+    # the working tree's package (the folder holding it first on the path), as the other tests run it
+    done = subprocess.run(command, env=scrubbed(tmp_path / "home", **({"PYTHONPATH": str(SOURCE)} | extra)), cwd=REPO,
+                          capture_output=True, text=True, timeout=120)
     assert done.returncode in (0, 1), done.stderr
     report = json.loads(done.stdout)
     report["code"] = done.returncode
@@ -62,7 +63,7 @@ def test_a_healthy_set_up_has_no_problems(tmp_path, shm):
     report = run_doctor(tmp_path, *healthy(tmp_path))
     assert report["code"] == 0 and report["problems"] == 0, report["problems_by_check"]
     checks = {f["check"] for f in report["findings"]}
-    assert {"rclpy", "transport", "socket buffers", "shared memory", "ament index", "video"} <= checks
+    assert {"rclpy", "veg_area_msgs", "transport", "socket buffers", "shared memory", "ament index", "video"} <= checks
     transport = next(f for f in report["findings"] if f["check"] == "transport")
     assert "found via" in transport["message"]
 
@@ -105,9 +106,19 @@ def test_a_broken_rclpy_is_a_problem(tmp_path, shm):
     fake = tmp_path / "broken" / "rclpy"
     fake.mkdir(parents=True)
     (fake / "__init__.py").write_text("raise ImportError('librcl.so: cannot open shared object file')\n")
-    report = run_doctor(tmp_path, *healthy(tmp_path), PYTHONPATH=f"{fake.parent}{os.pathsep}{REPO}")
+    report = run_doctor(tmp_path, *healthy(tmp_path), PYTHONPATH=f"{fake.parent}{os.pathsep}{SOURCE}")
     (problem,) = report["problems_by_check"]["rclpy"]
     assert "librcl.so" in problem["message"] and "make install" in problem["fix"]
+
+
+def test_messages_not_built_are_a_problem(tmp_path, shm):
+    fake = tmp_path / "unbuilt" / "veg_area_msgs"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("")  # the source folder without the generated msg module
+    report = run_doctor(tmp_path, *healthy(tmp_path), PYTHONPATH=f"{fake.parent}{os.pathsep}{SOURCE}")
+    (problem,) = report["problems_by_check"]["veg_area_msgs"]
+    assert "ProjectedArea does not load" in problem["message"] and "make install" in problem["fix"], problem
+    assert "rclpy" not in report["problems_by_check"]
 
 
 def test_ros2_without_the_package_on_the_ament_path_is_a_problem(tmp_path, shm):

@@ -116,10 +116,12 @@ def test_vogel_command_on_an_experiment_table(tmp_path):
 
 def test_vogel_command_on_bags_one_run_each(tmp_path):
     """Bags recorded in the flume (force, velocity, Af topics), one per run: the exponent of the runs' means,
-    with the balance pointing upstream (-y) and the probe along +x."""
+    with the balance pointing upstream (-y) and the probe along +x. Af as ProjectedArea in two runs and as the
+    Vector3Stamped of earlier recordings in the other two: both are read."""
     from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
     from rclpy.serialization import serialize_message
 
+    from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.bags import BagRecorder
 
     rng = np.random.default_rng(2)
@@ -130,9 +132,11 @@ def test_vogel_command_on_bags_one_run_each(tmp_path):
         force = 0.5 * WATER_DENSITY * velocity**2 * area * 1.1 * velocity ** -0.2
         bags.append(tmp_path / f"run{run}")
         recorder = BagRecorder(bags[-1])
+        typed = run % 2 == 0
         for topic, msgtype in (("/force", "geometry_msgs/msg/WrenchStamped"),
                                ("/velocity", "geometry_msgs/msg/TwistStamped"),
-                               ("/projected_area", "geometry_msgs/msg/Vector3Stamped")):
+                               ("/projected_area", "veg_area_msgs/msg/ProjectedArea" if typed
+                                else "geometry_msgs/msg/Vector3Stamped")):
             recorder.add_topic(topic, msgtype)
         for k in range(200):  # symmetric noise: the means are the true values to ~1e-3
             noise = 1 + 0.01 * (1 if k % 2 else -1)
@@ -145,8 +149,11 @@ def test_vogel_command_on_bags_one_run_each(tmp_path):
                 twist.twist.linear.x = velocity
                 recorder.write("/velocity", k * 5_000_000, serialize_message(twist))
             if k % 20 == 0:
-                af = Vector3Stamped()
-                af.vector.x = area
+                if typed:
+                    af = ProjectedArea(area_m2=area, area_std_m2=0.01 * area)
+                else:
+                    af = Vector3Stamped()
+                    af.vector.x, af.vector.y = area, 0.01 * area
                 recorder.write("/projected_area", k * 5_000_000, serialize_message(af))
         recorder.close()
     done = run_cli("vogel", *map(str, bags), "--force-axis=-y", "--json", "--plot", str(tmp_path / "v.png"))

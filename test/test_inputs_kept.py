@@ -14,7 +14,7 @@ from pathlib import Path
 import cv2
 import pytest
 import yaml
-from helpers import REPO, children_cpu_seconds
+from helpers import SOURCE, children_cpu_seconds
 
 from veg_area_ros.calib_io import write_calibration
 from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets_content
@@ -39,7 +39,7 @@ def workspace(tmp_path_factory) -> Path:
 
 def veg_area(folder: Path, *args: str, **popen) -> subprocess.CompletedProcess | subprocess.Popen:
     command = [sys.executable, "-m", "veg_area_ros.cli", *args]
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env = dict(os.environ, PYTHONPATH=str(SOURCE))
     if popen:
         return subprocess.Popen(command, cwd=folder, env=env, text=True, **popen)
     return subprocess.run(command, cwd=folder, env=env, capture_output=True, text=True, timeout=300)
@@ -133,7 +133,7 @@ def test_sigterm_keeps_the_rows_measured_so_far(workspace):
 def test_a_closed_stdout_stops_the_run_quietly_and_keeps_the_csv(workspace):
     done = subprocess.run(f"{sys.executable} -m veg_area_ros.cli {' '.join(MEASURE)} run.avi --json --csv pipe.csv"
                           " | head -n 1", shell=True, cwd=workspace, capture_output=True, text=True, timeout=300,
-                          env=dict(os.environ, PYTHONPATH=str(REPO)))
+                          env=dict(os.environ, PYTHONPATH=str(SOURCE)))
     assert done.stdout.count("\n") == 1 and '"area_m2"' in done.stdout
     assert "Traceback" not in done.stderr and "BrokenPipeError" not in done.stderr, done.stderr
     rows = list(csv.DictReader((workspace / "pipe.csv").open()))

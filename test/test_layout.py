@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers import REPO
+from helpers import REPO, SOURCE
 
 NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node",
          "console_node"]
@@ -45,15 +45,15 @@ def test_installed_command_line_runs(prefix):
 
 
 def test_package_xml_is_an_ament_python_manifest():
-    root = ET.parse(REPO / "package.xml").getroot()
+    root = ET.parse(SOURCE / "package.xml").getroot()
     assert root.tag == "package" and root.get("format") == "3"
     assert root.findtext("name") == "veg_area_ros"
     assert root.find("export/build_type").text == "ament_python"
     depends = {e.text for e in root.findall("exec_depend")}
     assert depends >= {"rclpy", "sensor_msgs", "std_msgs", "std_srvs", "python3-opencv", "python3-numpy",
                        "python3-scipy", "python3-yaml"}
-    assert (REPO / "resource" / "veg_area_ros").is_file()
-    setup_cfg = (REPO / "setup.cfg").read_text()
+    assert (SOURCE / "resource" / "veg_area_ros").is_file()
+    setup_cfg = (SOURCE / "setup.cfg").read_text()
     assert "script_dir=$base/lib/veg_area_ros" in setup_cfg and "install_scripts=$base/lib/veg_area_ros" in setup_cfg
 
 
@@ -147,7 +147,7 @@ def _package_imports(path: Path) -> set[str]:
     """The veg_area_ros modules (dotted, below the package) and the top-level packages a file imports."""
     import ast
 
-    package = path.relative_to(REPO).with_suffix("").parts[:-1]
+    package = path.relative_to(SOURCE).with_suffix("").parts[:-1]
     found = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom) and node.level:
@@ -163,7 +163,7 @@ def _package_imports(path: Path) -> set[str]:
 def test_imports_only_go_down_the_architecture():
     """The README's picture as a rule: the core imports neither rclpy nor the nodes nor the command line, and
     the simulator only through the camera node's sources; no node imports another but the composed graph."""
-    root = REPO / "veg_area_ros"
+    root = SOURCE / "veg_area_ros"
     for path in root.glob("*.py"):
         if path.name == "launcher.py":  # the `veg-area` entry point above everything: it imports the command line
             assert _package_imports(path) <= {"__future__", "sys", "veg_area_ros.cli"}, path
@@ -192,16 +192,16 @@ def _module_graph() -> dict[str, set[str]]:
     a lazy import still ties the two together)."""
     import ast
 
-    root = REPO / "veg_area_ros"
+    root = SOURCE / "veg_area_ros"
 
     def name(path: Path) -> str:
-        parts = path.relative_to(REPO).with_suffix("").parts
+        parts = path.relative_to(SOURCE).with_suffix("").parts
         return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
     modules = {name(path): path for path in root.rglob("*.py")}
     graph = {}
     for module, path in modules.items():
-        package = path.relative_to(REPO).with_suffix("").parts[:-1]
+        package = path.relative_to(SOURCE).with_suffix("").parts[:-1]
         found = set()
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.ImportFrom):
@@ -272,7 +272,7 @@ def test_a_node_refuses_a_choice_parameter_outside_its_choices(tmp_path):
     is none of a parameter's choices stops the node at start with one line naming it and the choices. Kept on
     this machine as the test above."""
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "AMENT_"))}
-    env.update(HOME=str(tmp_path), ROS_DOMAIN_ID="198", VEG_AREA_TRANSPORT="local", PYTHONPATH=str(REPO))
+    env.update(HOME=str(tmp_path), ROS_DOMAIN_ID="198", VEG_AREA_TRANSPORT="local", PYTHONPATH=str(SOURCE))
     done = subprocess.run([sys.executable, "-m", "veg_area_ros.ros.calibration_node", "--ros-args", "-p",
                            "medium:=lava", "-p", f"camera_info_url:=file://{tmp_path}/c.yaml"], env=env,
                           capture_output=True, text=True, timeout=120)
@@ -288,7 +288,7 @@ def test_a_mistyped_parameter_is_said_and_malformed_ros_args_in_one_line(tmp_pat
     import time
 
     env = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "FASTDDS_", "RMW_", "AMENT_"))}
-    env.update(HOME=str(tmp_path), ROS_DOMAIN_ID="197", VEG_AREA_TRANSPORT="local", PYTHONPATH=str(REPO))
+    env.update(HOME=str(tmp_path), ROS_DOMAIN_ID="197", VEG_AREA_TRANSPORT="local", PYTHONPATH=str(SOURCE))
     done = subprocess.run([sys.executable, "-m", "veg_area_ros.ros.camera_node", "--ros-args", "-p", "rate_hz"],
                           env=env, capture_output=True, text=True, timeout=120)
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from helpers import OPENCV_LEFT, REPO, calibrated_camera
+from helpers import OPENCV_LEFT, SOURCE, calibrated_camera
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
@@ -331,7 +331,7 @@ def test_warnings_reach_the_json_the_csv_and_the_batch_summary(tmp_path):
     base = [sys.executable, "-m", "veg_area_ros.cli", "measure", "--calibration", "camera.yaml",
             "--targets", "targets.yaml"]
     done = subprocess.run([*base, "clipped.png", "--json", "--csv", "one.csv"], cwd=tmp_path, capture_output=True,
-                          text=True, timeout=300, env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"})
+                          text=True, timeout=300, env={"PYTHONPATH": str(SOURCE), "PATH": "/usr/bin:/bin"})
     assert done.returncode == 0, done.stderr
     row = json.loads(done.stdout.splitlines()[0])
     assert any(w.startswith("clipped highlights") for w in row["warnings"])
@@ -342,7 +342,7 @@ def test_warnings_reach_the_json_the_csv_and_the_batch_summary(tmp_path):
     assert written["warnings"].startswith("clipped highlights") and float(written["exposure_std_m2"]) > 0
     done = subprocess.run([*base, "clipped.png", "fine.png", "--jobs", "2", "--output-dir", "batch", "-q"],
                           cwd=tmp_path, capture_output=True, text=True, timeout=300,
-                          env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"})
+                          env={"PYTHONPATH": str(SOURCE), "PATH": "/usr/bin:/bin"})
     assert done.returncode == 0, done.stderr
     summary = {r["input"]: r for r in csv.DictReader((tmp_path / "batch" / "batch_summary.csv").open())}
     assert summary["clipped.png"]["warnings"] == "clipped highlights: 1 frame"

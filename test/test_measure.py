@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from helpers import calibrated_endoscope, run_cli
+from helpers import SOURCE, calibrated_endoscope, run_cli
 
 from veg_area_ros.calib_io import write_calibration
 from veg_area_ros.sim.reproduction import run as reproduce
@@ -227,10 +227,9 @@ def interrupt_when(args: list[str], cwd, started) -> tuple[int, str]:
     import sys
     import threading
 
-    from helpers import REPO
 
     process = subprocess.Popen([sys.executable, "-m", "veg_area_ros.cli", "measure", *args], cwd=cwd, text=True,
-                               env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.PIPE,
+                               env=dict(os.environ, PYTHONPATH=str(SOURCE)), stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, start_new_session=True)
     seen: dict[str, list[str]] = {"stdout": [], "stderr": []}
     signalled = threading.Event()
@@ -374,12 +373,11 @@ def test_a_batch_killed_outright_takes_its_workers_along(workspace, long_video, 
     import sys
     import time
 
-    from helpers import REPO
 
     process = subprocess.Popen([sys.executable, "-m", "veg_area_ros.cli", "measure", str(long_video),
                                 str(long_video), "--calibration", str(workspace / "water.yaml"), "--targets",
                                 str(workspace / "targets.yaml"), "--jobs", "2", "--output-dir", str(tmp_path / "out")],
-                               cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(REPO)), stdout=subprocess.DEVNULL,
+                               cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(SOURCE)), stdout=subprocess.DEVNULL,
                                stderr=subprocess.PIPE, text=True)
 
     def children() -> set[int]:
@@ -435,7 +433,6 @@ def test_overlays_on_a_full_disk_are_said_and_fail_the_run(workspace, tmp_path):
     import subprocess
     import sys
 
-    from helpers import REPO
 
     if shutil.which("unshare") is None:
         pytest.skip("unshare is not installed: no private mount namespace for a full disk")
@@ -450,7 +447,7 @@ def test_overlays_on_a_full_disk_are_said_and_fail_the_run(workspace, tmp_path):
                f"{video} --calibration {workspace / 'water.yaml'} --targets {workspace / 'targets.yaml'} "
                f"--threshold 120 --overlay {full}/over --csv {tmp_path / 'clip.csv'}")
     done = subprocess.run(["unshare", "-m", "sh", "-c", command], capture_output=True, text=True, timeout=300,
-                          env={**__import__("os").environ, "PYTHONPATH": str(REPO)})
+                          env={**__import__("os").environ, "PYTHONPATH": str(SOURCE)})
     if done.stderr.startswith(("unshare:", "mount:")):  # the namespace or the mount refused, not the command
         pytest.skip(f"no private mount namespace here: {done.stderr.strip()}")
     assert done.returncode == 1 and "could not be written (a full disk?)" in done.stderr, done.stderr

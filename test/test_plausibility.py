@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from helpers import REPO, run_cli
+from helpers import REPO, SOURCE, run_cli
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.classify import Classifier, ClassifyError
@@ -321,12 +321,12 @@ def test_a_closed_stdout_ends_calibrate_quietly(tmp_path):
     import subprocess
     import sys
 
-    from helpers import OPENCV_LEFT, REPO
+    from helpers import OPENCV_LEFT
 
     command = (f"{sys.executable} -m veg_area_ros.cli calibrate {OPENCV_LEFT} --board chessboard:9x6:1 -o "
                f"{tmp_path / 'c.yaml'} --json -q | head -c 10")
     done = subprocess.run(["bash", "-o", "pipefail", "-c", command], capture_output=True, text=True, timeout=300,
-                          env={**__import__("os").environ, "PYTHONPATH": str(REPO)})
+                          env={**__import__("os").environ, "PYTHONPATH": str(SOURCE)})
     assert done.returncode == 0 and done.stdout == '{"distorti' and done.stderr == "", done.stderr
 
 
@@ -351,11 +351,10 @@ def test_a_video_whose_name_is_not_utf8_is_measured(tmp_path):
     import subprocess
     import sys
 
-    from helpers import REPO
 
     done = subprocess.run([sys.executable, "-m", "veg_area_ros.cli", "measure", odd, "--calibration", "cal.yaml",
                            "--targets", "targets.yaml", "--threshold", "120"], cwd=tmp_path, capture_output=True,
-                          env={**os.environ, "PYTHONPATH": str(REPO)}, timeout=300)
+                          env={**os.environ, "PYTHONPATH": str(SOURCE)}, timeout=300)
     assert done.returncode == 0, done.stderr
     assert b"time series: run\xff_area.csv" in done.stderr  # the name's own bytes, as ls shows them
     rows = list(csv.DictReader((tmp_path / os.fsdecode(b"run\xff_area.csv")).open(encoding="utf-8")))
@@ -409,10 +408,9 @@ def test_a_ctrl_c_while_the_command_starts_is_one_line():
     import sys
     import time
 
-    from helpers import REPO
 
     process = subprocess.Popen([sys.executable, "-c", "import sys; from veg_area_ros.launcher import main; "
-                                "sys.exit(main())", "measure", "--help"], env={**os.environ, "PYTHONPATH": str(REPO)},
+                                "sys.exit(main())", "measure", "--help"], env={**os.environ, "PYTHONPATH": str(SOURCE)},
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     maps = Path(f"/proc/{process.pid}/maps")
     deadline = time.monotonic() + 60

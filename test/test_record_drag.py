@@ -13,12 +13,24 @@ import yaml
 from helpers import run_cli
 from ros_harness import run_scenario
 from rosbags.rosbag2 import Reader
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from veg_area_ros.bags import typestore
 from veg_area_ros.cdr import decode_image
 from veg_area_ros.sim.synthetic import scene_targets_content
 
 pytestmark = pytest.mark.timeout(400)
+
+
+def store_of(reader: Reader):
+    """The Kilted types and what the bag itself defines (its MCAP schemas), as any rosbags user reads a bag
+    without our packages: veg_area_msgs/ProjectedArea must come from the bag alone."""
+    store = get_typestore(Stores.ROS2_KILTED)
+    for connection in reader.connections:
+        if connection.msgtype not in store.types:
+            assert connection.msgdef.format.name == "MSG" and connection.msgdef.data, connection
+            store.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+    return store
 
 
 @pytest.fixture(scope="module")
@@ -36,9 +48,10 @@ def test_recorded_bag_is_complete_and_valid(recorded):
     assert info["storage_identifier"] == "mcap" and info["message_count"] > 0
     assert {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]} == {
         "/image_raw", "/camera_info", "/projected_area", "/projected_area/info"}
-    store = get_typestore(Stores.ROS2_KILTED)
     counts: dict[str, int] = {}
     with Reader(folder / "closed_bag") as reader:
+        assert {c.topic: c.msgtype for c in reader.connections}["/projected_area"] == "veg_area_msgs/msg/ProjectedArea"
+        store = store_of(reader)
         for connection, _, data in reader.messages():
             message = store.deserialize_cdr(data, connection.msgtype)  # every message intact
             counts[connection.topic] = counts.get(connection.topic, 0) + 1
@@ -115,14 +128,14 @@ def test_a_replayed_bag_is_measured_as_live(recorded, tmp_path):
     folder, _ = recorded
     result = run_scenario("replay", tmp_path, bag=str(folder / "closed_bag"))
     assert result["player_exit"] == 0 and result["area_alive"], result
-    store = get_typestore(Stores.ROS2_KILTED)
+    store = typestore()  # ProjectedArea registered from veg_area_msgs's installed .msg file
     live, live_std = {}, {}
     with Reader(folder / "closed_bag") as reader:
         wanted = [c for c in reader.connections if c.topic == "/projected_area"]
         for connection, _, data in reader.messages(connections=wanted):
             message = store.deserialize_cdr(data, connection.msgtype)
             key = f"{message.header.stamp.sec}.{message.header.stamp.nanosec:09d}"
-            live[key], live_std[key] = message.vector.x, message.vector.y
+            live[key], live_std[key] = message.area_m2, message.area_std_m2
     replayed = result["areas"]
     common = set(live) & set(replayed)
     assert len(live) >= 15 and len(common) >= 0.9 * len(live), (len(live), len(replayed), len(common))
@@ -174,9 +187,9 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
     folder, _ = recorded
     targets = tmp_path / "targets.yaml"
     targets.write_text(yaml.safe_dump(scene_targets_content()))
-    store = get_typestore(Stores.ROS2_KILTED)
     live, live_std, live_info, first_frames = {}, {}, {}, []
     with Reader(folder / "closed_bag") as reader:
+        store = store_of(reader)
         wanted = [c for c in reader.connections if c.topic in ("/projected_area", "/projected_area/info")]
         for connection, _, data in reader.messages(connections=wanted):
             message = store.deserialize_cdr(data, connection.msgtype)
@@ -186,8 +199,8 @@ def test_offline_results_equal_the_live_nodes_frame_by_frame(recorded, tmp_path)
                     first_frames.append((info["stamp"]["sec"], info["stamp"]["nanosec"]))
                 live_info[(info["stamp"]["sec"], info["stamp"]["nanosec"])] = info
                 continue
-            live[(message.header.stamp.sec, message.header.stamp.nanosec)] = message.vector.x
-            live_std[(message.header.stamp.sec, message.header.stamp.nanosec)] = message.vector.y
+            live[(message.header.stamp.sec, message.header.stamp.nanosec)] = message.area_m2
+            live_std[(message.header.stamp.sec, message.header.stamp.nanosec)] = message.area_std_m2
     # from the live node's first frame on (the bag starts earlier): the pixel weights are carried from frame to
     # frame, so the same first frame gives the same numbers
     first = min(live)

@@ -174,6 +174,21 @@ def test_nodes_on_fast_dds_defaults_exchange_topics_with_ours(tmp_path):
     assert foreign["image_sizes"] == [[640, 480]] and foreign["images"] >= 20, foreign  # waited for
     areas = np.array(foreign["areas"])
     assert len(areas) >= 10 and np.all(np.abs(areas / result["truth_m2"] - 1) <= 0.01), areas
+    # ProjectedArea read by name with the generated class: the std is its terms in quadrature, the rest as said
+    fields = foreign["last_fields"]
+    terms = [fields[f"{name}_std_m2"] for name in ("scale", "threshold", "discretisation", "levels", "plane_offset",
+                                                   "exposure")]
+    assert fields["area_std_m2"] == pytest.approx(float(np.hypot.reduce(terms)), rel=1e-6), fields
+    assert 0 < fields["area_std_m2"] < 0.01 * fields["area_m2"] and fields["pixel_count"] > 1000, fields
+    assert fields["area_mode"] in ("subpixel", "count") and fields["calibrated"], fields
+    assert fields["calibration_source"] == "camera_info" and 0 < fields["threshold"] < 255, fields
+    assert abs(fields["count_area_m2"] / fields["area_m2"] - 1) < 0.01 and isinstance(fields["warnings"], list)
+    # the deprecated Vector3Stamped on projected_area/vector: the same Af, std and pixels, stamp for stamp
+    vectors = foreign["vector_areas"]
+    common = set(vectors) & set(foreign["area_stamps"])
+    assert len(common) >= 5, (len(vectors), len(foreign["area_stamps"]))
+    by_stamp = dict(zip(foreign["area_stamps"], foreign["areas"], strict=True))
+    assert all(vectors[stamp][0] == by_stamp[stamp] for stamp in common)
     assert result["forces_received"] >= 0.5 * foreign["forces_sent"] > 0, result["forces_received"]
     assert result["sockets"] and result["off_machine"] == []
 

@@ -10,14 +10,14 @@ import sys
 from collections import Counter
 
 import numpy as np
-from helpers import REPO
+from helpers import SOURCE
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.classify import Classifier
 from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets
 
 STAGES = ("locate", "region", "weights", "light_levels", "area_terms", "checks")
-PACKAGE = REPO / "veg_area_ros"
+PACKAGE = SOURCE / "veg_area_ros"
 
 
 def _calls_from_measure(measurer: AreaMeasurer, frame: np.ndarray) -> list[str]:

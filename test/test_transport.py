@@ -53,7 +53,7 @@ def test_the_lookup_order_is_ament_index_interpreter_prefix_source_tree(tmp_path
     places = config_locations("fastdds.xml", {"AMENT_PREFIX_PATH": str(install)})
     assert [how for _, how in places] == ["ament index", "this interpreter's prefix", "the source tree"]
     assert places[1][0] == Path(sys.prefix) / "share" / "veg_area_ros" / "config" / "fastdds.xml"
-    assert places[2][0] == REPO / "config" / "fastdds.xml"
+    assert places[2][0] == REPO / "veg_area_ros" / "config" / "fastdds.xml"
 
 
 def test_found_nowhere_says_where_it_looked(monkeypatch, tmp_path):

@@ -1,5 +1,6 @@
-"""numpy <-> sensor_msgs/Image and BrownCamera <-> sensor_msgs/CameraInfo (no cv_bridge), and the rclpy class of
-a message type named as in a bag."""
+"""numpy <-> sensor_msgs/Image and BrownCamera <-> sensor_msgs/CameraInfo (no cv_bridge), a frame's result as
+veg_area_msgs/ProjectedArea (and the deprecated Vector3Stamped), and the rclpy class of a message type named as
+in a bag."""
 
 from __future__ import annotations
 
@@ -7,14 +8,44 @@ import importlib
 
 import numpy as np
 from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import CameraInfo, Image
 
+from veg_area_msgs.msg import ProjectedArea
+
+from ..area_result import AreaResult
 from ..camera_info import camera_info_fields, info_to_camera
 from ..camera_model import BrownCamera
 from ..cdr import ImageMessageError, encode_image, frame_pixels, image_layout
 
 __all__ = ["ImageMessageError", "camera_to_info", "image_bytes", "image_to_msg", "info_to_camera", "message_class",
-           "msg_to_image"]
+           "msg_to_image", "projected_area", "projected_area_vector"]
+
+
+def projected_area(result: AreaResult, stamp: Time, frame_id: str, calibration_source: str) -> ProjectedArea:
+    """A frame's Af with every field named: the std and its terms, the classification, the calibration used
+    and the warnings (the rest of the record stays in projected_area/info's JSON)."""
+    msg = ProjectedArea()
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    msg.area_m2, msg.area_std_m2 = float(result.area_m2), float(result.area_std_m2)
+    msg.scale_std_m2, msg.threshold_std_m2 = float(result.scale_std_m2), float(result.threshold_std_m2)
+    msg.discretisation_std_m2, msg.levels_std_m2 = float(result.discretisation_std_m2), float(result.levels_std_m2)
+    msg.plane_offset_std_m2, msg.exposure_std_m2 = float(result.plane_offset_std_m2), float(result.exposure_std_m2)
+    msg.pixel_count, msg.count_area_m2 = int(result.pixel_count), float(result.count_area_m2)
+    msg.threshold, msg.area_mode = float(result.threshold), result.area_mode
+    msg.subpixel_applied, msg.calibrated = bool(result.subpixel_applied), bool(result.calibrated)
+    msg.calibration_source = calibration_source
+    msg.warnings = [str(w) for w in result.warnings]
+    return msg
+
+
+def projected_area_vector(result: AreaResult, stamp: Time, frame_id: str) -> Vector3Stamped:
+    """The earlier form of the result, kept for one release on projected_area/vector: x = Af m², y = its std m²,
+    z = object pixels."""
+    msg = Vector3Stamped()
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    msg.vector.x, msg.vector.y, msg.vector.z = result.area_m2, result.area_std_m2, float(result.pixel_count)
+    return msg
 
 
 def image_bytes(image: np.ndarray, stamp: Time, frame_id: str) -> bytes:

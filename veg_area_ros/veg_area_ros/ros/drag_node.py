@@ -1,8 +1,9 @@
 """drag_node: Cd = 2F / (rho U² Af) for every Af frame, with force (geometry_msgs/WrenchStamped) and velocity
 (geometry_msgs/TwistStamped, linear), each one signed axis such as "+x", averaged over ±tolerance around the
-frame's stamp. Publishes `drag_coefficient` (Vector3Stamped: x = Cd, y = its standard deviation, z = U m/s; header =
-the Af frame's) and `drag_coefficient/info` (JSON with force, velocity, Af and the sample counts; NaN or infinite
-instrument samples are left out and counted in `rejected_samples`)."""
+frame's stamp; Af comes from `projected_area` (veg_area_msgs/ProjectedArea, the area node's). Publishes
+`drag_coefficient` (Vector3Stamped: x = Cd, y = its standard deviation, z = U m/s; header = the Af frame's) and
+`drag_coefficient/info` (JSON with force, velocity, Af, the Af frame's warnings and the sample counts; NaN or
+infinite instrument samples are left out and counted in `rejected_samples`)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ import json
 from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
 from rclpy.node import Node
 from std_msgs.msg import String
+
+from veg_area_msgs.msg import ProjectedArea
 
 from ..drag import AXES, WATER_DENSITY, DragAligner, check_axis, component
 from .health import publish_safely
@@ -40,10 +43,11 @@ class DragNode(Node):
         self.aligner = DragAligner(tolerance, density, force_std, velocity_std)
         self.cd_pub = self.create_publisher(Vector3Stamped, "drag_coefficient", RESULT_QOS)
         self.info_pub = self.create_publisher(String, "drag_coefficient/info", RESULT_QOS)
-        self.headers: dict[float, tuple[int, int, str]] = {}  # Af time -> its exact stamp and frame_id
+        # Af time -> its exact stamp, frame_id and warnings (a Cd says what made its Af less trustworthy)
+        self.headers: dict[float, tuple[int, int, str, list[str]]] = {}
         self.create_subscription(WrenchStamped, "force", self._on_force, RESULT_QOS)
         self.create_subscription(TwistStamped, "velocity", self._on_velocity, RESULT_QOS)
-        self.create_subscription(Vector3Stamped, "projected_area", self._on_area, RESULT_QOS)
+        self.create_subscription(ProjectedArea, "projected_area", self._on_area, RESULT_QOS)
 
     def _on_force(self, msg: WrenchStamped) -> None:
         self.aligner.add_force(_seconds(msg.header.stamp), component(msg.wrench.force, self.force_axis))
@@ -53,10 +57,10 @@ class DragNode(Node):
         self.aligner.add_velocity(_seconds(msg.header.stamp), component(msg.twist.linear, self.velocity_axis))
         self._publish_ready()
 
-    def _on_area(self, msg: Vector3Stamped) -> None:
+    def _on_area(self, msg: ProjectedArea) -> None:
         t = _seconds(msg.header.stamp)
-        self.headers[t] = (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id)
-        self.aligner.add_area(t, msg.vector.x, msg.vector.y)
+        self.headers[t] = (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id, list(msg.warnings))
+        self.aligner.add_area(t, msg.area_m2, msg.area_std_m2)
         self._publish_ready()
 
     def _publish_ready(self) -> None:
@@ -64,11 +68,11 @@ class DragNode(Node):
             out = Vector3Stamped()
             # the Af message's own stamp, not seconds through a float (exact-time joins must match)
             sec = int(drag.time_s // 1)
-            out.header.stamp.sec, out.header.stamp.nanosec, out.header.frame_id = self.headers.pop(
-                drag.time_s, (sec, round((drag.time_s - sec) * 1e9) % 1_000_000_000, ""))
+            out.header.stamp.sec, out.header.stamp.nanosec, out.header.frame_id, warnings = self.headers.pop(
+                drag.time_s, (sec, round((drag.time_s - sec) * 1e9) % 1_000_000_000, "", []))
             out.vector.x, out.vector.y, out.vector.z = drag.cd, drag.cd_std, drag.velocity_m_s
             publish_safely(self, self.cd_pub, out)
-            info = {**drag.__dict__, "unmatched_frames": self.aligner.unmatched,
+            info = {**drag.__dict__, "area_warnings": warnings, "unmatched_frames": self.aligner.unmatched,
                     "rejected_samples": self.aligner.rejected_samples}
             publish_safely(self, self.info_pub, String(data=json.dumps(info)))
         if len(self.headers) > 1000:  # frames that never matched

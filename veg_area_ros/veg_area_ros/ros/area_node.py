@@ -1,6 +1,8 @@
 """area_node: idealizes each frame with the calibration from `camera_info` (or a file), classifies it and
-publishes Af (`projected_area`, geometry_msgs/Vector3Stamped: x = Af m², y = its standard deviation m²,
-z = object pixels; header = the source frame's), `projected_area/info` (JSON with everything else), the
+publishes Af (`projected_area`, veg_area_msgs/ProjectedArea: Af, its standard deviation and each term of it,
+the classification, the calibration used and the warnings, by name; header = the source frame's), the same as
+geometry_msgs/Vector3Stamped on `projected_area/vector` (deprecated, for one release: x = Af m², y = its standard
+deviation m², z = object pixels), `projected_area/info` (JSON with everything else), the
 binary `mask` (mono8, same header), and on demand (when subscribed) `image_rect`, `overlay` (every frame) and
 `overlay/preview` (the overlay at most `preview_rate_hz` times a second: for viewers such as the console,
 which then cost the measurement a few remaps a second, not one per frame).
@@ -28,6 +30,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import String
 
+from veg_area_msgs.msg import ProjectedArea
+
 from ..calib_io import read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, decode_compressed_image, decode_image, stamp_ns, unstamped
@@ -41,7 +45,7 @@ from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, MeasurementSettings
 from ..sources import default_targets
 from ..targets import TargetsError, TargetsSpec
 from .health import CountedWarnings, InputWatch, publish_safely
-from .messages import ImageMessageError, image_bytes
+from .messages import ImageMessageError, image_bytes, projected_area, projected_area_vector
 from .params import declare, read_start_file
 from .qos import ANY_INFO_QOS, IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS
 from .run import run_nodes
@@ -100,7 +104,9 @@ class AreaNode(Node):
         self._tally_logged_at = -TALLY_LOG_PERIOD_S
         self._busy: deque[tuple[int, int]] = deque(maxlen=64)  # recent measurements, (start, end) ns
         self._measuring_since: int | None = None
-        self.area_pub = self.create_publisher(Vector3Stamped, "projected_area", RESULT_QOS)
+        self.area_pub = self.create_publisher(ProjectedArea, "projected_area", RESULT_QOS)
+        # deprecated: the Vector3Stamped that `projected_area` was, for recordings and instrument nodes made for it
+        self.area_vector_pub = self.create_publisher(Vector3Stamped, "projected_area/vector", RESULT_QOS)
         self.info_pub = self.create_publisher(String, "projected_area/info", RESULT_QOS)
         self.mask_pub = self.create_publisher(Image, "mask", IMAGE_QOS)
         self.rect_pub = self.create_publisher(Image, "image_rect", IMAGE_QOS)
@@ -324,6 +330,13 @@ class AreaNode(Node):
             self._lost_logged = lost
             self._tally_logged_at = time.monotonic()
 
+    def _calibration_source(self) -> str:
+        if self.camera is None:
+            return ""
+        if self.camera == self.file_camera:
+            return f"calibration_file {self.get_parameter('calibration_file').value}"
+        return "camera_info"
+
     def _on_image(self, data: bytes) -> None:
         try:
             fields = decode_image(data) if self.transport == "raw" else decode_compressed_image(data)
@@ -356,10 +369,9 @@ class AreaNode(Node):
             kind = warning.split(":", 1)[0]
             self.warn("Af less trustworthy", warning, like=kind)
         stamp = Time(sec=header.sec, nanosec=header.nanosec)
-        area = Vector3Stamped()
-        area.header.stamp, area.header.frame_id = stamp, header.frame_id
-        area.vector.x, area.vector.y, area.vector.z = result.area_m2, result.area_std_m2, float(result.pixel_count)
-        publish_safely(self, self.area_pub, area)
+        publish_safely(self, self.area_pub, projected_area(result, stamp, header.frame_id, self._calibration_source()))
+        if self.area_vector_pub.get_subscription_count() > 0:
+            publish_safely(self, self.area_vector_pub, projected_area_vector(result, stamp, header.frame_id))
         summary = result.summary()
         summary.update(stamp={"sec": header.sec, "nanosec": header.nanosec}, frame_id=header.frame_id,
                        frames_received=self.frames.received, frames_dropped=self.frames.skipped,

@@ -19,13 +19,14 @@ import sys
 import threading
 from pathlib import Path
 
-from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
+
+from veg_area_msgs.msg import ProjectedArea
 
 from ..cdr import ImageMessageError, decode_camera_info, decode_image
 from ..console_server import ConsoleServer
@@ -80,7 +81,7 @@ class ConsoleNode(Node):
         self.view_topics = {"area": "overlay/preview",
                             "calibration": f"/{self.calibration_name}/feedback", "camera": "image_raw"}
         self.view_subscriptions: dict = {}
-        self.create_subscription(Vector3Stamped, "projected_area", self._on_area, RESULT_QOS)
+        self.create_subscription(ProjectedArea, "projected_area", self._on_area, RESULT_QOS)
         self.create_subscription(String, "projected_area/info", self._on_info, RESULT_QOS)
         self.create_subscription(String, f"/{self.calibration_name}/progress", self._on_progress, RESULT_QOS)
         self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, LATCHED_QOS, raw=True)
@@ -100,9 +101,9 @@ class ConsoleNode(Node):
                                       f"{address}?token={self.access.token} (without the token it is view-only)")
 
     # --- what comes from the graph ---------------------------------------------------------------------------
-    def _on_area(self, msg: Vector3Stamped) -> None:
+    def _on_area(self, msg: ProjectedArea) -> None:
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        self.series.add_area(stamp, msg.vector.x, msg.vector.y)
+        self.series.add_area(stamp, msg.area_m2, msg.area_std_m2)
 
     def _on_info(self, msg: String) -> None:
         self.series.add_info(msg.data)

@@ -54,7 +54,19 @@ def check_rclpy(python: str = sys.executable) -> list[Finding]:
         return [Finding("rclpy", False, f"import failed: {last}",
                         "in this repository `make install` (the pinned ROS 2 Kilted wheels); on a ROS 2 install "
                         "`source /opt/ros/<distro>/setup.bash` first")]
-    return [Finding("rclpy", True, f"imports ({done.stdout.strip()})")]
+    found = [Finding("rclpy", True, f"imports ({done.stdout.strip()})")]
+    code = "from rclpy.serialization import serialize_message; from veg_area_msgs.msg import ProjectedArea; " \
+           "serialize_message(ProjectedArea())"
+    try:
+        typed = subprocess.run([python, "-c", code], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return [*found, Finding("veg_area_msgs", False, f"could not start {python}: {exc}", "run `make install` again")]
+    if typed.returncode != 0:
+        last = (typed.stderr.strip().splitlines() or ["no message"])[-1]
+        return [*found, Finding("veg_area_msgs", False, f"ProjectedArea does not load: {last}",
+                                "in this repository `make install` (builds veg_area_msgs); on a ROS 2 install "
+                                "`colcon build` with both packages in the workspace, then source install/setup.bash")]
+    return [*found, Finding("veg_area_msgs", True, "ProjectedArea loads and serializes")]
 
 
 def check_transport(environ: dict, sysctl_dir: Path) -> list[Finding]:

@@ -9,8 +9,11 @@ being filled is lost. Reading hands image messages over as zero-copy views (veg_
 
 from __future__ import annotations
 
+import functools
+import os
 import statistics
 import struct
+import sys
 import time
 import zlib
 from collections.abc import Iterator
@@ -23,7 +26,7 @@ from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, Qo
 from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import CompressionMode, StoragePlugin
 from rosbags.rosbag2.storage_mcap import McapWriter
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
 from .cdr import (
     CameraInfoFields,
@@ -62,8 +65,46 @@ class BagError(ValueError):
     """A bag that cannot be written, read or recovered; the message says why."""
 
 
-def typestore():
-    return get_typestore(Stores.ROS2_KILTED)
+OUR_MESSAGES = "veg_area_msgs"  # the package whose .msg files are registered with the Kilted types
+
+
+def our_message_files() -> list[Path]:
+    """veg_area_msgs's .msg files: installed (share/veg_area_msgs/msg in an ament prefix: AMENT_PREFIX_PATH, then
+    this interpreter's prefix, as `make install` leaves .venv) or, in a source checkout, the repository's."""
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p] + [sys.prefix]
+    for folder in [Path(p, "share", OUR_MESSAGES, "msg") for p in prefixes] + [
+            Path(__file__).resolve().parents[2] / OUR_MESSAGES / "msg"]:
+        files = sorted(folder.glob("*.msg"))
+        if files:
+            return files
+    return []
+
+
+@functools.lru_cache(maxsize=1)
+def _our_types() -> tuple:
+    types: dict = {}
+    for path in our_message_files():
+        types.update(get_types_from_msg(path.read_text(), f"{OUR_MESSAGES}/msg/{path.stem}"))
+    return tuple(types.items())
+
+
+def typestore(reader: Reader | None = None):
+    """The Kilted message types with veg_area_msgs's registered (a bag of ProjectedArea is written with its
+    definition and read back), and, given a reader, any other type the bag defines itself (MCAP schemas)."""
+    store = get_typestore(Stores.ROS2_KILTED)
+    store.register(dict(_our_types()))
+    if reader is not None:
+        for connection in reader.connections:
+            if connection.msgtype in store.types or not connection.msgdef.data:
+                continue
+            try:
+                if connection.msgdef.format.name == "MSG":
+                    store.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+                else:
+                    store.register(get_types_from_idl(connection.msgdef.data))
+            except Exception:  # a definition rosbags cannot parse: that topic alone stays undecodable
+                continue
+    return store
 
 
 def topic_name_problem(name: str) -> str | None:
@@ -526,7 +567,8 @@ def play_messages(path: str | Path, topics: list[str]) -> Iterator[tuple[str, in
 def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x", force_topic: str = "/force",
             velocity_topic: str = "/velocity", area_topic: str = "/projected_area") -> dict:
     """One flume run recorded in a bag: the means of the force along its axis (geometry_msgs/WrenchStamped),
-    the velocity (TwistStamped, linear) and Af (projected_area, Vector3Stamped x), with their sample counts."""
+    the velocity (TwistStamped, linear) and Af (projected_area: veg_area_msgs/ProjectedArea, or the Vector3Stamped
+    of earlier recordings, x = Af and y = its std), with their sample counts."""
     from .drag import DragError, check_axis, component
 
     try:
@@ -537,7 +579,7 @@ def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x",
     wanted = {"/" + t.lstrip("/"): name for t, name in ((force_topic, "force"), (velocity_topic, "velocity"),
                                                          (area_topic, "area"))}
     reader = _open_reader(path)
-    store = typestore()
+    store = typestore(reader)
     samples: dict[str, list[float]] = {"force": [], "velocity": [], "area": []}
     area_std: list[float] = []  # each Af's reported std (y)
     try:
@@ -550,6 +592,9 @@ def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x",
                 samples[name].append(component(message.wrench.force, force_axis))
             elif name == "velocity":
                 samples[name].append(component(message.twist.linear, velocity_axis))
+            elif hasattr(message, "area_m2"):
+                samples[name].append(message.area_m2)
+                area_std.append(message.area_std_m2)
             else:
                 samples[name].append(message.vector.x)
                 area_std.append(message.vector.y)

@@ -25,7 +25,8 @@ from .run import run_nodes
 DEFAULT_TOPICS = ["image_raw", "camera_info", "projected_area", "projected_area/info"]
 
 
-STAMPED_TYPES = {"sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo", "sensor_msgs/msg/CompressedImage"}
+STAMPED_TYPES = {"sensor_msgs/msg/Image", "sensor_msgs/msg/CameraInfo", "sensor_msgs/msg/CompressedImage",
+                 "veg_area_msgs/msg/ProjectedArea"}
 
 
 def process_start_ns() -> int:

@@ -27,7 +27,8 @@ def add_parser(sub) -> None:
     vog.add_argument("--velocity-topic", default="/velocity",
                      help="bags: geometry_msgs/TwistStamped topic (default %(default)s)")
     vog.add_argument("--area-topic", default="/projected_area",
-                     help="bags: Af topic (Vector3Stamped, x = Af, y = its std; default %(default)s)")
+                     help="bags: Af topic (veg_area_msgs/ProjectedArea, or the Vector3Stamped of earlier "
+                          "recordings: x = Af, y = its std; default %(default)s)")
     vog.add_argument("--density", type=positive_float, default=998.2,
                      help="water density, kg/m³, where a table row gives none (default %(default)s: 20 °C)")
     vog.add_argument("--confidence", type=probability, default=0.95,

@@ -1,0 +1,140 @@
+"""veg_area_msgs: the wheels' CMake files made usable (tools/wheel_cmake.py), the message package's install
+layout, ProjectedArea filled from a frame's result, and its definition as rosbags reads it equal to the
+generated class's bytes."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import REPO
+
+PREFIX = Path(os.environ.get("VEG_AREA_PREFIX", REPO / ".venv"))
+MESSAGES = REPO / "veg_area_msgs"
+
+
+def _wheel_cmake():
+    spec = importlib.util.spec_from_file_location("wheel_cmake", REPO / "tools" / "wheel_cmake.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+EXPORT = ('set_target_properties(std_msgs__rosidl_generator_py PROPERTIES\n  INTERFACE_INCLUDE_DIRECTORIES '
+          '"/opt/python/cp311-cp311/include/python3.11;/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/'
+          '_core/include"\n)\n')
+
+
+def test_the_wheels_container_include_folders_are_pointed_at_this_machines(tmp_path):
+    wheel_cmake = _wheel_cmake()
+    cmake = tmp_path / "share" / "std_msgs" / "cmake"
+    cmake.mkdir(parents=True)
+    (cmake / "export_std_msgs__rosidl_generator_pyExport.cmake").write_text(EXPORT)
+    (cmake / "std_msgsConfig.cmake").write_text("# nothing of the container here\n")
+    changed = wheel_cmake.patch_prefix(tmp_path)
+    assert [p.name for p in changed] == ["export_std_msgs__rosidl_generator_pyExport.cmake"]
+    text = changed[0].read_text()
+    python, numpy_include = wheel_cmake.local_includes()
+    assert "/opt/python" not in text and f'"{python};{numpy_include}"' in text
+    assert Path(python, "Python.h").is_file() and Path(numpy_include, "numpy", "arrayobject.h").is_file()
+    assert wheel_cmake.patch_prefix(tmp_path) == []  # a second run changes nothing
+    assert (cmake / "std_msgsConfig.cmake").read_text() == "# nothing of the container here\n"
+
+
+def test_a_container_path_it_does_not_know_stops_the_build_by_name(tmp_path):
+    wheel_cmake = _wheel_cmake()
+    cmake = tmp_path / "share" / "odd_msgs" / "cmake"
+    cmake.mkdir(parents=True)
+    odd = cmake / "odd.cmake"
+    odd.write_text('INTERFACE_LINK_DIRECTORIES "/opt/python/cp311-cp311/lib/libpython3.11.so"\n')
+    with pytest.raises(SystemExit, match=r"odd\.cmake.*/opt/python/cp311-cp311/lib/libpython3\.11\.so"):
+        wheel_cmake.patch_prefix(tmp_path)
+    assert "/opt/python" in odd.read_text()  # left as it was
+    done = subprocess.run([sys.executable, str(REPO / "tools" / "wheel_cmake.py")], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2 and "PREFIX" in done.stderr
+
+
+def test_the_message_package_is_an_ament_cmake_interface_package():
+    root = ET.parse(MESSAGES / "package.xml").getroot()
+    assert root.get("format") == "3" and root.findtext("name") == "veg_area_msgs"
+    assert root.find("export/build_type").text == "ament_cmake"
+    assert root.findtext("member_of_group") == "rosidl_interface_packages"
+    assert {e.text for e in root.findall("buildtool_depend")} == {"ament_cmake", "rosidl_default_generators"}
+    assert "msg/ProjectedArea.msg" in (MESSAGES / "CMakeLists.txt").read_text()
+    ours = ET.parse(REPO / "veg_area_ros" / "package.xml").getroot()
+    assert "veg_area_msgs" in {e.text for e in ours.findall("exec_depend")}
+    # colcon finds both: the repository root is not itself a package (it would hide the other)
+    assert not (REPO / "package.xml").exists() and not (REPO / "setup.py").exists()
+
+
+@pytest.fixture(scope="module")
+def prefix():
+    if not (PREFIX / "share" / "veg_area_msgs").exists():
+        if os.environ.get("VEG_AREA_REQUIRE_INSTALL"):
+            pytest.fail(f"{PREFIX} has no veg_area_msgs: the install step did not build it")
+        pytest.skip(f"{PREFIX} has no veg_area_msgs; `make test` builds it")
+    return PREFIX
+
+
+def test_the_message_package_is_installed_as_ros_finds_it(prefix):
+    share = prefix / "share" / "veg_area_msgs"
+    assert (share / "package.xml").is_file() and (share / "msg" / "ProjectedArea.msg").is_file()
+    assert (share / "msg" / "ProjectedArea.idl").is_file()
+    assert (share / "msg" / "ProjectedArea.msg").read_text() == (MESSAGES / "msg" / "ProjectedArea.msg").read_text()
+    index = prefix / "share" / "ament_index" / "resource_index"
+    assert (index / "packages" / "veg_area_msgs").is_file()
+    assert "msg/ProjectedArea.msg" in (index / "rosidl_interfaces" / "veg_area_msgs").read_text()
+    for kind in ("rosidl_generator_c", "rosidl_typesupport_c", "rosidl_typesupport_fastrtps_c",
+                 "rosidl_typesupport_introspection_c", "rosidl_typesupport_cpp", "rosidl_generator_py"):
+        assert (prefix / "lib" / f"libveg_area_msgs__{kind}.so").is_file(), kind
+    # the generated class imports and serializes in a user's shell: no ROS environment, no LD_LIBRARY_PATH
+    code = ("from rclpy.serialization import serialize_message, deserialize_message;"
+            "from veg_area_msgs.msg import ProjectedArea;"
+            "m = ProjectedArea(area_m2=0.0105, warnings=['exposure: clipped']);"
+            "back = deserialize_message(serialize_message(m), ProjectedArea);"
+            "print(back.area_m2, back.warnings[0])")
+    done = subprocess.run([str(prefix / "bin" / "python"), "-c", code], capture_output=True, text=True, timeout=60,
+                          env={"PATH": "/usr/bin:/bin", "HOME": os.environ.get("HOME", "/tmp")}, cwd="/")
+    assert done.returncode == 0 and done.stdout.split() == ["0.0105", "exposure:", "clipped"], done.stderr
+
+
+def test_a_frames_result_fills_every_field_and_rosbags_reads_the_bytes_alike(prefix):
+    from rclpy.serialization import serialize_message
+
+    from veg_area_ros.area import AreaMeasurer
+    from veg_area_ros.bags import our_message_files, typestore
+    from veg_area_ros.classify import Classifier
+    from veg_area_ros.ros.messages import projected_area
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets
+
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.5)
+    frame[:40, :40] = 255  # a clipped corner far from the cube: the result must carry whatever it warns
+    result = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120.0)).measure(frame)
+    from builtin_interfaces.msg import Time
+
+    msg = projected_area(result, Time(sec=12, nanosec=5), "camera", "calibration_file /data/endoscope.yaml")
+    assert (msg.area_m2, msg.area_std_m2, msg.pixel_count) == (result.area_m2, result.area_std_m2,
+                                                              result.pixel_count)
+    terms = [msg.scale_std_m2, msg.threshold_std_m2, msg.discretisation_std_m2, msg.levels_std_m2,
+             msg.plane_offset_std_m2, msg.exposure_std_m2]
+    assert msg.area_std_m2 == pytest.approx(float(np.hypot.reduce(terms)), rel=1e-9)
+    assert (msg.area_mode, msg.subpixel_applied, msg.threshold) == (result.area_mode, result.subpixel_applied,
+                                                                     result.threshold)
+    assert list(msg.warnings) == result.warnings and msg.calibrated == result.calibrated
+    # rosbags, with the definition registered from the installed .msg, decodes rclpy's bytes field for field
+    assert our_message_files()[0].is_relative_to(prefix / "share" / "veg_area_msgs")
+    decoded = typestore().deserialize_cdr(serialize_message(msg), "veg_area_msgs/msg/ProjectedArea")
+    for name in msg.get_fields_and_field_types():
+        if name != "header":
+            assert getattr(decoded, name) == (list(getattr(msg, name)) if name == "warnings"
+                                              else getattr(msg, name)), name
+    assert (decoded.header.stamp.sec, decoded.header.frame_id) == (12, "camera")
+    store = typestore()
+    assert store.hash_rihs01("veg_area_msgs/msg/ProjectedArea").startswith("RIHS01_")
