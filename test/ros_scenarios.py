@@ -1069,10 +1069,10 @@ def scenario_guidance(options: dict, nodes: Nodes) -> dict:
     import rclpy
     from rclpy.node import Node
     from sensor_msgs.msg import Image
-    from std_msgs.msg import String
     from test_guidance import BOARD_SPEC, PORT, poses
 
-    from veg_area_ros.ros.messages import image_to_msg, msg_to_image
+    from veg_area_msgs.msg import CalibrationProgress
+    from veg_area_ros.ros.messages import image_to_msg, msg_to_image, progress_as_dict
     from veg_area_ros.ros.qos import IMAGE_QOS, RESULT_QOS
     from veg_area_ros.sim.synthetic import ENDOSCOPE, render_board_views
 
@@ -1086,8 +1086,8 @@ def scenario_guidance(options: dict, nodes: Nodes) -> dict:
     rclpy.init()
     probe = Node("probe")
     progress: list[dict] = []
-    probe.create_subscription(String, "calibration_node/progress", lambda m: progress.append(json.loads(m.data)),
-                              RESULT_QOS)
+    probe.create_subscription(CalibrationProgress, "calibration_node/progress",
+                              lambda m: progress.append(progress_as_dict(m)), RESULT_QOS)
     publisher = probe.create_publisher(Image, "image_raw", IMAGE_QOS)
     out: dict = {"sequence": sequence}
 

@@ -136,5 +136,35 @@ def test_a_frames_result_fills_every_field_and_rosbags_reads_the_bytes_alike(pre
             assert getattr(decoded, name) == (list(getattr(msg, name)) if name == "warnings"
                                               else getattr(msg, name)), name
     assert (decoded.header.stamp.sec, decoded.header.frame_id) == (12, "camera")
-    store = typestore()
-    assert store.hash_rihs01("veg_area_msgs/msg/ProjectedArea").startswith("RIHS01_")
+    # the type hash rosbags writes into a bag's metadata is the one rosidl generated (ros2 bag info, Foxglove)
+    import json
+
+    for name in ("ProjectedArea", "CalibrationProgress"):
+        generated = json.loads((prefix / "share" / "veg_area_msgs" / "msg" / f"{name}.json").read_text())
+        expected = next(h["hash_string"] for h in generated["type_hashes"]
+                        if h["type_name"] == f"veg_area_msgs/msg/{name}")
+        assert typestore().hash_rihs01(f"veg_area_msgs/msg/{name}") == expected, name
+
+
+def test_calibration_progress_carries_what_the_node_says_and_gives_it_back(prefix):
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from veg_area_msgs.msg import CalibrationProgress
+    from veg_area_ros.bags import typestore
+    from veg_area_ros.ros.messages import progress_as_dict, progress_message
+
+    state = {"message": "view 7 kept (54 points, coverage 41 %)", "views_kept": 7, "frames_seen": 40,
+             "frames_looked": 31, "frames_skipped": 9, "feedback_published": 0, "coverage": 0.41,
+             "coverage_cells": 14, "fitted": False, "rms_px": None, "still_needed": "tilt the board left-right",
+             "bars": {"x": 0.8, "y": 0.5, "size": 0.2, "tilt_h": 0.0, "tilt_v": 0.4, "roll": 0.1, "coverage": 0.41},
+             "rejected": {"too similar to a kept view": 5, "blurred": 2}, "warnings": []}
+    msg = progress_message(state, Time(sec=3), "camera")
+    back = progress_as_dict(deserialize_message(serialize_message(msg), CalibrationProgress))
+    assert back == state
+    fitted = progress_as_dict(progress_message({**state, "fitted": True, "rms_px": 0.061,
+                                                "warnings": ["k3 large"]}, Time(), "camera"))
+    assert (fitted["fitted"], fitted["rms_px"], fitted["warnings"]) == (True, 0.061, ["k3 large"])
+    decoded = typestore().deserialize_cdr(serialize_message(msg), "veg_area_msgs/msg/CalibrationProgress")
+    assert decoded.still_needed == state["still_needed"] and list(decoded.rejected_counts) == [5, 2]
+    assert (prefix / "share" / "veg_area_msgs" / "msg" / "CalibrationProgress.msg").is_file()

@@ -1,9 +1,10 @@
 """calibration_node: collects board views from `image_raw`, fits the combined lens-and-refraction model,
-and serves it: `camera_info` (latched), `set_camera_info`, and the YAML at `camera_info_url`."""
+and serves it: `camera_info` (latched), `set_camera_info`, and the YAML at `camera_info_url`. Says what it has
+kept and what is still missing on `~/progress` (veg_area_msgs/CalibrationProgress) and, while watched, in the
+`~/feedback` image."""
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import threading
@@ -12,8 +13,9 @@ import time
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
-from std_msgs.msg import String
 from std_srvs.srv import Trigger
+
+from veg_area_msgs.msg import CalibrationProgress
 
 from ..board import BoardSpec, BoardSpecError, detect_scaled
 from ..calib_io import (
@@ -32,7 +34,7 @@ from ..guidance import CalibrationGuide
 from ..replacement import Judgement, judge
 from ..sources import DEFAULT_BOARD
 from .health import CountedWarnings, InputWatch, publish_safely
-from .messages import ImageMessageError, camera_to_info, image_bytes, info_to_camera
+from .messages import ImageMessageError, camera_to_info, image_bytes, info_to_camera, progress_message
 from .params import declare, read_start_file
 from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
 from .run import run_nodes
@@ -76,7 +78,7 @@ class CalibrationNode(Node):
         self.fitted = False
         self.fit_view: FitView | None = None
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
-        self.progress_pub = self.create_publisher(String, "~/progress", RESULT_QOS)
+        self.progress_pub = self.create_publisher(CalibrationProgress, "~/progress", RESULT_QOS)
         self.feedback_pub = self.create_publisher(Image, "~/feedback", IMAGE_QOS)
         self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS, raw=True)  # a view, no copy
         self.input_watch = InputWatch(self, "image_raw")
@@ -182,7 +184,8 @@ class CalibrationNode(Node):
                  "coverage": self._coverage(),
                  "fitted": self.fitted, "rms_px": None if math.isinf(self.rms) else self.rms, "message": text,
                  **{k: v for k, v in guide.items() if k != "views_kept"}, **extra}
-        publish_safely(self, self.progress_pub, String(data=json.dumps(state)))
+        stamp = self.get_clock().now().to_msg()
+        publish_safely(self, self.progress_pub, progress_message(state, stamp, self.frame_id))
 
     # --- fitting and serving ---------------------------------------------------------------------------
     def _fit(self) -> tuple[bool, str]:

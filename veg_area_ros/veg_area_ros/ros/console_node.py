@@ -11,7 +11,6 @@ subscribed only while a page shows it (the area node draws its overlay only for 
 from __future__ import annotations
 
 import datetime as dt
-import json
 import os
 import signal
 import subprocess
@@ -26,7 +25,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
-from veg_area_msgs.msg import ProjectedArea
+from veg_area_msgs.msg import CalibrationProgress, ProjectedArea
 
 from ..cdr import ImageMessageError, decode_camera_info, decode_image
 from ..console_server import ConsoleServer
@@ -41,6 +40,7 @@ from ..console_state import (
     folder_size,
     now,
 )
+from .messages import progress_as_dict
 from .params import declare
 from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
 from .run import run_nodes
@@ -83,7 +83,8 @@ class ConsoleNode(Node):
         self.view_subscriptions: dict = {}
         self.create_subscription(ProjectedArea, "projected_area", self._on_area, RESULT_QOS)
         self.create_subscription(String, "projected_area/info", self._on_info, RESULT_QOS)
-        self.create_subscription(String, f"/{self.calibration_name}/progress", self._on_progress, RESULT_QOS)
+        self.create_subscription(CalibrationProgress, f"/{self.calibration_name}/progress", self._on_progress,
+                                 RESULT_QOS)
         self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, LATCHED_QOS, raw=True)
         self.get_client = self.create_client(GetParameters, f"/{self.area_name}/get_parameters")
         self.set_client = self.create_client(SetParametersAtomically, f"/{self.area_name}/set_parameters_atomically")
@@ -108,13 +109,8 @@ class ConsoleNode(Node):
     def _on_info(self, msg: String) -> None:
         self.series.add_info(msg.data)
 
-    def _on_progress(self, msg: String) -> None:
-        try:
-            progress = json.loads(msg.data)
-        except ValueError:
-            return
-        if isinstance(progress, dict):
-            self.calibration_log.add_progress(progress)
+    def _on_progress(self, msg: CalibrationProgress) -> None:
+        self.calibration_log.add_progress(progress_as_dict(msg))
 
     def _on_camera_info(self, data: bytes) -> None:
         try:

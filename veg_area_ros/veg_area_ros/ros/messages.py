@@ -11,7 +11,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped
 from sensor_msgs.msg import CameraInfo, Image
 
-from veg_area_msgs.msg import ProjectedArea
+from veg_area_msgs.msg import CalibrationProgress, ProjectedArea
 
 from ..area_result import AreaResult
 from ..camera_info import camera_info_fields, info_to_camera
@@ -19,7 +19,7 @@ from ..camera_model import BrownCamera
 from ..cdr import ImageMessageError, encode_image, frame_pixels, image_layout
 
 __all__ = ["ImageMessageError", "camera_to_info", "image_bytes", "image_to_msg", "info_to_camera", "message_class",
-           "msg_to_image", "projected_area", "projected_area_vector"]
+           "msg_to_image", "progress_as_dict", "progress_message", "projected_area", "projected_area_vector"]
 
 
 def projected_area(result: AreaResult, stamp: Time, frame_id: str, calibration_source: str) -> ProjectedArea:
@@ -37,6 +37,39 @@ def projected_area(result: AreaResult, stamp: Time, frame_id: str, calibration_s
     msg.calibration_source = calibration_source
     msg.warnings = [str(w) for w in result.warnings]
     return msg
+
+
+def progress_message(state: dict, stamp: Time, frame_id: str) -> CalibrationProgress:
+    """The calibration node's progress (its fields as `progress_as_dict` gives them back) as a message."""
+    msg = CalibrationProgress()
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    msg.message = str(state.get("message", ""))
+    for name in ("views_kept", "frames_seen", "frames_looked", "frames_skipped", "feedback_published",
+                 "coverage_cells"):
+        setattr(msg, name, int(state.get(name) or 0))
+    msg.coverage = float(state.get("coverage") or 0.0)
+    msg.fitted = bool(state.get("fitted"))
+    msg.rms_px = float("nan") if state.get("rms_px") is None else float(state["rms_px"])
+    msg.still_needed = str(state.get("still_needed") or "")
+    bars, rejected = state.get("bars") or {}, state.get("rejected") or {}
+    msg.bar_names, msg.bar_values = [str(k) for k in bars], [float(v) for v in bars.values()]
+    msg.rejected_reasons, msg.rejected_counts = [str(k) for k in rejected], [int(v) for v in rejected.values()]
+    msg.warnings = [str(w) for w in state.get("warnings") or []]
+    return msg
+
+
+def progress_as_dict(msg: CalibrationProgress) -> dict:
+    """A progress message as plain data (the console's page and JSON readers): bars and rejections as
+    name -> value, the RMS None before any fit."""
+    rms = float(msg.rms_px)
+    return {"message": msg.message, "views_kept": msg.views_kept, "frames_seen": msg.frames_seen,
+            "frames_looked": msg.frames_looked, "frames_skipped": msg.frames_skipped,
+            "feedback_published": msg.feedback_published, "coverage": msg.coverage,
+            "coverage_cells": msg.coverage_cells, "fitted": msg.fitted, "rms_px": None if rms != rms else rms,
+            "still_needed": msg.still_needed,
+            "bars": dict(zip(msg.bar_names, (float(v) for v in msg.bar_values), strict=True)),
+            "rejected": dict(zip(msg.rejected_reasons, (int(v) for v in msg.rejected_counts), strict=True)),
+            "warnings": list(msg.warnings)}
 
 
 def projected_area_vector(result: AreaResult, stamp: Time, frame_id: str) -> Vector3Stamped:
