@@ -36,6 +36,14 @@ def test_ament_index_finds_the_package_and_its_executables(prefix):
     for node in NODES:  # what `ros2 run veg_area_ros <node>` executes
         exe = Path(out[0]) / "lib" / "veg_area_ros" / node
         assert exe.is_file() and os.access(exe, os.X_OK), exe
+    # the message package beside it (its share/, type support libraries and Python module: test_msgs.py)
+    code = ("from ament_index_python import get_package_share_directory, get_resource;"
+            "print(get_package_share_directory('veg_area_msgs')); print(get_resource('rosidl_interfaces', "
+            "'veg_area_msgs')[0].split())")
+    done = subprocess.run([str(prefix / "bin" / "python"), "-c", code], env=env, capture_output=True, text=True,
+                          check=True, timeout=60).stdout.splitlines()
+    assert Path(done[0]).resolve() == (prefix / "share" / "veg_area_msgs").resolve()
+    assert "msg/ProjectedArea.msg" in done[1] and "msg/CalibrationProgress.msg" in done[1], done
 
 
 def test_installed_command_line_runs(prefix):

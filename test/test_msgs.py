@@ -168,3 +168,16 @@ def test_calibration_progress_carries_what_the_node_says_and_gives_it_back(prefi
     decoded = typestore().deserialize_cdr(serialize_message(msg), "veg_area_msgs/msg/CalibrationProgress")
     assert decoded.still_needed == state["still_needed"] and list(decoded.rejected_counts) == [5, 2]
     assert (prefix / "share" / "veg_area_msgs" / "msg" / "CalibrationProgress.msg").is_file()
+
+
+def test_colcon_finds_both_packages_in_a_workspace_and_builds_the_messages_first(tmp_path):
+    """As on a ROS 2 install: the repository cloned into a workspace's src/, `colcon build` as usual."""
+    colcon = Path(sys.executable).parent / "colcon"
+    if not colcon.exists():
+        pytest.skip("colcon is installed by `make install`")
+    (tmp_path / "src").mkdir()
+    (tmp_path / "src" / "veg_area").symlink_to(REPO)
+    done = subprocess.run([str(colcon), "list", "--topological-order", "--names-only", "--base-paths", "src"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["veg_area_msgs", "veg_area_ros"], done.stdout

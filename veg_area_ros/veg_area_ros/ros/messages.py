@@ -60,13 +60,13 @@ def progress_message(state: dict, stamp: Time, frame_id: str) -> CalibrationProg
 
 def progress_as_dict(msg: CalibrationProgress) -> dict:
     """A progress message as plain data (the console's page and JSON readers): bars and rejections as
-    name -> value, the RMS None before any fit."""
+    name -> value, the RMS None before any fit, still_needed None when nothing is."""
     rms = float(msg.rms_px)
     return {"message": msg.message, "views_kept": msg.views_kept, "frames_seen": msg.frames_seen,
             "frames_looked": msg.frames_looked, "frames_skipped": msg.frames_skipped,
             "feedback_published": msg.feedback_published, "coverage": msg.coverage,
             "coverage_cells": msg.coverage_cells, "fitted": msg.fitted, "rms_px": None if rms != rms else rms,
-            "still_needed": msg.still_needed,
+            "still_needed": msg.still_needed or None,
             "bars": dict(zip(msg.bar_names, (float(v) for v in msg.bar_values), strict=True)),
             "rejected": dict(zip(msg.rejected_reasons, (int(v) for v in msg.rejected_counts), strict=True)),
             "warnings": list(msg.warnings)}
