@@ -6,7 +6,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 SOURCES := $(shell find veg_area_ros veg_area_msgs -type f -not -name "*.pyc")
 
-.PHONY: demo test install browser lint bench clean
+.PHONY: demo test install build-tools browser lint bench clean
 
 demo: install
 	$(VENV)/bin/veg-area demo
@@ -25,9 +25,7 @@ $(VENV)/.deps-installed: requirements.txt
 
 # both packages (veg_area_msgs with CMake and the rosidl generators from the wheels, then veg_area_ros), with
 # .venv as the only prefix; the wheels' CMake files first get this machine's Python and NumPy include folders
-$(VENV)/.package-installed: $(VENV)/.deps-installed $(SOURCES) tools/wheel_cmake.py
-	@command -v cmake >/dev/null && command -v c++ >/dev/null || { \
-	    echo "building veg_area_msgs needs cmake and a C++ compiler: sudo apt-get install cmake g++"; exit 1; }
+$(VENV)/.package-installed: $(VENV)/.deps-installed $(SOURCES) tools/wheel_cmake.py | build-tools
 	$(PY) tools/wheel_cmake.py $(VENV)
 	mkdir -p build
 	PATH="$(abspath $(VENV))/bin:$$PATH" AMENT_PREFIX_PATH="$(abspath $(VENV))" CMAKE_PREFIX_PATH="$(abspath $(VENV))" \
@@ -37,6 +35,13 @@ $(VENV)/.package-installed: $(VENV)/.deps-installed $(SOURCES) tools/wheel_cmake
 	    || { cat build/colcon.out; tail -n 40 build/log/latest_build/veg_area_msgs/stdout_stderr.log 2>/dev/null; exit 1; }
 	ln -sf ../lib/veg_area_ros/veg-area $(VENV)/bin/veg-area
 	touch $@
+
+# veg_area_msgs is compiled (C and C++ type support), as any ROS message package
+build-tools:
+	@command -v cmake >/dev/null && command -v c++ >/dev/null || { \
+	    if [ "$$(id -u)" != 0 ]; then echo "building veg_area_msgs needs cmake and a C++ compiler: sudo apt-get install cmake g++"; exit 1; fi; \
+	    echo "installing Debian's cmake and g++ to build veg_area_msgs"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq cmake g++ >/dev/null; }
 
 # the console's tests drive Debian's chromium (Playwright uses it; no browser is downloaded)
 browser:
