@@ -17,11 +17,14 @@ from collections import deque
 from collections.abc import Callable
 
 REMEMBERED = 256  # stamps kept on each side: far more than frames in flight between the two topics
+# frames announced and not yet taken: a node held up (a loaded machine) while a fast camera runs on; one
+# forgotten beyond this is still counted, as skipped or lost, when it is dropped
+WAITING = 4096
 
 
 class FrameTally:
     def __init__(self) -> None:
-        self._announced: deque[int] = deque(maxlen=REMEMBERED)  # camera_info stamps not yet accounted for
+        self._announced: deque[int] = deque()  # camera_info stamps not yet accounted for (at most WAITING)
         self._received_at: dict[int, int] = {}  # announced stamp -> when its camera_info was received (ns)
         self._heard: deque[int] = deque(maxlen=REMEMBERED)  # every stamp announced (one frame heard twice is one)
         self._taken: deque[int] = deque(maxlen=REMEMBERED)  # frames whose camera_info may still come
@@ -29,6 +32,7 @@ class FrameTally:
         self.received = 0  # frames taken
         self._skipped = 0  # frames never taken while the node was busy, after the first frame taken
         self._lost = 0  # frames never taken although the node was idle, after the first frame taken
+        self._busy_between: Callable[[int, int], bool] = lambda start, end: True  # the last `took` was given
 
     def announce(self, stamp_ns: int, received_ns: int = 0) -> None:
         """A camera_info with this stamp: a frame the camera published. The same stamp again (the node listens
@@ -40,16 +44,29 @@ class FrameTally:
             self._per_frame = True
             self._taken.remove(stamp_ns)
         elif not self._announced or stamp_ns > self._announced[-1]:  # a latched re-send is not a new frame
-            if len(self._announced) == self._announced.maxlen:
-                self._received_at.pop(self._announced[0], None)
             self._announced.append(stamp_ns)
             self._received_at[stamp_ns] = received_ns
+            if len(self._announced) > WAITING:  # so many newer frames since: its image will not come
+                self._count_missing(self._announced.popleft(), received_ns)
+
+    def _count_missing(self, missing: int, until_ns: int) -> None:
+        """An announced frame whose image never came: skipped if the node was measuring between its camera_info
+        and the next one's, else lost (nothing before the node took its first frame)."""
+        if len(self._announced):
+            until_ns = self._received_at.get(self._announced[0], until_ns)
+        busy = self._busy_between(self._received_at.pop(missing, 0), until_ns)
+        if self.received >= 1:
+            if busy:
+                self._skipped += 1
+            else:
+                self._lost += 1
 
     def took(self, stamp_ns: int, now_ns: int = 0,
              busy_between: Callable[[int, int], bool] = lambda start, end: True) -> None:
         """A frame with this stamp reached the node (at `now_ns`); announced frames older than it never did:
         skipped if `busy_between(their camera_info, the next one)` says the node was measuring meanwhile, else
         lost."""
+        self._busy_between = busy_between
         self.received += 1
         skipped = lost = 0
         while self._announced and self._announced[0] < stamp_ns:
