@@ -99,6 +99,33 @@ def main(workdir: Path) -> None:
         out, err = client_run.communicate(timeout=300)
         results["killed"] = {"code": client_run.returncode, "stderr": "".join(lines) + err, "stdout": out,
                              "worker_killed": killed, "worker_exit": workers[1].wait(timeout=30)}
+
+        # a second cluster: first a scheduler without workers (said, nothing submitted), then one worker, and
+        # the scheduler SIGKILLed while a long input is being measured
+        lonely = start([PYTHON, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
+                        "--scheduler-file", "lonely.json", "--no-dashboard"], workdir / "lonely.log")
+        processes.append(lonely)
+        deadline = time.monotonic() + 60
+        while not (workdir / "lonely.json").exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        lonely_address = json.loads((workdir / "lonely.json").read_text())["address"]
+        results["no_workers"] = step(veg_area(*MEASURE, "v0.avi", "--scheduler", lonely_address, "--output-dir",
+                                              "cluster_no_workers"), 0.0)
+        worker = start([PYTHON, "-m", "dask", "worker", "--scheduler-file", "lonely.json", "--nthreads", "1",
+                        "--no-nanny", "--no-dashboard", "--host", "127.0.0.1", "--name", "w_lonely"],
+                       workdir / "worker_lonely.log")
+        processes.append(worker)
+        client_run = veg_area(*MEASURE, "v0.avi", "longer.avi", "--segment-frames", "2", "--scheduler",
+                              lonely_address, "--output-dir", "cluster_lost", stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE)
+        lines = []
+        for line in client_run.stderr:
+            lines.append(line)
+            if " done: " in line:
+                os.killpg(lonely.pid, signal.SIGKILL)
+                break
+        out, err = client_run.communicate(timeout=300)
+        results["scheduler_lost"] = {"code": client_run.returncode, "stderr": "".join(lines) + err, "stdout": out}
     finally:
         for process in reversed(processes):
             if process.poll() is None:

@@ -59,12 +59,13 @@ class Nodes:
                 process.wait()
 
 
-def spin_for(node, seconds: float) -> None:
-    """Spin a probe node for `seconds`, handling its callbacks as they come."""
+def spin_for(node, seconds: float, until=lambda: True, longest: float = 60.0) -> None:
+    """Spin a probe node for `seconds`, handling its callbacks as they come; then on while `until()` is false,
+    at most `longest` seconds more (a busy machine starts the nodes late: a count asserted must have come)."""
     import rclpy
 
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
+    start = time.monotonic()
+    while time.monotonic() < start + seconds or (not until() and time.monotonic() < start + seconds + longest):
         rclpy.spin_once(node, timeout_sec=0.05)
 
 
@@ -971,7 +972,7 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
         nonlocal published
         stamp = probe.get_clock().now().to_msg()
         image = image_to_msg(frame, stamp, "camera")
-        info = camera_to_info(ENDOSCOPE, "camera", stamp)
+        info = camera_to_info(ENDOSCOPE, options.get("info_frame_id", "camera"), stamp)
         info_pub.publish(info)
         image_pub.publish(image)
         published += 1
@@ -982,13 +983,14 @@ def scenario_driver_qos(options: dict, nodes: Nodes) -> dict:
         while time.monotonic() < end:  # the driver runs first, as in a lab
             rclpy.spin_once(probe, timeout_sec=0.05)
         nodes.start("area_node")
-        spin_for(probe, float(options["seconds"]))
+        spin_for(probe, float(options["seconds"]), until=lambda: len(areas) >= options.get("least_areas", 0))
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
     last = json.loads(infos[-1]) if infos else {}
     return {"areas": areas, "published": published, "truth_m2": cube_scene().true_area_m2,
-            "frames_received": last.get("frames_received", 0), "frames_measured": last.get("frames_measured", 0)}
+            "frames_received": last.get("frames_received", 0), "frames_measured": last.get("frames_measured", 0),
+            "warnings": last.get("warnings", [])}
 
 
 
@@ -1224,7 +1226,7 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     probe.create_timer(0.2, publish)
     try:
         nodes.start("area_node", image_transport="compressed")
-        spin_for(probe, float(options["seconds"]))
+        spin_for(probe, float(options["seconds"]), until=lambda: len(areas) >= 5)
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()

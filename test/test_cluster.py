@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -129,6 +130,37 @@ def test_an_unreachable_scheduler_is_said_within_10_s_and_nothing_is_written(sce
     # machine stretches the interpreter's start, which is not the wait being judged)
     assert "Connection refused" in unreachable["stderr"] and "Traceback" not in unreachable["stderr"]
     assert not (folder / "cluster_unreachable").exists()
+
+
+def test_a_scheduler_without_workers_is_said_and_nothing_is_submitted(scenario):
+    folder, results = scenario
+    alone = results["no_workers"]
+    assert alone["code"] == 1 and "has no workers after 30 s" in alone["stderr"].splitlines()[-1], alone["stderr"]
+    assert "dask worker tcp://" in alone["stderr"] and "Traceback" not in alone["stderr"]
+    assert not (folder / "cluster_no_workers").exists()
+
+
+def test_a_scheduler_lost_mid_run_keeps_what_was_received(scenario):
+    """The scheduler SIGKILLed after the first input is done: that input's files stay, the long input's
+    segments received so far are written in frame order and its summary says how many of the 60; one line on
+    stderr for it, no traceback, and the command ends."""
+    folder, results = scenario
+    lost = results["scheduler_lost"]
+    assert lost["code"] == 1, lost
+    assert "Traceback" not in lost["stderr"] and "writing what was measured" in lost["stderr"], lost["stderr"]
+    summary = {r["input"]: r for r in rows(folder / "cluster_lost" / "batch_summary.csv")}
+    assert summary["v0.avi"]["measured"] == "12" and summary["v0.avi"]["error"] == ""
+    assert rows(folder / "cluster_lost" / "v0_area.csv") == rows(folder / "cluster_six" / "v0_area.csv")
+    longer = summary["longer.avi"]
+    said = re.search(r"(stopped answering for 10 s|was lost): (\d+) of 60 segments measured \((\d+) frames",
+                     longer["error"])
+    assert said, longer
+    frames = int(said.group(3))
+    assert frames == int(longer["frames"]) and frames <= 2 * int(said.group(2))
+    if frames:
+        written = rows(folder / "cluster_lost" / "longer_area.csv")
+        order = [int(r["frame"].rsplit("#", 1)[1]) for r in written]  # "longer.avi#12"
+        assert len(written) == frames and order == sorted(order), order
 
 
 def test_ctrl_c_cancels_the_rest_and_keeps_what_finished(scenario):

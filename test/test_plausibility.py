@@ -388,6 +388,7 @@ def test_the_frame_itself_as_its_background_is_refused(folder):
 @pytest.mark.parametrize("options, said", [
     (("--levels", "0,255"), "the sub-pixel shares make Af"),
     (("--threshold", "250"), "the object fills"),
+    (("--object", "bright", "--threshold", "120"), "object surrounds the rest"),  # the dark cube's background
 ])
 def test_levels_or_a_threshold_that_take_the_background_are_said(folder, options, said):
     """`--levels 0,255` measured +241 % and `--threshold 250` +1190 %, exit 0 without a word. Said in the result;
@@ -396,7 +397,21 @@ def test_levels_or_a_threshold_that_take_the_background_are_said(folder, options
     row = json.loads(done.stdout.splitlines()[0])
     assert any(w.startswith(said) for w in row["warnings"]), row["warnings"]
     fine = json.loads(measure(folder, "cube.png", "--json", "--threshold", "120").stdout.splitlines()[0])
-    assert not any(w.startswith(("the sub-pixel shares", "the object fills")) for w in fine["warnings"])
+    assert not any(w.startswith(("the sub-pixel shares", "the object fills", "object surrounds")) for w in
+                   fine["warnings"])
+
+
+def test_a_plant_crossing_the_roi_is_not_taken_for_the_background():
+    """A bush cut by a ROI drawn across it touches the ROI's border and is said to be cut there; it does not
+    surround the rest, so it is not called the background."""
+    from veg_area_ros.settings import MeasurementSettings
+    from veg_area_ros.sources import SyntheticSource, default_targets
+
+    source = SyntheticSource(scene="bush")
+    across = [250.0, 200.0, 400.0, 200.0, 400.0, 300.0, 250.0, 300.0]
+    result = MeasurementSettings(roi=across).measurer(source.camera, default_targets()).measure(source.read())
+    assert any(w.startswith("object touches the ROI's border") for w in result.warnings), result.warnings
+    assert not any(w.startswith("object surrounds") for w in result.warnings), result.warnings
 
 
 def test_a_ctrl_c_while_the_command_starts_is_one_line():

@@ -193,11 +193,24 @@ def test_nodes_on_fast_dds_defaults_exchange_topics_with_ours(tmp_path):
     assert result["sockets"] and result["off_machine"] == []
 
 
+@pytest.mark.parametrize("info_frame_id", ["camera", "right_camera"])
+def test_a_camera_info_of_another_frame_is_said_in_the_result(tmp_path, info_frame_id):
+    """The image's frame_id is `camera`; a camera_info stamped `right_camera` (another camera's, wired to this
+    one) is used, and each result says so; the matching one stays silent."""
+    result = run_scenario("driver_qos", tmp_path, qos="usb_cam", seconds=8.0, info_frame_id=info_frame_id,
+                          least_areas=10)
+    said = [w for w in result["warnings"] if w.startswith("calibration of another frame")]
+    assert result["frames_measured"] >= 5, result
+    assert bool(said) == (info_frame_id != "camera"), result["warnings"]
+    if said:
+        assert "'right_camera'" in said[0] and "'camera'" in said[0]
+
+
 @pytest.mark.parametrize("qos", ["usb_cam", "sensor_data", "latched"])
 def test_camera_info_from_every_kind_of_driver_is_used(tmp_path, qos):
     """camera_info offered volatile and reliable (usb_cam), best effort (v4l2_camera's sensor-data QoS) or
     latched (ours): the area node, started after the driver, measures the cube from it at 10 Hz."""
-    result = run_scenario("driver_qos", tmp_path, qos=qos, seconds=8.0)
+    result = run_scenario("driver_qos", tmp_path, qos=qos, seconds=8.0, least_areas=10)
     areas = np.array(result["areas"])
     # every frame that reached the node was measured with the driver's calibration (a frame or two may come
     # before the node's first camera_info); what the transport delivered is not what is judged here

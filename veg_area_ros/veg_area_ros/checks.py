@@ -28,6 +28,9 @@ from .weights import Weights
 
 ROI_CUT_SHARE = 1e-3  # of the ROI without a pixel behind it: said (the remap's border is never counted)
 NEARLY_ALL = 0.98  # of the ROI's pixels taken for object: the classification took the background too
+# of the ROI's border taken for object: what surrounds the object was classified as object (a plant's stem
+# crossing the border takes a few per cent of it, a board's squares along a ROI through its corners about half)
+SURROUNDS = 0.75
 SHARES_APART = 0.2  # sub-pixel Af this far from the count (real photos: a few %): the levels are not this frame's
 CLIP_HIGH, CLIP_LOW = 250, 5  # band values a sensor or JPEG has clipped: whites burnt out, shadows crushed
 CLIP_REACH_PX = 2  # blooming and the lens's blur carry a clipped pixel's light this far into its neighbours
@@ -39,7 +42,8 @@ BLUR_RATIO = 2.0  # the object's edges this much (and a pixel) wider than the ma
 DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
 
 # warnings about an object's edges, levels or extent: void where no object was found
-OBJECT_WARNINGS = ("counted whole pixels", "object touches the ROI's border", "threshold sweep does not settle",
+OBJECT_WARNINGS = ("counted whole pixels", "object touches the ROI's border", "object surrounds the rest",
+                   "threshold sweep does not settle",
                    "edges wider than the markers'")
 
 
@@ -190,7 +194,12 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
                     "markers out)")
     border = weights.border()
     touching = cv2.countNonZero(mask & border)
-    if touching >= max(5, BORDER_TOUCH_SHARE * max(result.pixel_count, 1)):
+    ring = cv2.countNonZero(border)
+    if ring and touching >= SURROUNDS * ring:
+        said.append(f"object surrounds the rest: it covers {100 * touching / ring:.0f} % of the ROI's border, so "
+                    "what was measured is most likely the background (check --object, --threshold and "
+                    "--channel); Af is doubtful")
+    elif touching >= max(5, BORDER_TOUCH_SHARE * max(result.pixel_count, 1)):
         said.append(f"object touches the ROI's border: {touching} of its pixels lie on it, so Af is cut there "
                     "(widen the ROI, or move the targets)")
     if result.area_m2 > 0 and result.threshold_std_m2 / result.area_m2 > SWEEP_UNSETTLED:

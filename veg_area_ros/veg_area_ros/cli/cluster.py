@@ -6,6 +6,7 @@ write); this client writes each input's CSV and plot, batch_summary.csv and the 
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from dataclasses import replace
@@ -17,6 +18,9 @@ from .measure_job import CSV_COLUMNS, MeasureJob, csv_row, frames_lost, measure,
 
 CONNECT_TIMEOUT_S = 6  # the whole refusal within 10 s, the interpreter and its imports included
 PROGRESS_EVERY_S = 2.0
+WORKER_WAIT_S = 30.0  # a cluster without a worker this long (at the start, or all lost) ends the run
+SCHEDULER_LOST_S = 10.0  # a scheduler that does not answer this long is lost: what was received is written
+ASK_TIMEOUT_S = 5.0  # one question to the scheduler (its workers), so a dead one cannot hold the loop
 
 
 def input_frames(job: MeasureJob) -> int | None:
@@ -97,6 +101,33 @@ def _connect(address: str):
         raise CliError(f"the Dask scheduler at {address} cannot be reached ({exc}); nothing was measured") from exc
 
 
+def _workers(client) -> int | None:
+    """The scheduler's worker count, None when it does not answer within ASK_TIMEOUT_S."""
+    try:
+        identity = client.sync(client.scheduler.identity, n_workers=-1, callback_timeout=ASK_TIMEOUT_S)
+    except Exception:  # a lost connection, a timeout, a closing client: all mean no answer
+        return None
+    return len(identity.get("workers", {}))
+
+
+def _wait_for_a_worker(client, address: str, say) -> int:
+    """Workers at the start; CliError when none joins within WORKER_WAIT_S (nothing is submitted then)."""
+    deadline = time.monotonic() + WORKER_WAIT_S
+    said = False
+    while True:
+        workers = _workers(client)
+        if workers:
+            return workers
+        if time.monotonic() >= deadline:
+            what = "does not answer" if workers is None else "has no workers"
+            raise CliError(f"the Dask scheduler at {address} {what} after {WORKER_WAIT_S:.0f} s (start workers with "
+                           f"`dask worker {address}`); nothing was measured")
+        if not said:
+            say(f"cluster {address}: no workers yet, waiting up to {WORKER_WAIT_S:.0f} s for one")
+            said = True
+        time.sleep(1.0)
+
+
 def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
     if job.frame_range is not None:
         raise CliError("a frame range is the cluster's own unit; give whole inputs")
@@ -104,10 +135,15 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
     inputs = list(job.inputs)
     say = progress(job.quiet)
     client = _connect(address)
+    _quiet_dask()
     from distributed import as_completed
 
+    try:
+        workers = _wait_for_a_worker(client, address, say)
+    except CliError:
+        client.close()
+        raise
     folder.mkdir(parents=True, exist_ok=True)
-    workers = len(client.scheduler_info(n_workers=-1).get("workers", {}))
     say(f"cluster {address}: {len(inputs)} inputs, {workers} workers")
     jobs = [input_job(job, source, csv_paths[k]) for k, source in enumerate(inputs)]
     parts: dict[int, dict[int, list[dict]]] = {k: {} for k in range(len(inputs))}
@@ -122,6 +158,8 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
         pending[future] = ("count", k, 0)
     counting = as_completed(list(pending), loop=client.loop)
     interrupted = False
+    lost = ""  # why the cluster stopped measuring: the scheduler lost, or no worker left
+    answered_at = workers_at = asked_at = time.monotonic()
 
     def finish(k: int) -> None:
         rows = [row for part in sorted(parts[k]) for row in parts[k][part]]
@@ -143,6 +181,17 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
     handlers = catch_stop_signals(stop)
     try:
         while not counting.is_empty() and not stop.is_set():
+            now = time.monotonic()
+            if now - asked_at >= PROGRESS_EVERY_S:  # the scheduler and its workers, between results
+                asked_at, workers = now, _workers(client)
+                answered_at = now if workers is not None else answered_at
+                workers_at = now if workers else workers_at
+                if now - answered_at >= SCHEDULER_LOST_S:
+                    lost = f"the scheduler at {address} stopped answering for {SCHEDULER_LOST_S:.0f} s"
+                    break
+                if now - workers_at >= WORKER_WAIT_S:
+                    lost = f"the scheduler at {address} had no worker for {WORKER_WAIT_S:.0f} s"
+                    break
             if not counting.has_ready():
                 stop.wait(0.05)
                 continue
@@ -153,6 +202,9 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
                 try:
                     result = future.result()
                 except Exception as exc:  # the input cannot be opened where it runs, a bug, a worker lost thrice
+                    if _workers(client) is None:  # the scheduler went away: not this input's fault
+                        pending[future] = (kind, k, part)
+                        continue
                     summaries[k] = _summary(inputs[k], "", _reason(exc))
                     say(f"cluster: {inputs[k]} failed: {summaries[k]['error']}")
                     continue
@@ -181,11 +233,39 @@ def measure_on_cluster(job: MeasureJob, address: str, folder: Path) -> int:
         if stop.is_set():  # cancel what is left; every input finished so far is kept
             interrupted = True
             client.cancel(list(pending))
+        elif pending and not lost:  # every result left came back as the scheduler's loss
+            lost = f"the scheduler at {address} was lost"
+        if lost:  # what was received is kept: each unfinished input's segments so far, written and said
+            say(f"cluster: {lost}; writing what was measured")
+            for k in range(len(inputs)):
+                if k not in summaries:
+                    _write_partial(k, inputs[k], csv_paths[k], parts[k], expected.get(k), lost, summaries)
     finally:
-        client.close()
+        with contextlib.suppress(Exception):  # a lost scheduler: closing says nothing more
+            client.close(timeout=ASK_TIMEOUT_S)
         restore_signals(handlers)
     return finish_batch(job, folder, [summaries.get(k) or _summary(inputs[k], "", "interrupted before it finished")
                                       for k in range(len(inputs))], interrupted)
+
+
+def _write_partial(k: int, source: str, csv_path: str, parts: dict[int, list[dict]], expected: int | None,
+                   lost: str, summaries: dict[int, dict]) -> None:
+    """An input the cluster did not finish: its segments received, in order, written as its CSV; its summary
+    says how many of how many."""
+    rows = [row for part in sorted(parts) for row in parts[part]]
+    if rows:
+        write_csv(Path(csv_path), CSV_COLUMNS, [csv_row(row) for row in rows])
+    summaries[k] = input_summary(source, csv_path if rows else "", EXIT_FAILED, rows)
+    summaries[k]["error"] = (f"{lost}: {len(parts)} of {expected if expected is not None else '?'} segments "
+                             f"measured ({len(rows)} frames{', written' if rows else ''})")
+
+
+def _quiet_dask() -> None:
+    """Dask's own reconnection tracebacks off stderr: this command says in one line what happened."""
+    import logging
+
+    for name in ("distributed", "distributed.client", "distributed.comm", "distributed.batched", "tornado"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
 def _reason(exc: BaseException) -> str:

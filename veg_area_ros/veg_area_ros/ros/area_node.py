@@ -97,6 +97,7 @@ class AreaNode(Node):
         if self.transport not in IMAGE_TRANSPORTS:
             raise ValueError(f"image_transport must be one of {', '.join(IMAGE_TRANSPORTS)}, got {self.transport!r}")
         self.camera = None
+        self.info_frame_id = ""  # the frame_id of the camera_info the calibration came from
         self.frames = FrameTally()
         self.frames_measured = 0
         self._skipped_logged = 0
@@ -264,7 +265,9 @@ class AreaNode(Node):
             return
         self._info_seen = content
         try:
-            camera = info_to_camera(decode_camera_info(data))
+            fields = decode_camera_info(data)
+            self.info_frame_id = fields.header.frame_id
+            camera = info_to_camera(fields)
         except ValueError as exc:
             self.warn("camera_info ignored", str(exc))
             return
@@ -365,6 +368,11 @@ class AreaNode(Node):
             self.warn("frame not measured", str(exc))
             return
         self.frames_measured += 1
+        from_camera_info = self.camera is not None and self.camera != self.file_camera
+        if from_camera_info and self.info_frame_id and header.frame_id and self.info_frame_id != header.frame_id:
+            result.warnings.append(f"calibration of another frame: camera_info's frame_id {self.info_frame_id!r} is "
+                                   f"not the image's {header.frame_id!r}, so it may be another camera's (remap "
+                                   "camera_info to this camera's, as image_transport pairs them)")
         for warning in result.warnings:  # in the result itself (info); the log says each kind, throttled
             kind = warning.split(":", 1)[0]
             self.warn("Af less trustworthy", warning, like=kind)
