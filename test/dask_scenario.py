@@ -30,6 +30,21 @@ def veg_area(*args: str, **popen) -> subprocess.CompletedProcess | subprocess.Po
     return subprocess.run(command, capture_output=True, text=True, timeout=600)
 
 
+def start_scheduler(workdir: Path, name: str) -> tuple[subprocess.Popen, str]:
+    """A `dask scheduler` on loopback (any free port); its process and address, read from its scheduler file."""
+    scheduler = start([PYTHON, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
+                       "--scheduler-file", f"{name}.json", "--no-dashboard"], workdir / f"{name}.log")
+    deadline = time.monotonic() + 60
+    while not (workdir / f"{name}.json").exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return scheduler, json.loads((workdir / f"{name}.json").read_text())["address"]
+
+
+def start_worker(workdir: Path, scheduler: str, name: str) -> subprocess.Popen:
+    return start([PYTHON, "-m", "dask", "worker", "--scheduler-file", f"{scheduler}.json", "--nthreads", "1",
+                  "--no-nanny", "--no-dashboard", "--host", "127.0.0.1", "--name", name], workdir / f"{name}.log")
+
+
 def step(done: subprocess.CompletedProcess, seconds: float) -> dict:
     return {"code": done.returncode, "stderr": done.stderr[-4000:], "stdout": done.stdout[-4000:],
             "seconds": seconds}
@@ -40,16 +55,9 @@ def main(workdir: Path) -> None:
     results: dict = {}
     processes: list[subprocess.Popen] = []
     try:
-        scheduler = start([PYTHON, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
-                           "--scheduler-file", "scheduler.json", "--no-dashboard"], workdir / "scheduler.log")
+        scheduler, address = start_scheduler(workdir, "scheduler")
         processes.append(scheduler)
-        deadline = time.monotonic() + 60
-        while not (workdir / "scheduler.json").exists() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        address = json.loads((workdir / "scheduler.json").read_text())["address"]
-        workers = [start([PYTHON, "-m", "dask", "worker", "--scheduler-file", "scheduler.json", "--nthreads", "1",
-                          "--no-nanny", "--no-dashboard", "--host", "127.0.0.1", "--name", f"w{k}"],
-                         workdir / f"worker{k}.log") for k in range(2)]
+        workers = [start_worker(workdir, "scheduler", f"w{k}") for k in range(2)]
         processes += workers
         from distributed import Client
 
@@ -102,19 +110,11 @@ def main(workdir: Path) -> None:
 
         # a second cluster: first a scheduler without workers (said, nothing submitted), then one worker, and
         # the scheduler SIGKILLed while a long input is being measured
-        lonely = start([PYTHON, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
-                        "--scheduler-file", "lonely.json", "--no-dashboard"], workdir / "lonely.log")
+        lonely, lonely_address = start_scheduler(workdir, "lonely")
         processes.append(lonely)
-        deadline = time.monotonic() + 60
-        while not (workdir / "lonely.json").exists() and time.monotonic() < deadline:
-            time.sleep(0.2)
-        lonely_address = json.loads((workdir / "lonely.json").read_text())["address"]
         results["no_workers"] = step(veg_area(*MEASURE, "v0.avi", "--scheduler", lonely_address, "--output-dir",
                                               "cluster_no_workers"), 0.0)
-        worker = start([PYTHON, "-m", "dask", "worker", "--scheduler-file", "lonely.json", "--nthreads", "1",
-                        "--no-nanny", "--no-dashboard", "--host", "127.0.0.1", "--name", "w_lonely"],
-                       workdir / "worker_lonely.log")
-        processes.append(worker)
+        processes.append(start_worker(workdir, "lonely", "w_lonely"))
         client_run = veg_area(*MEASURE, "v0.avi", "longer.avi", "--segment-frames", "2", "--scheduler",
                               lonely_address, "--output-dir", "cluster_lost", stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE)

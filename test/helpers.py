@@ -22,6 +22,19 @@ OPENCV_REFERENCE_RMS = 0.4087  # OpenCV 5.0 on the same 13 images (test/data/REA
 CHESSBOARD = "chessboard:9x6:0.03"
 
 
+INSTALL_PREFIX = Path(os.environ.get("VEG_AREA_PREFIX", REPO / ".venv"))
+
+
+def installed(relative: str, what: str) -> Path:
+    """The install prefix (.venv) when it holds `relative`; else fail under `make test` (its install step did
+    not run) or skip (a plain pytest before any install)."""
+    if not (INSTALL_PREFIX / relative).exists():
+        if os.environ.get("VEG_AREA_REQUIRE_INSTALL"):
+            pytest.fail(f"{INSTALL_PREFIX} has no {what}: the install step did not run")
+        pytest.skip(f"{INSTALL_PREFIX} has no {what}; `make test` installs it")
+    return INSTALL_PREFIX
+
+
 def shared(relative: str) -> Path:
     """A file under ../shared/data, or skip with the reason (a user's fresh clone has no ../shared)."""
     path = SHARED_DATA / relative

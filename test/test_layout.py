@@ -9,20 +9,13 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers import REPO, SOURCE
+from helpers import SOURCE, installed
 
 NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node",
          "console_node"]
-PREFIX = Path(os.environ.get("VEG_AREA_PREFIX", REPO / ".venv"))
-
-
 @pytest.fixture(scope="module")
 def prefix():
-    if not (PREFIX / "share" / "ament_index").exists():
-        if os.environ.get("VEG_AREA_REQUIRE_INSTALL"):
-            pytest.fail(f"{PREFIX} has no ament layout: the install step did not run")
-        pytest.skip(f"{PREFIX} is not installed; `make test` installs it")
-    return PREFIX
+    return installed("share/ament_index", "ament layout")
 
 
 def test_ament_index_finds_the_package_and_its_executables(prefix):

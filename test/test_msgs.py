@@ -13,9 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import REPO
+from helpers import REPO, installed
 
-PREFIX = Path(os.environ.get("VEG_AREA_PREFIX", REPO / ".venv"))
 MESSAGES = REPO / "veg_area_msgs"
 
 
@@ -76,11 +75,7 @@ def test_the_message_package_is_an_ament_cmake_interface_package():
 
 @pytest.fixture(scope="module")
 def prefix():
-    if not (PREFIX / "share" / "veg_area_msgs").exists():
-        if os.environ.get("VEG_AREA_REQUIRE_INSTALL"):
-            pytest.fail(f"{PREFIX} has no veg_area_msgs: the install step did not build it")
-        pytest.skip(f"{PREFIX} has no veg_area_msgs; `make test` builds it")
-    return PREFIX
+    return installed("share/veg_area_msgs", "veg_area_msgs")
 
 
 def test_the_message_package_is_installed_as_ros_finds_it(prefix):
