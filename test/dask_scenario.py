@@ -78,6 +78,29 @@ def main(workdir: Path) -> None:
         results["missing"] = step(veg_area(*MEASURE, "v0.avi", "not_on_the_workers.avi", "--scheduler", address,
                                            "--output-dir", "cluster_missing"), time.monotonic() - started)
 
+        # listeners that are not Dask: one silent, one with an SSH server's banner; each refused in one line
+        import socket
+        import threading
+
+        def listener(banner: bytes) -> int:
+            server = socket.create_server(("127.0.0.1", 0))
+
+            def serve() -> None:
+                while True:
+                    connection, _ = server.accept()
+                    if banner:
+                        connection.sendall(banner)
+                    time.sleep(30)  # held open and silent, as a hung service would
+                    connection.close()
+
+            threading.Thread(target=serve, daemon=True).start()
+            return server.getsockname()[1]
+
+        for name, banner in (("silent", b""), ("ssh", b"SSH-2.0-OpenSSH_9.2p1 Debian-2\r\n")):
+            port = listener(banner)
+            results[f"not_dask_{name}"] = step(veg_area(*MEASURE, "v0.avi", "--scheduler", f"tcp://127.0.0.1:{port}",
+                                                        "--output-dir", f"cluster_{name}"), 0.0)
+
         started = time.monotonic()
         results["unreachable"] = step(veg_area(*MEASURE, "v0.avi", "--scheduler", "tcp://127.0.0.1:9",
                                                "--output-dir", "cluster_unreachable"), time.monotonic() - started)

@@ -17,6 +17,7 @@ from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, CliError, progress, write_
 from .measure_job import CSV_COLUMNS, MeasureJob, csv_row, frames_lost, measure, no_object_anywhere, plot_series
 
 CONNECT_TIMEOUT_S = 6  # the whole refusal within 10 s, the interpreter and its imports included
+HANDSHAKE_S = 4.0  # a scheduler's handshake comes at once; a listener silent this long is something else
 PROGRESS_EVERY_S = 2.0
 WORKER_WAIT_S = 30.0  # a cluster without a worker this long (at the start, or all lost) ends the run
 SCHEDULER_LOST_S = 10.0  # a scheduler that does not answer this long is lost: what was received is written
@@ -81,15 +82,45 @@ def scheduler_address(text: str) -> tuple[str, str, int]:
     return f"tcp://{host}:{port}", host, port
 
 
+def _check_speaks_dask(connection, address: str) -> None:
+    """A Dask scheduler speaks first on a new connection: its handshake, framed as a little-endian count of
+    frames (a handful) and their sizes. Something else on that port (a silent listener, a web server, SSH) is
+    refused within HANDSHAKE_S instead of hanging in Dask's connect."""
+    import struct
+
+    connection.settimeout(HANDSHAKE_S)
+    first = b""
+    try:
+        while len(first) < 8:
+            chunk = connection.recv(8 - len(first))
+            if not chunk:
+                break
+            first += chunk
+    except TimeoutError:
+        raise CliError(f"{address} accepted the connection but said nothing in {HANDSHAKE_S:.0f} s: it is not a "
+                       "Dask scheduler (the scheduler listens at tcp://HOST:8786 by default); nothing was "
+                       "measured") from None
+    except OSError as exc:
+        raise CliError(f"the Dask scheduler at {address} cannot be reached ({exc.strerror or exc}); nothing was "
+                       "measured") from None
+    frames = struct.unpack("<Q", first)[0] if len(first) == 8 else 0
+    if not 0 < frames < 1000:
+        shown = first.decode("ascii", "replace").strip() or "nothing"
+        raise CliError(f"{address} is not a Dask scheduler: it answered {shown!r} (the scheduler listens at "
+                       "tcp://HOST:8786 by default); nothing was measured")
+
+
 def _connect(address: str):
     address, host, port = scheduler_address(address)
     import socket
 
     try:  # a closed port or an unknown host said at once, before Dask's own retries
-        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S).close()
+        probe = socket.create_connection((host, port), timeout=CONNECT_TIMEOUT_S)
     except OSError as exc:
         raise CliError(f"the Dask scheduler at {address} cannot be reached ({exc.strerror or exc}); nothing was "
                        "measured") from None
+    with probe:
+        _check_speaks_dask(probe, address)
     try:
         from distributed import Client
     except ImportError as exc:  # optional on a ROS install (rosdep does not bring it)
