@@ -83,9 +83,10 @@ def scheduler_address(text: str) -> tuple[str, str, int]:
 
 
 def _check_speaks_dask(connection, address: str) -> None:
-    """A Dask scheduler speaks first on a new connection: its handshake, framed as a little-endian count of
-    frames (a handful) and their sizes. Something else on that port (a silent listener, a web server, SSH) is
-    refused within HANDSHAKE_S instead of hanging in Dask's connect."""
+    """A Dask scheduler speaks first on a new connection: its handshake, led by its length in bytes as a
+    little-endian 64-bit number (a few hundred; text such as SSH's or a web server's banner reads as trillions).
+    Something else on that port (a silent listener, a web server, SSH) is refused within HANDSHAKE_S instead of
+    hanging in Dask's connect."""
     import struct
 
     connection.settimeout(HANDSHAKE_S)
@@ -103,8 +104,8 @@ def _check_speaks_dask(connection, address: str) -> None:
     except OSError as exc:
         raise CliError(f"the Dask scheduler at {address} cannot be reached ({exc.strerror or exc}); nothing was "
                        "measured") from None
-    frames = struct.unpack("<Q", first)[0] if len(first) == 8 else 0
-    if not 0 < frames < 1000:
+    length = struct.unpack("<Q", first)[0] if len(first) == 8 else 0
+    if not 0 < length < 2**24:
         shown = first.decode("ascii", "replace").strip() or "nothing"
         raise CliError(f"{address} is not a Dask scheduler: it answered {shown!r} (the scheduler listens at "
                        "tcp://HOST:8786 by default); nothing was measured")
