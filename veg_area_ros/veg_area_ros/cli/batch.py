@@ -171,8 +171,8 @@ def finish_batch(job: MeasureJob, folder: Path, rows: list[dict], interrupted: b
         raise CliError(f"{len(failed)} of {len(rows)} inputs gave no measurement: {', '.join(failed)}")
     damaged = [row["input"] for row in rows if row["error"]]
     if damaged:
-        raise CliError(f"{len(damaged)} of {len(rows)} inputs were not measured whole (frames that could not be "
-                       f"read, or a cluster lost): {', '.join(damaged)} (see batch_summary.csv)")
+        raise CliError(f"{len(damaged)} of {len(rows)} inputs lost frames (unreadable, or the cluster measuring "
+                       f"them was lost): {', '.join(damaged)} (see batch_summary.csv)")
     return EXIT_OK
 
 
