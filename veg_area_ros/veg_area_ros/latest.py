@@ -49,11 +49,11 @@ class FrameTally:
             if len(self._announced) > WAITING:  # so many newer frames since: its image will not come
                 self._count_missing(self._announced.popleft(), received_ns)
 
-    def _count_missing(self, missing: int, until_ns: int) -> None:
+    def _count_missing(self, missing: int, now_ns: int) -> None:
         """An announced frame whose image never came: skipped if the node was measuring between its camera_info
-        and the next one's, else lost (nothing before the node took its first frame)."""
-        if len(self._announced):
-            until_ns = self._received_at.get(self._announced[0], until_ns)
+        and the next one's (or now: the time its image had to be taken), else lost. Nothing is counted before
+        the node took its first frame: it was not listening."""
+        until_ns = self._received_at.get(self._announced[0], now_ns) if self._announced else now_ns
         busy = self._busy_between(self._received_at.pop(missing, 0), until_ns)
         if self.received >= 1:
             if busy:
@@ -67,24 +67,14 @@ class FrameTally:
         skipped if `busy_between(their camera_info, the next one)` says the node was measuring meanwhile, else
         lost."""
         self._busy_between = busy_between
-        self.received += 1
-        skipped = lost = 0
         while self._announced and self._announced[0] < stamp_ns:
-            missing = self._announced.popleft()
-            # until the next frame's camera_info (or now): the time this frame's image had to be taken
-            until = self._received_at.get(self._announced[0], now_ns) if self._announced else now_ns
-            if busy_between(self._received_at.pop(missing, 0), until):
-                skipped += 1
-            else:
-                lost += 1
+            self._count_missing(self._announced.popleft(), now_ns)
+        self.received += 1
         if self._announced and self._announced[0] == stamp_ns:
             self._received_at.pop(self._announced.popleft(), None)
             self._per_frame = True
         else:
             self._taken.append(stamp_ns)
-        if self.received > 1:  # before the first frame the node was not listening: nothing was skipped
-            self._skipped += skipped
-            self._lost += lost
 
     @property
     def skipped(self) -> int | None:

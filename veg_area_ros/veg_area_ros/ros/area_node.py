@@ -88,8 +88,8 @@ class AreaNode(Node):
                                     "Frames before any calibration: 'drop' (throttled warning) or 'measure' "
                                     "(as an uncalibrated camera, flagged calibrated=false).",
                                     choices=("drop", "measure"))
-        calibration_file = declare(self, "calibration_file", "", "Calibration YAML to start with ('' = wait for "
-                                   "camera_info).", read_only=True)
+        self.calibration_file = calibration_file = declare(
+            self, "calibration_file", "", "Calibration YAML to start with ('' = wait for camera_info).", read_only=True)
         self.transport = declare(self, "image_transport", "raw", "How the camera's images come: 'raw' "
                                  "(sensor_msgs/Image on image_raw) or 'compressed' (CompressedImage, JPEG or PNG, on "
                                  "image_raw/compressed, as image_transport's compressed plugin publishes them).",
@@ -334,10 +334,11 @@ class AreaNode(Node):
             self._tally_logged_at = time.monotonic()
 
     def _calibration_source(self) -> str:
+        """Where the calibration in use came from: "calibration_file <path>", "camera_info", or "" (none)."""
         if self.camera is None:
             return ""
         if self.camera == self.file_camera:
-            return f"calibration_file {self.get_parameter('calibration_file').value}"
+            return f"calibration_file {self.calibration_file}"
         return "camera_info"
 
     def _on_image(self, data: bytes) -> None:
@@ -368,8 +369,8 @@ class AreaNode(Node):
             self.warn("frame not measured", str(exc))
             return
         self.frames_measured += 1
-        from_camera_info = self.camera is not None and self.camera != self.file_camera
-        if from_camera_info and self.info_frame_id and header.frame_id and self.info_frame_id != header.frame_id:
+        source = self._calibration_source()
+        if source == "camera_info" and self.info_frame_id and header.frame_id and self.info_frame_id != header.frame_id:
             result.warnings.append(f"calibration of another frame: camera_info's frame_id {self.info_frame_id!r} is "
                                    f"not the image's {header.frame_id!r}, so it may be another camera's (remap "
                                    "camera_info to this camera's, as image_transport pairs them)")
@@ -377,7 +378,7 @@ class AreaNode(Node):
             kind = warning.split(":", 1)[0]
             self.warn("Af less trustworthy", warning, like=kind)
         stamp = Time(sec=header.sec, nanosec=header.nanosec)
-        publish_safely(self, self.area_pub, projected_area(result, stamp, header.frame_id, self._calibration_source()))
+        publish_safely(self, self.area_pub, projected_area(result, stamp, header.frame_id, source))
         if self.area_vector_pub.get_subscription_count() > 0:
             publish_safely(self, self.area_vector_pub, projected_area_vector(result, stamp, header.frame_id))
         summary = result.summary()
