@@ -1187,7 +1187,8 @@ def scenario_replay_into_recorder(options: dict, nodes: Nodes) -> dict:
 
 def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     """A camera driver in this probe publishing image_transport's compressed topic (image_raw/compressed, JPEG,
-    sensor data QoS) and camera_info; the area node started with image_transport:=compressed measures it."""
+    sensor data QoS) and camera_info; the area node started with image_transport:=compressed measures it, and a
+    record node records both topics as they are published (closed with SIGINT at the end)."""
     import cv2
     import numpy as np
     import rclpy
@@ -1218,6 +1219,8 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
         image_pub.publish(message)
         published += 1
 
+    recorder = nodes.start("record_node", output=str(Path("recorded").resolve()),
+                           topics=["image_raw/compressed", "camera_info"])
     probe.create_timer(0.2, publish)
     try:
         nodes.start("area_node", image_transport="compressed")
@@ -1225,7 +1228,10 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
-    return {"areas": areas, "published": published, "jpeg": np.asarray(jpeg).ravel().tolist()}
+    recorder.send_signal(signal.SIGINT)
+    recorder.wait(20)
+    return {"areas": areas, "published": published, "jpeg": np.asarray(jpeg).ravel().tolist(),
+            "recorder_exit": recorder.returncode}
 
 
 if __name__ == "__main__":

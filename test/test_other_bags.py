@@ -231,10 +231,12 @@ def test_a_recorder_that_got_nothing_of_a_topic_says_so_and_fails(tmp_path):
 
 
 @pytest.mark.timeout(300)
-def test_the_area_node_measures_image_transports_compressed_topic(tmp_path):
+def test_the_area_node_measures_image_transports_compressed_topic_and_the_recorder_keeps_it(tmp_path):
     """A driver publishing JPEG on image_raw/compressed: the area node started with image_transport:=compressed
-    measures it, each Af the core's on the same JPEG decoded as a file is."""
+    measures it, each Af the core's on the same JPEG decoded as a file is; the record node keeps the topic as
+    CompressedImage (the JPEG bytes as published, not decoded), and the bag it wrote measures to the same Af."""
     from ros_harness import run_scenario
+    from rosbags.rosbag2 import Reader
 
     from veg_area_ros.area import AreaMeasurer
     from veg_area_ros.classify import Classifier
@@ -246,6 +248,22 @@ def test_the_area_node_measures_image_transports_compressed_topic(tmp_path):
     core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
     assert all(abs(area / core.area_m2 - 1) <= core.weight_error_bound for area in result["areas"]), (
         result["areas"], core.area_m2)
+
+    assert result["recorder_exit"] == 0, result["log"]
+    bag = tmp_path / "recorded"
+    with Reader(bag) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        jpegs = [TYPES.deserialize_cdr(data, "sensor_msgs/msg/CompressedImage").data.tobytes()
+                 for connection, _, data in reader.messages() if connection.topic.endswith("/compressed")]
+    assert types == {"/image_raw/compressed": "sensor_msgs/msg/CompressedImage",
+                     "/camera_info": "sensor_msgs/msg/CameraInfo"}, types
+    assert len(jpegs) >= 5 and set(jpegs) == {bytes(result["jpeg"])}, len(jpegs)
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    rows, done = _measure(tmp_path, bag, "--calibration", "bag")
+    assert done.returncode == 0, done.stderr
+    assert len(rows) == len(jpegs)
+    assert all(abs(row["area_m2"] / core.area_m2 - 1) <= core.weight_error_bound for row in rows), (
+        [row["area_m2"] for row in rows], core.area_m2)
 
 
 def test_our_mcap_is_written_as_ros2_bag_record_writes_it(tmp_path):
