@@ -6,6 +6,7 @@ from __future__ import annotations
 import ipaddress
 import json
 import os
+import shutil
 import signal
 import socket
 import struct
@@ -889,6 +890,16 @@ def scenario_record_cli(options: dict, nodes: Nodes) -> dict:
                               text=True, timeout=60)
         runs[name] = {"exit": done.returncode, "stderr": done.stderr[-2000:], "seconds": time.monotonic() - started,
                       "bag": str(Path(name).resolve())}
+    # a disk that fills while recording: a 512 kB tmpfs in a private mount namespace (one 640x480 image is 900 kB)
+    if shutil.which("unshare") is None:
+        runs["full"] = None
+        return runs
+    full = Path("full").resolve()
+    full.mkdir()
+    done = subprocess.run(["unshare", "-m", "sh", "-c", f"mount -t tmpfs -o size=512k none {full} && exec "
+                           f"{sys.executable} -m veg_area_ros.cli record image_raw camera_info --duration 6 -o "
+                           f"{full / 'bag'}"], env=GIVEN_ENVIRONMENT, capture_output=True, text=True, timeout=90)
+    runs["full"] = {"exit": done.returncode, "stderr": done.stderr[-3000:]}
     return runs
 
 

@@ -168,6 +168,17 @@ def test_record_command_duration_all_and_a_mistyped_topic(tmp_path):
     assert (stamps[-1] - stamps[0]) / 1e9 >= 8 - gap - 2, (gap, len(stamps), (stamps[-1] - stamps[0]) / 1e9)
     assert 0 < gap < 30 and 0 < rate <= 6 and abs(missed - gap * rate) <= 1, (gap, missed, rate)
 
+    # a disk that fills while recording (512 kB, one image is 900 kB): a Traceback and exit 1 before; now the
+    # error says what happened and how to get what reached the disk, once, and the exit is 1
+    full = result["full"]
+    if full is None:
+        pytest.skip("unshare is not installed: no private mount namespace for a full disk")
+    assert full["exit"] == 1, full["stderr"]
+    assert "Traceback" not in full["stderr"], full["stderr"]
+    assert full["stderr"].count("could not be written (No space left on device, a full disk?)") == 1, full["stderr"]
+    assert "veg-area bag-recover" in full["stderr"], full["stderr"]
+    assert "QoS did not match" not in full["stderr"], full["stderr"]
+
 
 def test_killed_recording_is_recovered_but_for_the_last_chunk(recorded, tmp_path):
     folder, _ = recorded

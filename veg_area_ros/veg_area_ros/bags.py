@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import os
+import sqlite3
 import statistics
 import struct
 import sys
@@ -219,6 +220,7 @@ class BagRecorder:
         self._chunks_flushed = 0
         self._last_commit = time.monotonic()
         self.counts: dict[str, int] = {}
+        self.write_problem: str | None = None  # why messages can no longer be written (then none are tried)
         self.crash_safety_problem = self._check_crash_safety()
 
     def add_topic(self, topic: str, msgtype: str, offered: list[OfferedQos] = ()) -> None:
@@ -244,24 +246,45 @@ class BagRecorder:
     def write(self, topic: str, timestamp_ns: int, data: bytes | memoryview, publish_ns: int | None = None) -> None:
         """One message received at `timestamp_ns` (its log time), sent at `publish_ns` where the middleware says
         (MCAP's publish time; sqlite3 keeps one time)."""
+        if self.write_problem:
+            raise BagError(self.write_problem)
         if publish_ns is not None and hasattr(self._writer.storage, "publish_time_ns"):
             self._writer.storage.publish_time_ns = publish_ns
-        self._writer.write(self._connections[topic], timestamp_ns, data)
-        self.counts[topic] += 1
-        if self.crash_safety_problem:
-            return
-        storage = self._writer.storage
-        if hasattr(storage, "chunks"):
-            if len(storage.chunks) != self._chunks_flushed:  # MCAP: a chunk went to the file
-                storage.bio.flush()
-                self._chunks_flushed = len(storage.chunks)
-        elif time.monotonic() - self._last_commit > SQLITE_COMMIT_SECONDS:
-            storage.conn.commit()
-            self._last_commit = time.monotonic()
+        try:
+            self._writer.write(self._connections[topic], timestamp_ns, data)
+            self.counts[topic] += 1
+            if self.crash_safety_problem:
+                return
+            storage = self._writer.storage
+            if hasattr(storage, "chunks"):
+                if len(storage.chunks) != self._chunks_flushed:  # MCAP: a chunk went to the file
+                    storage.bio.flush()
+                    self._chunks_flushed = len(storage.chunks)
+            elif time.monotonic() - self._last_commit > SQLITE_COMMIT_SECONDS:
+                storage.conn.commit()
+                self._last_commit = time.monotonic()
+        except (OSError, sqlite3.Error) as exc:  # a full disk, a removed drive: no later message can be kept
+            taken = sum(self.counts.values())
+            self.write_problem = (f"{self.path} could not be written ({_reason(exc)}, a full disk?): recording "
+                                  f"stopped after {taken} message{'' if taken == 1 else 's'} were taken; what "
+                                  "reached the disk before stays")
+            raise BagError(self.write_problem) from exc
 
     def close(self) -> None:
-        self._writer.close()  # MCAP summary and footer, metadata.yaml
-        _set_ros_distro(self.path / "metadata.yaml", ROS_DISTRO)
+        """The bag's end (MCAP summary and footer, metadata.yaml). Where it cannot be written (BagError), what
+        reached the disk before stays there for `veg-area bag-recover`."""
+        try:
+            self._writer.close()
+            _set_ros_distro(self.path / "metadata.yaml", ROS_DISTRO)
+        except (OSError, sqlite3.Error) as exc:
+            recover = (f"rebuild a readable bag from it with 'veg-area bag-recover {self.path} NEW_BAG' on a disk "
+                       "with space" if any(self.path.glob("*.mcap"))
+                       else "the messages committed before are in its .db3 file")
+            raise BagError(f"{self.path}: its end could not be written ({_reason(exc)}): {recover}") from exc
+
+
+def _reason(exc: BaseException) -> str:
+    return getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
 
 
 def _as_ros_writes_it(metadata: str) -> str:

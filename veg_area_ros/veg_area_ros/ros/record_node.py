@@ -117,7 +117,14 @@ class RecordNode(Node):
     def _write(self, topic: str, data: bytes, info: dict | None = None) -> None:
         # MCAP's publish time: when the sender's middleware sent it (rclpy's message info), as rosbag2 keeps it
         sent = (info or {}).get("source_timestamp") or None
-        self.recorder.write(topic, self.get_clock().now().nanoseconds, data, sent)
+        if self.recorder.write_problem:  # said once; the node stops after this callback
+            return
+        try:
+            self.recorder.write(topic, self.get_clock().now().nanoseconds, data, sent)
+        except BagError as exc:
+            self.get_logger().error(str(exc))
+            self.exit_code, self.stop_requested = 1, True
+            return
         if self.recording[topic] in STAMPED_TYPES or self.recording[topic].endswith("Stamped"):
             self._note_start(topic, data)
 
@@ -153,9 +160,13 @@ class RecordNode(Node):
         if self.recorder is None:  # it could not start (the reason is said): nothing to close or count
             super().destroy_node()
             return
-        self.recorder.close()
         counts = ", ".join(f"{t} {n}" for t, n in self.recorder.counts.items())
-        self.get_logger().info(f"bag {self.output} closed: {counts or 'no messages'}")
+        try:
+            self.recorder.close()
+            self.get_logger().info(f"bag {self.output} closed: {counts or 'no messages'}")
+        except BagError as exc:
+            self.get_logger().error(f"{exc}; messages taken: {counts or 'none'}")
+            self.exit_code = 1
         for topic, (gap, frames) in self.missed_before_start().items():
             if gap > 0:
                 estimate = f", about {frames:.0f} messages" if frames is not None else ""
@@ -166,7 +177,8 @@ class RecordNode(Node):
             self.get_logger().warning(f"never seen on the graph, not recorded: {', '.join(never) or 'any topic'} "
                                       "(a mistyped name? `ros2 topic list` shows what is published)")
             self.exit_code = 1
-        empty = [t for t in self.recording if not self.recorder.counts.get(t) and not self.everything]
+        empty = [t for t in self.recording if not self.recorder.counts.get(t) and not self.everything
+                 and not self.recorder.write_problem]
         if empty:  # seen and subscribed, yet nothing came: a QoS that did not match, or a publisher that stopped
             self.get_logger().warning(f"no message recorded of {', '.join(empty)} although it was on the graph "
                                       "(its publishers' QoS did not match, or they published nothing)")
