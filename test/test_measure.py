@@ -453,3 +453,70 @@ def test_overlays_on_a_full_disk_are_said_and_fail_the_run(workspace, tmp_path):
     assert done.returncode == 1 and "could not be written (a full disk?)" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr and done.stderr.count("could not be written (a full disk?)") == 2
     assert len(list(csv.DictReader((tmp_path / "clip.csv").open()))) == 3  # every row kept
+
+
+def _on_a_full_disk(tmp_path: Path, size: str, *args: str):
+    """`veg-area ARGS` with tmp_path/full a tmpfs of `size` in a private mount namespace (skipped without one)."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+
+    if shutil.which("unshare") is None:
+        pytest.skip("unshare is not installed: no private mount namespace for a full disk")
+    full = tmp_path / "full"
+    full.mkdir(exist_ok=True)
+    # what the full disk held is copied out before the namespace (and its tmpfs) goes
+    command = (f"mount -t tmpfs -o size={size} none {full} || exit 97; {sys.executable} -m veg_area_ros.cli "
+               + " ".join(args) + f"; code=$?; mkdir -p {tmp_path}/kept; cp -r {full}/. {tmp_path}/kept/; exit $code")
+    done = subprocess.run(["unshare", "-m", "sh", "-c", command], capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "PYTHONPATH": str(SOURCE)}, cwd=tmp_path)
+    if done.returncode == 97 or done.stderr.startswith("unshare:"):  # the namespace or the mount refused
+        pytest.skip(f"no private mount namespace here: {done.stderr.strip()}")
+    return done
+
+
+@pytest.fixture(scope="module")
+def clip(workspace):
+    """24 frames of the cube as an MJPG video: 6 kB of rows, a plot of about 30 kB."""
+    video = workspace / "full_clip.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, ENDOSCOPE.image_size)
+    for k in range(24):
+        writer.write(render_scene(ENDOSCOPE, SCENE, 0.7, FlatPort(), seed=k))
+    writer.release()
+    return video
+
+
+@pytest.mark.parametrize("case", ["rows", "plot", "batch summary"])
+def test_a_disk_that_fills_mid_run_is_said_and_keeps_what_was_written(workspace, clip, tmp_path, case):
+    """A full disk while the rows, the Af(t) plot or a batch's summary are written: a Traceback each before
+    (exit 1 with Python's stack, or from Pillow inside matplotlib). Now the file that could not be written is
+    named once with the reason, the run exits 1, and every row written before stays a valid CSV."""
+    common = [f"--calibration {workspace / 'water.yaml'}", f"--targets {workspace / 'targets.yaml'}",
+              "--threshold 120", "-q"]
+    if case == "rows":  # 24 rows do not fit in 4 kB
+        done, named = _on_a_full_disk(tmp_path, "4k", "measure", str(clip), *common, "--csv full/clip.csv"), \
+            "full/clip.csv"
+    elif case == "plot":  # the rows fit, the plot does not
+        done, named = _on_a_full_disk(tmp_path, "12k", "measure", str(clip), *common, "--csv full/clip.csv"), \
+            "full/clip.png"
+    else:
+        done, named = _on_a_full_disk(tmp_path, "12k", "measure", str(clip), str(workspace / "cube.png"), *common,
+                                      "--output-dir full"), "full/batch_summary.csv"
+    assert done.returncode == 1, done.stderr
+    assert "Traceback" not in done.stderr, done.stderr
+    said = f"{named} could not be written (No space left on device, a full disk?)"
+    assert done.stderr.count(said) == 1, done.stderr
+    if case != "batch summary":
+        rows = list(csv.DictReader((tmp_path / "kept" / "clip.csv").open()))
+        assert rows and all(float(row["area_m2"]) > 0 for row in rows)  # whole rows only
+        assert (len(rows) == 24) == (case == "plot"), len(rows)
+
+
+def test_a_calibration_report_on_a_full_disk_is_said(tmp_path):
+    from helpers import OPENCV_LEFT
+
+    done = _on_a_full_disk(tmp_path, "4k", "calibrate", str(OPENCV_LEFT), "--board chessboard:9x6:0.025",
+                           "--output full/left.yaml", "--report full/report")
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    assert "could not be written (No space left on device, a full disk?)" in done.stderr, done.stderr

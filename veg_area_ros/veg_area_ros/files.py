@@ -3,6 +3,7 @@ Imports nothing of the package, so any module may import it."""
 
 from __future__ import annotations
 
+import errno
 import glob
 import os
 import stat
@@ -60,6 +61,22 @@ def _remove_orphans(path: Path) -> None:
             orphan.unlink(missing_ok=True)
 
 
+class FileWriteError(OSError):
+    """A file that could not be written (a full disk, a read-only or vanished folder); the message names it and
+    why. What was written before it stays; the file itself is left as it was (writes are atomic). Made by `of`;
+    its arguments are OSError's own (errno, message, path), so it crosses a process pool as it is."""
+
+    @classmethod
+    def of(cls, path: str | os.PathLike, cause: OSError) -> FileWriteError:
+        full = cause.errno in (errno.ENOSPC, errno.EDQUOT)
+        reason = cause.strerror or str(cause) or type(cause).__name__
+        return cls(cause.errno, f"{path} could not be written ({reason}{', a full disk?' if full else ''})",
+                   str(path))
+
+    def __str__(self) -> str:
+        return self.strerror
+
+
 def write_atomic(path: str | os.PathLike, content: str | bytes) -> None:
     """Write `content` (text as UTF-8, or bytes) via a temporary file in the same folder and rename, so readers
     never see half a file; the file gets the mode the umask gives any new file (mkstemp's own is 0600), and a
@@ -75,8 +92,10 @@ def write_atomic(path: str | os.PathLike, content: str | bytes) -> None:
             os.fchmod(handle.fileno(), 0o666 & ~_umask())
             os.fsync(handle.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError) and not isinstance(exc, FileWriteError):
+            raise FileWriteError.of(path, exc) from exc
         raise
 
 
@@ -84,12 +103,17 @@ def save_figure(figure, path: str | os.PathLike, **options) -> None:
     """A matplotlib figure saved as PNG atomically (a temporary file in the same folder, then renamed): a run
     stopped while it is drawn leaves the last whole plot or none, never a truncated file."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise FileWriteError.of(path, exc) from exc
     os.close(fd)
     try:
         figure.savefig(tmp, format="png", **options)
         os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError) and not isinstance(exc, FileWriteError):
+            raise FileWriteError.of(path, exc) from exc
         raise

@@ -23,8 +23,9 @@ import threading
 from collections.abc import Sequence
 
 from .. import __version__
+from ..files import FileWriteError
 from . import bags, calibrate, demos, doctor, flume, measure
-from .common import EXIT_INTERRUPTED, EXIT_OK, CliError
+from .common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, CliError
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -81,6 +82,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except CliError as exc:
         print(f"veg-area {args.command}: {exc}", file=sys.stderr)
         return exc.code
+    except FileWriteError as exc:  # a full disk mid-run: said, what was written before stays
+        print(f"veg-area {args.command}: {exc}; what was written before it stays", file=sys.stderr)
+        return EXIT_FAILED
     except KeyboardInterrupt:
         print(f"veg-area {args.command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -17,6 +17,7 @@ from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecu
 from dataclasses import replace
 from pathlib import Path
 
+from ..files import FileWriteError
 from ..series import series_summary
 from .common import (
     EXIT_FAILED,
@@ -117,6 +118,8 @@ def _outcome(future, source: str, csv_path: str) -> dict:
         return future.result()
     except CancelledError:
         return _summary(source, "", "interrupted before it began")
+    except FileWriteError as exc:  # a full disk: its rows up to then are in its CSV
+        return _summary(source, csv_path, f"{exc}; the rows written before it stay")
     except Exception as exc:  # a bug or a killed worker: its input failed, the others go on
         detail = "".join(traceback.format_exception_only(exc)).strip()
         return _summary(source, csv_path, f"worker failed: {detail}")

@@ -4,6 +4,7 @@ check that an output can be written before any work, and CSV tables written atom
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import errno
 import io
@@ -15,7 +16,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..files import write_atomic
+from ..files import FileWriteError, write_atomic
 
 EXIT_OK = 0
 EXIT_FAILED = 1  # with a one-line reason on stderr
@@ -172,6 +173,19 @@ class RowLog:
         return self._handle is not None
 
     def add(self, row: dict) -> None:
+        try:
+            self._add(row)
+        except OSError as exc:  # a full disk: the rows before stay in the file, no later one can follow
+            self._abandon()
+            raise FileWriteError.of(self.path, exc) from exc
+
+    def _abandon(self) -> None:
+        if self._handle is not None:
+            with contextlib.suppress(OSError):
+                self._handle.close()
+            self._handle = None
+
+    def _add(self, row: dict) -> None:
         if self._handle is None:
             if not self.worth_keeping(row):
                 self.held.append(row)
@@ -191,9 +205,13 @@ class RowLog:
     def close(self, write_held: bool = False) -> None:
         """Finish the table; a table never begun is written with its held rows when `write_held`."""
         if self._handle is not None:
-            self._handle.flush()
-            os.fsync(self._handle.fileno())
-            self._handle.close()
+            try:
+                self._handle.flush()
+                os.fsync(self._handle.fileno())
+                self._handle.close()
+            except OSError as exc:
+                self._abandon()
+                raise FileWriteError.of(self.path, exc) from exc
             self._handle = None
         elif write_held and self.held:
             write_csv(self.path, self.columns, self.held)
