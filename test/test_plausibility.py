@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from helpers import REPO, SOURCE, run_cli
+from helpers import OPENCV_LEFT, REPO, SOURCE, run_cli
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.classify import Classifier, ClassifyError
@@ -250,8 +250,6 @@ def test_numbers_and_options_that_cannot_apply_are_refused(tmp_path, args, messa
 def test_calibrate_writes_no_calibration_that_measure_would_refuse(tmp_path):
     """OpenCV's 9x6 photos calibrated as a 7x5 board wrote fy/fx 44.5 and cx -306 (exit 0; measure then
     refused the file). Refused, nothing written, the board named as the likely cause."""
-    from helpers import OPENCV_LEFT, run_cli
-
     done = run_cli("calibrate", str(OPENCV_LEFT), "--board", "chessboard:7x5:1", "-o", str(tmp_path / "c.yaml"),
                    "-q")
     assert done.returncode == 1 and "is the board spec the board in the images?" in done.stderr, done.stderr
@@ -297,6 +295,40 @@ def test_a_device_or_pipe_given_as_a_file_is_refused_unread(folder, option, spec
     kind = "a pipe (FIFO)" if special == "fifo" else "a device"
     assert done.returncode in (1, 2) and f"is {kind}, not a file" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize("command", ["measure --csv", "calibrate --output", "vogel", "bag-recover"])
+@pytest.mark.parametrize("special", ["/dev/null", "fifo"])
+def test_a_device_or_pipe_as_an_output_or_a_table_is_refused(folder, command, special):
+    """A FIFO as `--csv` hung the run (the write waits for a reader), as `vogel`'s table or the bag to recover it
+    hung the reading; as root, `calibrate --output /dev/null` would have renamed its temporary file over the
+    device itself. Each refused, naming what it is, and /dev/null stays a device."""
+    import os
+    import stat
+
+    path = folder / "out.fifo"
+    if special == "fifo" and not path.exists():
+        os.mkfifo(path)
+    given = str(path) if special == "fifo" else special
+    if command == "measure --csv":
+        args = ("measure", str(folder / "cube.png"), "--calibration", "none", "--targets",
+                str(folder / "targets.yaml"), "--csv", given)
+    elif command == "calibrate --output":
+        args = ("calibrate", str(OPENCV_LEFT), "--board", "chessboard:9x6:0.025", "--output", given)
+    else:
+        args = (command, given) if command == "vogel" else (command, given, str(folder / "recovered"))
+    done = run_cli(*args, cwd=folder)
+    kind = "a pipe (FIFO)" if special == "fifo" else "a device"
+    assert done.returncode in (1, 2) and f"is {kind}, not a file" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+
+
+def test_an_atomic_write_never_replaces_a_device(tmp_path):
+    from veg_area_ros.files import FileWriteError, write_atomic
+
+    with pytest.raises(FileWriteError, match="is a device, not a file"):
+        write_atomic("/dev/null", "rows")
 
 
 def test_a_plot_is_written_whole_or_not_at_all(tmp_path):

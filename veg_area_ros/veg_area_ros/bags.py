@@ -37,7 +37,7 @@ from .cdr import (
     decode_compressed_image,
     decode_image,
 )
-from .files import write_atomic
+from .files import special_file, write_atomic
 from .strict_yaml import load_text, read_text
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -342,6 +342,9 @@ def recover_bag(broken: str | Path, output: str | Path) -> Recovery:
     files = sorted(broken.glob("*.mcap")) if broken.is_dir() else [broken]
     if not files:
         raise BagError(f"{broken}: no .mcap file to recover")
+    special = special_file(files[0])
+    if special:
+        raise BagError(f"{files[0]}: {special}")
     try:
         data = memoryview(files[0].read_bytes())
     except OSError as exc:

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from .files import save_figure
+from .files import save_figure, special_file
 
 WATER_DENSITY = 998.2  # kg/m³ at 20 °C
 AXES = ("+x", "-x", "+y", "-y", "+z", "-z")  # signed: a sensor may point against the flow; and a bare
@@ -192,6 +192,9 @@ def read_table(path: str | Path) -> list[dict]:
     """An experiment table's rows (CSV with columns velocity_m_s, force_n, area_m2; optional run, density and
     the std columns of `run_table`), checked for its columns."""
     path = Path(path)
+    special = special_file(path)
+    if special:
+        raise DragError(f"{path}: {special}")
     try:
         with path.open(newline="", encoding="utf-8-sig") as handle:
             rows = list(csv.DictReader(handle))

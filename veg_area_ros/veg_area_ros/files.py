@@ -14,10 +14,11 @@ MAX_IMAGE_PIXELS = 64_000_000  # six times the 3872x2592 DSLR; a 20000x20000 PNG
 MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in a camera_info are corrupt
 
 
-def special_file(path: str | os.PathLike) -> str | None:
-    """Why `path` cannot be read as a file, or None: a device (/dev/zero never ends: 3 GB read before a
-    MemoryError), a pipe (the read waits for a writer, Ctrl-C too) or a socket. A missing file or a folder is
-    left to the reader's own error."""
+def special_file(path: str | os.PathLike, writing: bool = False) -> str | None:
+    """Why `path` cannot be read (or, `writing`, written) as a file, or None: a device (/dev/zero never ends: 3 GB
+    read before a MemoryError; an atomic write would replace /dev/null itself), a pipe (the read waits for a
+    writer, the write for a reader, Ctrl-C too) or a socket. A missing file or a folder is left to the reader's
+    own error."""
     try:
         mode = os.stat(path).st_mode
     except (OSError, ValueError):
@@ -26,6 +27,10 @@ def special_file(path: str | os.PathLike) -> str | None:
         return None
     kind = ("a pipe (FIFO)" if stat.S_ISFIFO(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
             else "a socket" if stat.S_ISSOCK(mode) else "no regular file")
+    if writing:
+        why = ("writing would wait for a reader" if stat.S_ISFIFO(mode) else "a file written there would replace "
+               "the device itself" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "no file can be written there")
+        return f"is {kind}, not a file ({why})"
     return f"is {kind}, not a file (reading it would never end or would wait for a writer)"
 
 
@@ -82,6 +87,9 @@ def write_atomic(path: str | os.PathLike, content: str | bytes) -> None:
     never see half a file; the file gets the mode the umask gives any new file (mkstemp's own is 0600), and a
     killed writer's leftovers of the same file are removed."""
     path = Path(path)
+    special = special_file(path, writing=True)
+    if special:  # as root, the rename would put a regular file where /dev/null was
+        raise FileWriteError(errno.EINVAL, f"{path} {special}", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     _remove_orphans(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
@@ -103,6 +111,9 @@ def save_figure(figure, path: str | os.PathLike, **options) -> None:
     """A matplotlib figure saved as PNG atomically (a temporary file in the same folder, then renamed): a run
     stopped while it is drawn leaves the last whole plot or none, never a truncated file."""
     path = Path(path)
+    special = special_file(path, writing=True)
+    if special:
+        raise FileWriteError(errno.EINVAL, f"{path} {special}", str(path))
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
     except OSError as exc:

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..files import FileWriteError, write_atomic
+from ..files import FileWriteError, special_file, write_atomic
 
 EXIT_OK = 0
 EXIT_FAILED = 1  # with a one-line reason on stderr
@@ -87,6 +87,9 @@ def unwritable(path: Path, folder: bool) -> str | None:
         return "exists and is not a folder"
     if path.exists() and not folder and path.is_dir():
         return "is a folder, not a file"
+    special = None if folder else special_file(path, writing=True)
+    if special:
+        return special
     where = path if folder and path.exists() else path.parent
     while not where.exists():
         where = where.parent
