@@ -167,3 +167,28 @@ def test_vogel_command_on_bags_one_run_each(tmp_path):
     assert empty.returncode == 1 and "no messages on /nothing" in empty.stderr
     mixed = run_cli("vogel", str(bags[0]), str(tmp_path / "v.png"))
     assert mixed.returncode == 2
+
+
+@pytest.mark.parametrize("slip, column, scale, said", [
+    ("velocity in cm/s", "velocity", 100.0, "U = 20 to 50 m/s in runs 3, 4, 5, 6 is beyond any flume"),
+    ("area in cm²", "area", 1e4, "is beyond any plant measured here (area_m2 in cm²?)"),
+    ("force in mN", "force", 1e3, "Cd = 1.26e+03 to 1.74e+03 in runs 1, 2, 3, 4, 5, 6 is outside 0.005-50"),
+])
+def test_a_unit_slip_in_the_runs_is_refused_with_the_likely_unit(tmp_path, slip, column, scale, said):
+    """A table in cm/s, cm² or mN fitted a Cd of 0.0001 or 1700 and plotted it with exit 0. Refused, nothing
+    fitted or plotted, the column and its likely unit named; the same runs in SI units are fitted."""
+    velocity = np.array([0.1, 0.15, 0.2, 0.3, 0.4, 0.5])
+    columns = {"velocity": velocity, "area": 0.02 * velocity ** -0.3}
+    columns["force"] = 0.5 * WATER_DENSITY * velocity**2 * columns["area"] * 1.1 * velocity ** -0.2
+    table = tmp_path / "runs.csv"
+
+    def write(values: dict) -> None:
+        table.write_text("velocity_m_s,force_n,area_m2\n" + "".join(
+            f"{u},{f},{a}\n" for u, f, a in zip(values["velocity"], values["force"], values["area"], strict=True)))
+
+    write({**columns, column: columns[column] * scale})
+    done = run_cli("vogel", str(table), "--json")
+    assert done.returncode == 1 and said in done.stderr and "nothing was fitted" in done.stderr, done.stderr
+    assert not (tmp_path / "runs.vogel.png").exists()
+    write(columns)
+    assert run_cli("vogel", str(table), "--json").returncode == 0

@@ -41,7 +41,7 @@ def add_parser(sub) -> None:
 
 def cmd_vogel(args: argparse.Namespace) -> int:
     from ..bags import BagError, bag_run
-    from ..drag import DragError, format_run_table, plot_vogel, read_table, run_table, vogel_fit
+    from ..drag import DragError, format_run_table, plot_vogel, read_table, run_table, unit_slips, vogel_fit
     from ..frames import is_bag
 
     bags = [Path(i) for i in args.inputs if is_bag(Path(i))]
@@ -62,6 +62,10 @@ def cmd_vogel(args: argparse.Namespace) -> int:
             table = run_table(runs, args.density, "bags")
         else:
             table = run_table(read_table(args.inputs[0]), args.density, args.inputs[0])
+        slips = unit_slips(table)
+        if slips:  # Cd of 0.001 or 10000 fitted and plotted with exit 0 before
+            raise DragError("the runs' units look wrong, nothing was fitted (columns are velocity_m_s in m/s, "
+                            "force_n in N, area_m2 in m²): " + "; ".join(slips))
         velocity = [r["velocity_m_s"] for r in table]
         cd_area = [r["cd_area_m2"] for r in table]
         fit = vogel_fit(velocity, cd_area, args.confidence)
