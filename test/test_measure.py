@@ -153,7 +153,9 @@ def test_targets_file_with_a_duplicate_id(workspace, tmp_path):
 @pytest.mark.parametrize("args,message", [
     (["--threshold", "300"], "must be a number from 0 to 255 or 'otsu', got '300'"),
     (["--threshold", "dark"], "must be a number from 0 to 255"),
-    (["--roi", "10,10,20,20,30,30"], "is empty (its corners enclose no area)"),
+    (["--roi", "10,10,20,20,30,30"], "is empty (its corners enclose less than one pixel)"),
+    (["--roi", "0.1,0.1,0.9,0.1,0.9,0.9"], "they look like fractions of the image, and a region of interest is in "
+                                           "pixels"),
     (["--roi", "10,10,20"], "needs at least 3 x,y corner pairs"),
     (["--video-step", "0"], "--video-step must be 1 or more"),
 ])

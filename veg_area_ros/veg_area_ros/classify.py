@@ -326,7 +326,11 @@ def check_polygon(polygon) -> np.ndarray:
         raise ClassifyError(f"a region of interest corner at {np.max(np.abs(polygon)):.3g} px lies beyond any image "
                             f"(pixel coordinates up to {MAX_IMAGE_SIDE})")
     if not np.all(np.isfinite(polygon)) or cv2.contourArea(polygon.astype(np.float32)) < 1.0:
-        raise ClassifyError("the region of interest is empty (its corners enclose no area)")
+        if np.all(np.isfinite(polygon)) and np.all(np.abs(polygon) <= 1.0) and np.ptp(polygon) > 0:
+            raise ClassifyError("the region of interest's corners all lie within 1 px of the origin: they look "
+                                "like fractions of the image, and a region of interest is in pixels (of the "
+                                "idealized image)")
+        raise ClassifyError("the region of interest is empty (its corners enclose less than one pixel)")
     return polygon
 
 
