@@ -431,27 +431,14 @@ def test_a_videos_overlays_are_one_per_frame(workspace, tmp_path):
 def test_overlays_on_a_full_disk_are_said_and_fail_the_run(workspace, tmp_path):
     """--overlay on a full disk: 60 libpng errors and exit 0. The first image that cannot be written is said,
     no more are tried, the rows are kept, and the run exits 1. (A 64 kB tmpfs in a private mount namespace.)"""
-    import shutil
-    import subprocess
-    import sys
-
-
-    if shutil.which("unshare") is None:
-        pytest.skip("unshare is not installed: no private mount namespace for a full disk")
-    full = tmp_path / "full"
-    full.mkdir()
     video = tmp_path / "clip.avi"
     writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, ENDOSCOPE.image_size)
     for _ in range(3):
         writer.write(cv2.imread(str(workspace / "cube.png")))
     writer.release()
-    command = (f"mount -t tmpfs -o size=64k none {full} && exec {sys.executable} -m veg_area_ros.cli measure "
-               f"{video} --calibration {workspace / 'water.yaml'} --targets {workspace / 'targets.yaml'} "
-               f"--threshold 120 --overlay {full}/over --csv {tmp_path / 'clip.csv'}")
-    done = subprocess.run(["unshare", "-m", "sh", "-c", command], capture_output=True, text=True, timeout=300,
-                          env={**__import__("os").environ, "PYTHONPATH": str(SOURCE)})
-    if done.stderr.startswith(("unshare:", "mount:")):  # the namespace or the mount refused, not the command
-        pytest.skip(f"no private mount namespace here: {done.stderr.strip()}")
+    done = _on_a_full_disk(tmp_path, "64k", "measure", str(video), f"--calibration {workspace / 'water.yaml'}",
+                           f"--targets {workspace / 'targets.yaml'}", "--threshold 120",
+                           f"--overlay {tmp_path / 'full'}/over", f"--csv {tmp_path / 'clip.csv'}")
     assert done.returncode == 1 and "could not be written (a full disk?)" in done.stderr, done.stderr
     assert "Traceback" not in done.stderr and done.stderr.count("could not be written (a full disk?)") == 2
     assert len(list(csv.DictReader((tmp_path / "clip.csv").open()))) == 3  # every row kept

@@ -37,7 +37,7 @@ from .cdr import (
     decode_compressed_image,
     decode_image,
 )
-from .files import special_file, write_atomic
+from .files import os_reason, special_file, write_atomic
 from .strict_yaml import load_text, read_text
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -265,7 +265,7 @@ class BagRecorder:
                 self._last_commit = time.monotonic()
         except (OSError, sqlite3.Error) as exc:  # a full disk, a removed drive: no later message can be kept
             taken = sum(self.counts.values())
-            self.write_problem = (f"{self.path} could not be written ({_reason(exc)}, a full disk?): recording "
+            self.write_problem = (f"{self.path} could not be written ({os_reason(exc)}, a full disk?): recording "
                                   f"stopped after {taken} message{'' if taken == 1 else 's'} were taken; what "
                                   "reached the disk before stays")
             raise BagError(self.write_problem) from exc
@@ -280,11 +280,8 @@ class BagRecorder:
             recover = (f"rebuild a readable bag from it with 'veg-area bag-recover {self.path} NEW_BAG' on a disk "
                        "with space" if any(self.path.glob("*.mcap"))
                        else "the messages committed before are in its .db3 file")
-            raise BagError(f"{self.path}: its end could not be written ({_reason(exc)}): {recover}") from exc
+            raise BagError(f"{self.path}: its end could not be written ({os_reason(exc)}): {recover}") from exc
 
-
-def _reason(exc: BaseException) -> str:
-    return getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
 
 
 def _as_ros_writes_it(metadata: str) -> str:

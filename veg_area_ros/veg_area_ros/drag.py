@@ -248,22 +248,21 @@ def unit_slips(table: list[dict]) -> list[str]:
     """What in the runs looks like a column in another unit, once per kind with its runs and range, or nothing:
     a velocity above MAX_VELOCITY_M_S, an area above MAX_AREA_M2, else a Cd outside CD_RANGE."""
     low, high = CD_RANGE
-    kinds = {
-        "velocity": ("velocity_m_s", "m/s", "beyond any flume or river (velocity_m_s in cm/s?)",
-                     lambda r: abs(r["velocity_m_s"]) > MAX_VELOCITY_M_S),
-        "area": ("area_m2", "m²", "beyond any plant measured here (area_m2 in cm²?)",
-                 lambda r: r["area_m2"] > MAX_AREA_M2),
-        "cd": ("cd", "", f"outside {low:g}-{high:g}, what plants show (force_n in mN or grams, velocity_m_s in "
+    kinds = {  # label: (column, unit, why, whether a run's value is wrong)
+        "U": ("velocity_m_s", " m/s", "beyond any flume or river (velocity_m_s in cm/s?)",
+              lambda r: abs(r["velocity_m_s"]) > MAX_VELOCITY_M_S),
+        "Af": ("area_m2", " m²", "beyond any plant measured here (area_m2 in cm²?)",
+               lambda r: r["area_m2"] > MAX_AREA_M2),
+        "Cd": ("cd", "", f"outside {low:g}-{high:g}, what plants show (force_n in mN or grams, velocity_m_s in "
                "cm/s or area_m2 in cm²?)", lambda r: not low <= abs(r["cd"]) <= high),
     }
     found, explained = [], set()
-    for name, (key, unit, why, wrong) in kinds.items():
-        runs = [r for r in table if wrong(r) and (name != "cd" or r["run"] not in explained)]
+    for label, (key, unit, why, wrong) in kinds.items():
+        runs = [r for r in table if wrong(r) and (label != "Cd" or r["run"] not in explained)]
         if runs:
             values = [r[key] for r in runs]
             span = f"{min(values):.3g}" + (f" to {max(values):.3g}" if len(runs) > 1 else "")
-            label = {"velocity": "U", "area": "Af", "cd": "Cd"}[name]
-            found.append(f"{label} = {span}{' ' + unit if unit else ''} in run{'s' if len(runs) > 1 else ''} "
+            found.append(f"{label} = {span}{unit} in run{'s' if len(runs) > 1 else ''} "
                          f"{', '.join(r['run'] for r in runs)} is {why}")
             explained.update(r["run"] for r in runs)
     return found

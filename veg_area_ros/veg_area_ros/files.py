@@ -3,11 +3,13 @@ Imports nothing of the package, so any module may import it."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import glob
 import os
 import stat
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 MAX_IMAGE_PIXELS = 64_000_000  # six times the 3872x2592 DSLR; a 20000x20000 PNG took 9 GB and minutes to refuse
@@ -74,12 +76,46 @@ class FileWriteError(OSError):
     @classmethod
     def of(cls, path: str | os.PathLike, cause: OSError) -> FileWriteError:
         full = cause.errno in (errno.ENOSPC, errno.EDQUOT)
-        reason = cause.strerror or str(cause) or type(cause).__name__
-        return cls(cause.errno, f"{path} could not be written ({reason}{', a full disk?' if full else ''})",
+        return cls(cause.errno, f"{path} could not be written ({os_reason(cause)}{', a full disk?' if full else ''})",
                    str(path))
 
     def __str__(self) -> str:
         return self.strerror
+
+
+def os_reason(exc: BaseException) -> str:
+    """An OS error's reason as the system words it (No space left on device), else its text or its kind."""
+    return getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+
+
+def _temporary_beside(path: Path, make_folder: bool = False) -> tuple[int, str]:
+    """A temporary file in `path`'s folder (made first, and a killed writer's leftovers of `path` removed, where
+    `make_folder`), to be renamed over it (`_replacing`); FileWriteError where `path` is no file to replace (as
+    root, the rename would put a regular file where /dev/null was) or the folder takes no file."""
+    special = special_file(path, writing=True)
+    if special:
+        raise FileWriteError(errno.EINVAL, f"{path} {special}", str(path))
+    try:
+        if make_folder:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            _remove_orphans(path)
+        return tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
+    except OSError as exc:
+        raise FileWriteError.of(path, exc) from exc
+
+
+@contextlib.contextmanager
+def _replacing(path: Path, tmp: str) -> Iterator[None]:
+    """The temporary file renamed over `path` once the block wrote it; removed if anything went wrong, an OS
+    error (a full disk) raised as FileWriteError."""
+    try:
+        yield
+        os.replace(tmp, path)
+    except BaseException as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, OSError) and not isinstance(exc, FileWriteError):
+            raise FileWriteError.of(path, exc) from exc
+        raise
 
 
 def write_atomic(path: str | os.PathLike, content: str | bytes) -> None:
@@ -87,44 +123,20 @@ def write_atomic(path: str | os.PathLike, content: str | bytes) -> None:
     never see half a file; the file gets the mode the umask gives any new file (mkstemp's own is 0600), and a
     killed writer's leftovers of the same file are removed."""
     path = Path(path)
-    special = special_file(path, writing=True)
-    if special:  # as root, the rename would put a regular file where /dev/null was
-        raise FileWriteError(errno.EINVAL, f"{path} {special}", str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    _remove_orphans(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(content.encode("utf-8") if isinstance(content, str) else content)
-            handle.flush()
-            os.fchmod(handle.fileno(), 0o666 & ~_umask())
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException as exc:
-        Path(tmp).unlink(missing_ok=True)
-        if isinstance(exc, OSError) and not isinstance(exc, FileWriteError):
-            raise FileWriteError.of(path, exc) from exc
-        raise
+    fd, tmp = _temporary_beside(path, make_folder=True)
+    with _replacing(path, tmp), os.fdopen(fd, "wb") as handle:
+        handle.write(content.encode("utf-8") if isinstance(content, str) else content)
+        handle.flush()
+        os.fchmod(handle.fileno(), 0o666 & ~_umask())
+        os.fsync(handle.fileno())
 
 
 def save_figure(figure, path: str | os.PathLike, **options) -> None:
     """A matplotlib figure saved as PNG atomically (a temporary file in the same folder, then renamed): a run
     stopped while it is drawn leaves the last whole plot or none, never a truncated file."""
     path = Path(path)
-    special = special_file(path, writing=True)
-    if special:
-        raise FileWriteError(errno.EINVAL, f"{path} {special}", str(path))
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}.", suffix=".tmp", dir=path.parent)
-    except OSError as exc:
-        raise FileWriteError.of(path, exc) from exc
+    fd, tmp = _temporary_beside(path)
     os.close(fd)
-    try:
+    with _replacing(path, tmp):
         figure.savefig(tmp, format="png", **options)
         os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, path)
-    except BaseException as exc:
-        Path(tmp).unlink(missing_ok=True)
-        if isinstance(exc, OSError) and not isinstance(exc, FileWriteError):
-            raise FileWriteError.of(path, exc) from exc
-        raise
