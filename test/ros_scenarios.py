@@ -458,6 +458,16 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         spin_until(lambda: len(calibrated(mark)) >= 6, 30)
         out["area_modes_after_change"] = sorted({i["area_mode"] for i in calibrated(mark)[3:]})
         set_parameter("area_mode", "subpixel")
+        bad_tone = set_parameter("tone_curve", "gamma")
+        out["bad_tone_curve"] = None if bad_tone is None else [bad_tone.results[0].successful,
+                                                               bad_tone.results[0].reason]
+        good_tone = set_parameter("tone_curve", "srgb")
+        out["good_tone_curve"] = None if good_tone is None else good_tone.results[0].successful
+        mark = len(infos)
+        spin_until(lambda: len(calibrated(mark)) >= 5, 30)
+        out["tone_curves_after_change"] = sorted({str((i.get("levels") or {}).get("tone_curve"))
+                                                  for i in calibrated(mark)[3:]})
+        set_parameter("tone_curve", "linear")
 
         # bad frames on image_raw: wrong encoding, wrong size, empty data, lying step
         for encoding, width, height, data in (("16UC1", 640, 480, bytes(640 * 480 * 2)),

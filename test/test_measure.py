@@ -158,6 +158,8 @@ def test_targets_file_with_a_duplicate_id(workspace, tmp_path):
                                            "pixels"),
     (["--roi", "10,10,20"], "needs at least 3 x,y corner pairs"),
     (["--video-step", "0"], "--video-step must be 1 or more"),
+    (["--tone-curve", "srgb", "--object", "green"], "use tone curve linear with object green"),
+    (["--tone-curve", "gamma"], "argument --tone-curve: invalid choice: 'gamma'"),
 ])
 def test_usage_errors(workspace, args, message):
     done = measure(workspace, *args)

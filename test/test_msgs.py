@@ -120,8 +120,8 @@ def test_a_frames_result_fills_every_field_and_rosbags_reads_the_bytes_alike(pre
     terms = [msg.scale_std_m2, msg.threshold_std_m2, msg.discretisation_std_m2, msg.levels_std_m2,
              msg.plane_offset_std_m2, msg.exposure_std_m2]
     assert msg.area_std_m2 == pytest.approx(float(np.hypot.reduce(terms)), rel=1e-9)
-    assert (msg.area_mode, msg.subpixel_applied, msg.threshold) == (result.area_mode, result.subpixel_applied,
-                                                                     result.threshold)
+    assert (msg.area_mode, msg.subpixel_applied, msg.threshold, msg.tone_curve) == (
+        result.area_mode, result.subpixel_applied, result.threshold, result.tone_curve)
     assert list(msg.warnings) == result.warnings and msg.calibrated == result.calibrated
     # rosbags, with the definition registered from the installed .msg, decodes rclpy's bytes field for field
     assert our_message_files()[0].is_relative_to(prefix / "share" / "veg_area_msgs")

@@ -35,6 +35,7 @@ class AreaResult:
     target_pixels: dict[str, np.ndarray] = field(default_factory=dict)  # "marker 3" / "point 0" -> idealized px
     weight_error_bound: float = 0.0  # relative bound on Af from quantizing the pixel weights
     area_mode: str = "count"
+    tone_curve: str = "linear"  # how the band's values were read as light (classify.TONE_CURVES)
     levels: Levels | None = None  # the object/background levels used (None: none could be told apart)
     discretisation_std_m2: float = 0.0  # count mode: whole edge pixels counted or not
     levels_std_m2: float = 0.0  # sub-pixel mode: level estimates, noise, pure zones
@@ -57,7 +58,7 @@ class AreaResult:
             "scale_m_per_px": self.scale.metres_per_pixel, "scale_kind": self.scale.kind,
             "homography": self.scale.matrix.tolist() if self.scale.kind != "distance" else None,
             "object_plane_offset_m": self.scale.plane_offset_m,
-            "threshold": self.threshold, "calibrated": self.calibrated,
+            "threshold": self.threshold, "tone_curve": self.tone_curve, "calibrated": self.calibrated,
             "scale_std_m2": self.scale_std_m2, "threshold_std_m2": self.threshold_std_m2,
             "discretisation_std_m2": self.discretisation_std_m2, "levels_std_m2": self.levels_std_m2,
             "plane_offset_std_m2": self.plane_offset_std_m2,

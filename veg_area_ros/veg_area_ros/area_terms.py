@@ -167,7 +167,7 @@ def _edge_terms(roi_area: np.ndarray, roi_count: np.ndarray, levels: Levels | No
         moved = [subpixel_area(Levels(**{**levels.to_dict(), name: getattr(levels, name) + sign * shift}))
                  for sign in (1, -1)]
         sensitivity.append((moved[0] - moved[1]) / 2)
-    noise = weight * np.sqrt(mixed_count) * levels.background_spread / levels.contrast
+    noise = weight * np.sqrt(mixed_count) * levels.share_spreads()[1]
     # the pure zones: an edge pixel within one is counted 0 or 1. Where the edge crosses the grid at random
     # phases the errors are independent; where it follows the grid they repeat along it, and what they add up
     # to shows as the change of Af when both zones are made twice as wide (an error growing with the zones'

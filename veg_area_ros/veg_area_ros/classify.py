@@ -8,7 +8,9 @@ Sub-pixel area: a pixel on the object's edge holds both; its band value lies bet
 background's level in proportion to how much of it the object covers. `Levels` holds the two levels (from
 the ROI's band histogram, or given) and turns every band value into an object fraction. Values within a
 few noise widths of a level count as pure (0 or 1), so noise and mild texture of a large background do not
-add up to area.
+add up to area. A camera's band values are encoded light: with the `srgb` tone curve the shares and Otsu's
+threshold are read in linear light (an edge blurred in light is a symmetric ramp there, not in encoded levels),
+the band itself staying 8-bit; `linear` (the default) takes the values as light.
 """
 
 from __future__ import annotations
@@ -35,10 +37,28 @@ MIN_PURE_PIXELS = 50  # a class's interior must hold this many pixels to give it
 LEVEL_ERROR_FLOOR = 0.15  # an estimated level may be off by this share of its spread however many pixels it has
 CHANNELS = ("grey", "blue", "green", "red")
 EXCESS_GREEN = np.array([[-0.5, 1.0, -0.5, 128.0]])  # B, G, R, offset -> (2G - R - B) / 2 + 128, saturated
+TONE_CURVES = ("linear", "srgb")  # how the band's values encode light: as they are, or the sRGB curve (IEC 61966-2-1)
 
 
 class ClassifyError(ValueError):
     """Settings or a region that cannot classify a frame."""
+
+
+def to_light(values, tone_curve: str) -> np.ndarray:
+    """Band values (0..255, float allowed) as light on the same 0..255 scale, through the tone curve."""
+    values = np.asarray(values, float)
+    if tone_curve == "linear":
+        return values
+    x = np.clip(values / 255.0, 0.0, None)
+    return 255.0 * np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def light_slope(value: float, tone_curve: str) -> float:
+    """d light / d band value at `value`: how a spread of band values becomes a spread of light."""
+    if tone_curve == "linear":
+        return 1.0
+    x = max(value / 255.0, 0.0)
+    return 1 / 12.92 if x <= 0.04045 else 2.4 / 1.055 * ((x + 0.055) / 1.055) ** 1.4
 
 
 MAX_ROI_COORDINATE = 2 * MAX_IMAGE_SIDE  # a corner may lie outside the image, not kilometres outside
@@ -52,8 +72,14 @@ class Classifier:
     channel: str = "grey"
     open_px: int = 0  # morphological opening radius (removes specks), 0 = none
     close_px: int = 0  # morphological closing radius (fills pin-holes), 0 = none
+    tone_curve: str = "linear"  # how the band's values encode light (TONE_CURVES)
 
     def __post_init__(self) -> None:
+        if self.tone_curve not in TONE_CURVES:
+            raise ClassifyError(f"tone curve must be one of {', '.join(TONE_CURVES)}, got {self.tone_curve!r}")
+        if self.tone_curve != "linear" and self.object == "green":
+            raise ClassifyError("a tone curve applies to a grey or colour channel's levels, not to the excess-green "
+                                "index (a difference of encoded channels); use tone curve linear with object green")
         if self.object not in OBJECTS:
             raise ClassifyError(f"object must be one of {', '.join(OBJECTS)}, got {self.object!r}")
         if self.channel not in CHANNELS:
@@ -90,7 +116,7 @@ class Classifier:
     def resolve_threshold(self, band: np.ndarray, roi: np.ndarray) -> float:
         if self.threshold != "otsu":
             return float(self.threshold)
-        return otsu_level(np.bincount(band[roi > 0], minlength=256))
+        return otsu_level(np.bincount(band[roi > 0], minlength=256), self.tone_curve)
 
     def object_side(self, band: np.ndarray, threshold: float) -> np.ndarray:
         """Where the band lies on the object's side of the threshold (bool, anywhere in the band)."""
@@ -120,6 +146,7 @@ class Levels:
     # unevenness that is left; None: not known, the spread is taken (a level may then be off by a whole spread)
     object_error: float | None = None
     background_error: float | None = None
+    tone_curve: str = "linear"  # the shares are read in light through this curve (TONE_CURVES)
 
     def error(self, name: str) -> float:
         """How far the object's or the background's level may be off (DN): its error, else its spread."""
@@ -135,11 +162,20 @@ class Levels:
     def contrast(self) -> float:
         return abs(self.background - self.object)
 
+    def share_spreads(self) -> tuple[float, float]:
+        """The object's and the background's spreads as shares of the contrast, in light."""
+        light = abs(float(to_light(self.background, self.tone_curve) - to_light(self.object, self.tone_curve)))
+        return tuple(getattr(self, f"{name}_spread") * light_slope(getattr(self, name), self.tone_curve)
+                     / max(light, 1e-9) for name in ("object", "background"))
+
     def pure_zones(self) -> tuple[float, float]:
         """Fractions within which a pixel counts as pure object (1 - eps..1) or background (0..eps). The two
         zones are equally wide (the wider spread's): a blurred edge's symmetric ramp then loses at one end
         what it gains at the other."""
-        eps = PURE_ZONE_SPREADS * max(self.object_spread, self.background_spread) / max(self.contrast, 1e-9)
+        if self.tone_curve == "linear":
+            eps = PURE_ZONE_SPREADS * max(self.object_spread, self.background_spread) / max(self.contrast, 1e-9)
+        else:
+            eps = PURE_ZONE_SPREADS * max(self.share_spreads())
         return eps, eps
 
     def resolvable(self) -> bool:
@@ -152,7 +188,12 @@ class Levels:
         """The object fraction (0..1) of a pixel of each band value (all 256 by default)."""
         if values is None:  # the same levels recur (threshold sweep): computed once per levels
             return _fractions_of_every_value(self)
-        fraction = (self.background - np.asarray(values, float)) / (self.background - self.object)
+        if self.tone_curve == "linear":
+            fraction = (self.background - np.asarray(values, float)) / (self.background - self.object)
+        else:
+            background = to_light(self.background, self.tone_curve)
+            fraction = ((background - to_light(values, self.tone_curve))
+                        / (background - to_light(self.object, self.tone_curve)))
         eps_object, eps_background = self.pure_zones()
         fraction[fraction <= eps_background] = 0.0
         fraction[fraction >= 1 - eps_object] = 1.0
@@ -166,7 +207,8 @@ class Levels:
     def to_dict(self) -> dict:
         return {"object": self.object, "background": self.background, "object_spread": self.object_spread,
                 "background_spread": self.background_spread, "estimated": self.estimated,
-                "object_error": self.object_error, "background_error": self.background_error}
+                "object_error": self.object_error, "background_error": self.background_error,
+                "tone_curve": self.tone_curve}
 
 
 @functools.lru_cache(maxsize=64)
@@ -187,10 +229,11 @@ class LevelEstimator:
     quantiles on the side of the object (uneven light darkens or brightens it there too): a background
     that varies widely leaves no value mixed, and sub-pixel area becomes the whole-pixel count."""
 
-    def __init__(self, counts: np.ndarray, object_is_high: bool):
+    def __init__(self, counts: np.ndarray, object_is_high: bool, tone_curve: str = "linear"):
         counts = np.asarray(counts, float)
         self.counts = counts
         self.object_is_high = object_is_high
+        self.tone_curve = tone_curve
         sums = np.zeros((3, 257))
         np.cumsum(counts * BAND_POWERS, axis=1, out=sums[:, 1:])
         self._sums = sums.tolist()
@@ -236,7 +279,7 @@ class LevelEstimator:
                 (obj, obj_spread, obj_error), (bg, bg_spread, bg_error) = ((high, low) if self.object_is_high
                                                                            else (low, high))
                 self._levels_at[split] = Levels(obj, bg, obj_spread, bg_spread, object_error=obj_error,
-                                                background_error=bg_error)
+                                                background_error=bg_error, tone_curve=self.tone_curve)
         return self._levels_at[split]
 
 
@@ -298,14 +341,15 @@ def check_levels(levels) -> tuple[float, float] | None:
     return object_level, background_level
 
 
-def otsu_level(counts: np.ndarray) -> float:
+def otsu_level(counts: np.ndarray, tone_curve: str = "linear") -> float:
     """Otsu's threshold from a 256-bin histogram of the band in the ROI: the level t that maximises the
-    between-class variance of {<= t} and {> t} (the first such level, as OpenCV chooses)."""
+    between-class variance of {<= t} and {> t} (the first such level, as OpenCV chooses), the variance of light
+    through `tone_curve`."""
     counts = np.asarray(counts, float)
     total = counts.sum()
     if total == 0:
         raise ClassifyError("the region of interest is empty")
-    levels = np.arange(len(counts))
+    levels = np.arange(len(counts)) if tone_curve == "linear" else to_light(np.arange(len(counts)), tone_curve)
     weight_low = np.cumsum(counts) / total
     mean_low_sum = np.cumsum(counts * levels) / total
     mean_all = mean_low_sum[-1]

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .classify import AREA_MODES, CHANNELS, OBJECTS
+from .classify import AREA_MODES, CHANNELS, OBJECTS, TONE_CURVES
 from .settings import THRESHOLD_MODES
 
 VIEWS = ("area", "calibration", "camera")  # the overlay, the calibration node's feedback, the raw camera image
@@ -30,7 +30,8 @@ SERIES_POINTS = 1200
 MESSAGES_KEPT = 12
 
 # the area node's parameters the console sets, with what each must be
-CHOICES = {"threshold_mode": THRESHOLD_MODES, "object": OBJECTS, "channel": CHANNELS, "area_mode": AREA_MODES}
+CHOICES = {"threshold_mode": THRESHOLD_MODES, "object": OBJECTS, "channel": CHANNELS, "area_mode": AREA_MODES,
+           "tone_curve": TONE_CURVES}
 NUMBERS = {"threshold": (0.0, 255.0), "open_px": (0, 50), "close_px": (0, 50)}
 TUNED = (*NUMBERS, *CHOICES, "roi")
 

@@ -110,11 +110,11 @@ def light_frame(raw_band: np.ndarray, weights: Weights, settings: LightSettings,
     object_is_high = settings.classifier.object != "dark"
     band, threshold, flat, histogram = _evened(raw_band, weights, settings, memory, fresh=False)
     roi_count = histogram.sum(axis=1)
-    estimator = LevelEstimator(roi_count, object_is_high)
+    estimator = LevelEstimator(roi_count, object_is_high, settings.classifier.tone_curve)
     if _light_drifted(estimator, threshold, memory):  # the light changed since it was fitted
         band, threshold, flat, histogram = _evened(raw_band, weights, settings, memory, fresh=True)
         roi_count = histogram.sum(axis=1)
-        estimator = LevelEstimator(roi_count, object_is_high)
+        estimator = LevelEstimator(roi_count, object_is_high, settings.classifier.tone_curve)
         _light_drifted(estimator, threshold, memory)  # found in this frame: what the next frames are held to
     return LitFrame(band, threshold, flat, histogram, roi_count, estimator)
 
@@ -155,7 +155,8 @@ def levels_at(estimator: LevelEstimator, threshold: float, settings: LightSettin
     object_level, background_level = settings.given_levels
     spreads = ((estimated.object_spread, estimated.background_spread) if estimated is not None
                else (MIN_SPREAD_DN, MIN_SPREAD_DN))
-    given = Levels(object_level, background_level, *spreads, estimated=False)
+    given = Levels(object_level, background_level, *spreads, estimated=False,
+                   tone_curve=settings.classifier.tone_curve)
     return given if given.resolvable() else None
 
 
@@ -177,12 +178,13 @@ def _flat_field(band: np.ndarray, weights: Weights, threshold: float, settings: 
         return flat_field(band, weights.roi, background)
 
     found = fitted_beyond(threshold)
-    if found is None and settings.classifier.threshold != "otsu":
-        # the user's threshold classifies; where the light is uneven enough that it leaves too little
-        # background to fit (a real photo's dim whites on the object's side of 150), Otsu's split of this band
-        # finds the background the light is fitted to (worked out only then), and the user's threshold still
-        # classifies
-        found = fitted_beyond(otsu_level(np.bincount(band[weights.roi > 0], minlength=256)))
+    if found is None and (settings.classifier.threshold != "otsu" or settings.classifier.tone_curve != "linear"):
+        # the threshold classifies; where the light is uneven enough that it leaves too little background to
+        # fit (a real photo's dim whites on the object's side of 150, or of Otsu's split in light), Otsu's split
+        # of the band's values as they are finds the background the light is fitted to (worked out only then)
+        split = otsu_level(np.bincount(band[weights.roi > 0], minlength=256))
+        if split != threshold:
+            found = fitted_beyond(split)
     return found
 
 
@@ -276,7 +278,7 @@ def interior_levels(band: np.ndarray, roi: np.ndarray, threshold: float, classif
     if last_move is not None:
         levels = replace(levels, object_error=math.hypot(levels.error("object"), last_move[0]),
                          background_error=math.hypot(levels.error("background"), last_move[1]))
-    return levels, reach, before
+    return replace(levels, tone_curve=classifier.tone_curve), reach, before
 
 
 def levels_inside(band: np.ndarray, classes: list[np.ndarray], reach: int) -> Levels | None:

@@ -57,6 +57,7 @@ class MeasurementSettings:
     area_mode: str = "subpixel"
     levels: tuple[float, float] | None = None
     sweep_step: float = 5.0
+    tone_curve: str = "linear"  # how the camera encodes light in its grey levels: linear, or srgb (most JPEGs)
 
     def __post_init__(self) -> None:
         roi = roi_polygon(self.roi)
@@ -80,7 +81,7 @@ class MeasurementSettings:
 
     def classifier(self) -> Classifier:
         return Classifier(threshold=self.threshold, object=self.object, channel=self.channel,
-                          open_px=int(self.open_px), close_px=int(self.close_px))
+                          open_px=int(self.open_px), close_px=int(self.close_px), tone_curve=self.tone_curve)
 
     def measurer(self, camera: BrownCamera | None, targets: TargetsSpec, port_camera: FlatPortCamera | None = None,
                  background: np.ndarray | None = None,

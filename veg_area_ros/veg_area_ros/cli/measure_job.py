@@ -28,9 +28,10 @@ from .common import (
 )
 
 CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "area_mode",
-               "subpixel_applied", "pixel_count", "count_area_m2", "threshold", "scale_std_m2", "threshold_std_m2",
-               "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2", "object_plane_offset_m",
-               "exposure_std_m2", "scale_m_per_px", "scale_kind", "calibrated", "missing_targets", "warnings", "error")
+               "subpixel_applied", "pixel_count", "count_area_m2", "threshold", "tone_curve", "scale_std_m2",
+               "threshold_std_m2", "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2",
+               "object_plane_offset_m", "exposure_std_m2", "scale_m_per_px", "scale_kind", "calibrated",
+               "missing_targets", "warnings", "error")
 
 SEGMENT_FRAMES = 1000
 
@@ -115,7 +116,7 @@ class MeasureJob:
             settings = MeasurementSettings(threshold=args.threshold, object=args.object, channel=args.channel,
                                            roi=args.roi, open_px=args.open, close_px=args.close,
                                            area_mode=args.area_mode, levels=args.levels,
-                                           sweep_step=args.sweep_step)
+                                           sweep_step=args.sweep_step, tone_curve=args.tone_curve)
         except ClassifyError as exc:
             raise CliError(str(exc), EXIT_USAGE) from exc
         if args.segment_frames < 1:

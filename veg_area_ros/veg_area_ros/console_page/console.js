@@ -120,7 +120,7 @@ function setupRoi() {
 }
 
 // --- settings -------------------------------------------------------------------------------------------
-const SELECTS = ["threshold_mode", "object", "channel", "area_mode"];
+const SELECTS = ["threshold_mode", "object", "channel", "area_mode", "tone_curve"];
 let thresholdTimer = null;
 
 function setupSettings() {

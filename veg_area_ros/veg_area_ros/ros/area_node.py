@@ -35,7 +35,7 @@ from veg_area_msgs.msg import ProjectedArea
 from ..calib_io import read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, decode_compressed_image, decode_image, stamp_ns, unstamped
-from ..classify import AREA_MODES, CHANNELS, OBJECTS, ClassifyError
+from ..classify import AREA_MODES, CHANNELS, OBJECTS, TONE_CURVES, ClassifyError
 from ..frames import read_image
 from ..idealize import FrameSizeError
 from ..latest import FrameTally
@@ -54,7 +54,8 @@ TALLY_LOG_PERIOD_S = 10.0  # the skipped and lost frames' log lines, at most onc
 BUSY_GAP_NS = 1_000_000  # callbacks closer than 1 ms: the node never waited for messages in between
 DEFAULTS = MeasurementSettings()
 # the parameters that are MeasurementSettings, tunable at run time (`ros2 param set`), and targets_file
-SETTINGS = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "area_mode", "levels")
+SETTINGS = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "area_mode", "levels",
+            "tone_curve")
 TUNABLE = (*SETTINGS, "targets_file", "background_file")
 
 
@@ -80,6 +81,9 @@ class AreaNode(Node):
                 "its grey level; 'count': whole pixels, as in the paper.", choices=AREA_MODES)
         declare(self, "levels", list(NO_LEVELS), "Sub-pixel mode: [object, background] grey levels; [0.0] = "
                 "from each frame.")
+        declare(self, "tone_curve", DEFAULTS.tone_curve, "How the camera encodes light in its grey levels: "
+                "'linear' as they are, 'srgb' the sRGB curve (most JPEG cameras): Otsu's threshold and the sub-pixel "
+                "shares are then read in light.", choices=TONE_CURVES)
         declare(self, "background_file", "", "Sub-pixel mode: an image of the empty scene (the flume before the "
                 "plant goes in), same camera and settings, to even the light with; '' = fitted in each frame.")
         declare(self, "preview_rate_hz", 5.0, "overlay/preview is drawn at most this often (viewers, the console).",
@@ -183,6 +187,7 @@ class AreaNode(Node):
         return MeasurementSettings(object=value["object"], channel=value["channel"], roi=value["roi"],
                                    open_px=value["open_px"], close_px=value["close_px"],
                                    area_mode=value["area_mode"], levels=value["levels"],
+                                   tone_curve=value["tone_curve"],
                                    ).with_threshold(value["threshold_mode"], value["threshold"])
 
     def _build(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None,

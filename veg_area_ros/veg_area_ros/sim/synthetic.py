@@ -170,11 +170,12 @@ def board_views(
 
 
 def degrade(image: np.ndarray, rng: np.random.Generator, noise_sigma: float = 1.0, blur_sigma_px: float = 0.0,
-            light_gradient: float = 0.0, light_direction_deg: float = 45.0, gain: float = 1.0) -> np.ndarray:
+            light_gradient: float = 0.0, light_direction_deg: float = 45.0, gain: float = 1.0,
+            tone_curve: str = "linear") -> np.ndarray:
     """What a flume adds to a clean render: uneven light (brightness falling by `light_gradient` across the
     image towards `light_direction_deg` (0: to the right, 90: down; 45, the default, diagonally), plus
     vignetting of the same strength), turbidity blur, sensor noise, and an exposure `gain` (over 1 clips the
-    whites). uint8 out."""
+    whites); then the camera's tone curve (`srgb`: light encoded as most JPEG cameras do). uint8 out."""
     out = image.astype(np.float32) * np.float32(gain)
     if light_gradient:
         h, w = out.shape[:2]
@@ -186,6 +187,11 @@ def degrade(image: np.ndarray, rng: np.random.Generator, noise_sigma: float = 1.
     if blur_sigma_px:
         out = cv2.GaussianBlur(out, (0, 0), blur_sigma_px)
     out += rng.normal(0.0, noise_sigma, out.shape).astype(np.float32)
+    if tone_curve == "srgb":  # the light (0..255) encoded: the inverse of classify.to_light
+        x = np.clip(out / 255.0, 0.0, 1.0)
+        out = 255.0 * np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    elif tone_curve != "linear":
+        raise ValueError(f"tone curve must be linear or srgb, got {tone_curve!r}")
     return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
 
@@ -356,12 +362,12 @@ def render_scene(camera: BrownCamera, scene: Scene, distance: float = DISTANCE_M
                  tilt_deg: float = 0.0, roll_deg: float = 4.0, noise_sigma: float = 1.0, seed: int = 0,
                  blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3,
                  centre: tuple[float, float] = (0.0, 0.0), object_offset: float = 0.0,
-                 light_direction_deg: float = 45.0, gain: float = 1.0) -> np.ndarray:
+                 light_direction_deg: float = 45.0, gain: float = 1.0, tone_curve: str = "linear") -> np.ndarray:
     """The scene plane facing the camera at `distance` (its origin at `centre`, metres in camera x, y), tilted
     about its vertical axis by `tilt_deg` and rolled about the optical axis by `roll_deg` (4° by default, as
     the older tests were written; 0 puts edges along the pixel rows). With `object_offset` the object lies on
     its own parallel plane that much farther along the optical axis (negative: nearer), the markers on a
-    frame in the scene's plane and the board's background behind both. BGR."""
+    frame in the scene's plane and the board's background behind both; `tone_curve` as `degrade` takes it. BGR."""
     rvec, tvec = look_at_pose(distance, tilt_y_deg=tilt_deg, roll_deg=roll_deg, centre=centre)
     if not object_offset:
         fine = _render_fine(camera, scene.texture, scene.extent, rvec, tvec, port, 60, supersample)
@@ -369,7 +375,7 @@ def render_scene(camera: BrownCamera, scene: Scene, distance: float = DISTANCE_M
         fine = _render_layers(camera, scene, rvec, tvec, object_offset, port, supersample)
     image = cv2.resize(fine, camera.image_size, interpolation=cv2.INTER_AREA)
     grey = degrade(image, np.random.default_rng(seed), noise_sigma, blur_sigma_px, light_gradient,
-                   light_direction_deg, gain)
+                   light_direction_deg, gain, tone_curve)
     return cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR)
 
 
