@@ -752,12 +752,16 @@ def scenario_interop(options: dict, nodes: Nodes) -> dict:
 
 
 def scenario_drag(options: dict, nodes: Nodes) -> dict:
-    """drag_node fed synthetic Af (10 Hz), force (200 Hz, noisy) and velocity (50 Hz) with a known Cd."""
+    """drag_node fed synthetic Af (10 Hz), force (200 Hz, noisy) and velocity (50 Hz) with a known Cd; its
+    DragCoefficient messages, the deprecated Vector3Stamped beside them, and a run-time change of a start-only
+    parameter."""
     import rclpy
     from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
+    from rcl_interfaces.srv import SetParameters
     from rclpy.node import Node
+    from rclpy.parameter import Parameter
 
-    from veg_area_msgs.msg import ProjectedArea
+    from veg_area_msgs.msg import DragCoefficient, ProjectedArea
     from veg_area_ros.ros.qos import RESULT_QOS
 
     cd, density, area, velocity = options["cd"], 998.2, options["area_m2"], options["velocity_m_s"]
@@ -768,12 +772,20 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
     received: list[list[float]] = []
     received_stamps: list[list[int]] = []
     area_stamps: list[list[int]] = []
+    named: list[dict] = []
+    vectors: dict[tuple[int, int], list[float]] = {}
 
-    def on_drag(msg: Vector3Stamped) -> None:
-        received.append([msg.vector.x, msg.vector.y, msg.vector.z])
+    def on_drag(msg: DragCoefficient) -> None:
+        received.append([msg.drag_coefficient, msg.drag_coefficient_std, msg.velocity_m_s])
         received_stamps.append([msg.header.stamp.sec, msg.header.stamp.nanosec])
+        named.append({name: getattr(msg, name) for name in msg.get_fields_and_field_types() if name != "header"}
+                     | {"area_warnings": list(msg.area_warnings)})
 
-    results = probe.create_subscription(Vector3Stamped, "drag_coefficient", on_drag, RESULT_QOS)
+    def on_vector(msg: Vector3Stamped) -> None:
+        vectors[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = [msg.vector.x, msg.vector.y, msg.vector.z]
+
+    results = probe.create_subscription(DragCoefficient, "drag_coefficient", on_drag, RESULT_QOS)
+    vector_results = probe.create_subscription(Vector3Stamped, "drag_coefficient/vector", on_vector, RESULT_QOS)
     publishers = {name: probe.create_publisher(kind, name, RESULT_QOS)
                   for name, kind in (("force", WrenchStamped), ("velocity", TwistStamped),
                                      ("projected_area", ProjectedArea))}
@@ -782,8 +794,8 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
         # every way matched, the drag node's output to us too: a Cd published before that would be lost (seen
         # on a loaded machine: 29 of 40 arrived)
         deadline = time.monotonic() + 30
-        while ((any(p.get_subscription_count() == 0 for p in publishers.values()) or results.get_publisher_count() == 0)
-               and time.monotonic() < deadline):
+        while ((any(p.get_subscription_count() == 0 for p in publishers.values()) or results.get_publisher_count() == 0
+                or vector_results.get_publisher_count() == 0) and time.monotonic() < deadline):
             rclpy.spin_once(probe, timeout_sec=0.1)
         start = probe.get_clock().now().nanoseconds
         for tick in range(int(options["seconds"] * 200)):  # a 200 Hz clock of simulated instruments
@@ -802,6 +814,7 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
                 msg = ProjectedArea()
                 msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
                 msg.area_m2, msg.area_std_m2 = area, 0.002 * area
+                msg.warnings = ["clipped highlights: a test's warning"] if tick % 40 == 10 else []
                 publishers["projected_area"].publish(msg)
                 area_stamps.append([sec, nanosec])
             rclpy.spin_once(probe, timeout_sec=0.0)
@@ -809,10 +822,19 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
         deadline = time.monotonic() + 10
         while len(received) < options["seconds"] * 10 - 2 and time.monotonic() < deadline:
             rclpy.spin_once(probe, timeout_sec=0.1)
+        client = probe.create_client(SetParameters, "drag_node/set_parameters")
+        client.wait_for_service(timeout_sec=10)
+        future = client.call_async(SetParameters.Request(parameters=[Parameter("density", value=1000.0)
+                                                                     .to_parameter_msg()]))
+        rclpy.spin_until_future_complete(probe, future, timeout_sec=10)
+        refused = None if future.result() is None else [future.result().results[0].successful,
+                                                        future.result().results[0].reason]
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
-    return {"received": received, "true_cd": cd, "received_stamps": received_stamps, "area_stamps": area_stamps}
+    return {"received": received, "true_cd": cd, "received_stamps": received_stamps, "area_stamps": area_stamps,
+            "named": named, "vectors": {f"{sec}.{nanosec:09d}": v for (sec, nanosec), v in vectors.items()},
+            "density_change": refused}
 
 
 def _two_pcs(shm_root: Path) -> dict[str, list[str]]:

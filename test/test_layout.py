@@ -313,3 +313,29 @@ def test_a_mistyped_parameter_is_said_and_malformed_ros_args_in_one_line(tmp_pat
         except subprocess.TimeoutExpired:
             process.kill()
             process.wait()
+
+
+# the parameters each node applies when they change at run time; every other parameter is read at start only
+# and must be declared read-only, so that `ros2 param set` is refused instead of accepted and ignored
+APPLIED_AT_RUN_TIME = {
+    "area_node": {"threshold", "threshold_mode", "object", "channel", "roi", "open_px", "close_px", "area_mode",
+                  "levels", "tone_curve", "targets_file", "background_file", "preview_rate_hz", "uncalibrated_frames"},
+    "camera_node": {"rate_hz"},
+    "calibration_node": {"model"},
+}
+
+
+def test_a_parameter_a_node_does_not_apply_at_run_time_is_read_only():
+    import ast
+
+    found = {}
+    for path in sorted((SOURCE / "veg_area_ros" / "ros").glob("*_node.py")):
+        for call in ast.walk(ast.parse(path.read_text())):
+            if isinstance(call, ast.Call) and getattr(call.func, "id", None) == "declare":
+                name = call.args[1].value
+                read_only = any(k.arg == "read_only" and getattr(k.value, "value", False) for k in call.keywords)
+                found[(path.stem, name)] = read_only
+    assert len(found) > 40 and ("drag_node", "density") in found
+    wrong = [(node, name) for (node, name), read_only in found.items()
+             if read_only == (name in APPLIED_AT_RUN_TIME.get(node, set()))]
+    assert not wrong, f"applied at run time and read-only, or neither: {wrong}"

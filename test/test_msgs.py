@@ -66,7 +66,10 @@ def test_the_message_package_is_an_ament_cmake_interface_package():
     assert root.find("export/build_type").text == "ament_cmake"
     assert root.findtext("member_of_group") == "rosidl_interface_packages"
     assert {e.text for e in root.findall("buildtool_depend")} == {"ament_cmake", "rosidl_default_generators"}
-    assert "msg/ProjectedArea.msg" in (MESSAGES / "CMakeLists.txt").read_text()
+    # every message definition of the package is generated
+    listed = (MESSAGES / "CMakeLists.txt").read_text()
+    assert all(f"msg/{path.name}" in listed for path in (MESSAGES / "msg").glob("*.msg"))
+    assert len(list((MESSAGES / "msg").glob("*.msg"))) == 3
     ours = ET.parse(REPO / "veg_area_ros" / "package.xml").getroot()
     assert "veg_area_msgs" in {e.text for e in ours.findall("exec_depend")}
     # colcon finds both: the repository root is not itself a package (it would hide the other)
@@ -134,7 +137,7 @@ def test_a_frames_result_fills_every_field_and_rosbags_reads_the_bytes_alike(pre
     # the type hash rosbags writes into a bag's metadata is the one rosidl generated (ros2 bag info, Foxglove)
     import json
 
-    for name in ("ProjectedArea", "CalibrationProgress"):
+    for name in ("ProjectedArea", "CalibrationProgress", "DragCoefficient"):
         generated = json.loads((prefix / "share" / "veg_area_msgs" / "msg" / f"{name}.json").read_text())
         expected = next(h["hash_string"] for h in generated["type_hashes"]
                         if h["type_name"] == f"veg_area_msgs/msg/{name}")

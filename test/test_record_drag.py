@@ -255,6 +255,24 @@ def test_drag_node_recovers_a_known_drag_coefficient(tmp_path):
     # each Cd carries its Af message's exact stamp (an exact-time join with projected_area must match)
     sent = {tuple(stamp) for stamp in result["area_stamps"]}
     assert all(tuple(stamp) in sent for stamp in result["received_stamps"]), result["received_stamps"][:5]
+    # every field by name: what Cd was computed from, and its Af frame's warnings passed on
+    for named in result["named"]:
+        assert named["area_m2"] == 0.0105 and named["area_std_m2"] == pytest.approx(0.002 * 0.0105)
+        assert named["density_kg_m3"] == 998.2 and named["velocity_m_s"] == pytest.approx(0.3)
+        assert named["force_n"] == pytest.approx(0.5 * 998.2 * 0.3**2 * 0.0105 * 1.05, rel=0.005)
+        assert named["force_samples"] >= 15 and named["velocity_samples"] >= 3
+    warned = [named["area_warnings"] for named in result["named"] if named["area_warnings"]]
+    assert warned and all(w == ["clipped highlights: a test's warning"] for w in warned), warned
+    assert 0.3 < len(warned) / len(result["named"]) < 0.7
+    # the deprecated Vector3Stamped beside it, while subscribed: the same Cd, std and U, stamp for stamp
+    stamps = [f"{sec}.{nanosec:09d}" for sec, nanosec in result["received_stamps"]]
+    assert len(result["vectors"]) >= 30 and set(result["vectors"]) <= set(stamps)
+    for stamp, row in zip(stamps, received, strict=True):
+        if stamp in result["vectors"]:
+            assert result["vectors"][stamp] == list(row)
+    # a start-only parameter changed at run time is refused, not accepted and ignored
+    ok, reason = result["density_change"]
+    assert not ok and "read-only" in reason, reason
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])

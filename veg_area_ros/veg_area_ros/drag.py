@@ -52,6 +52,7 @@ class Drag:
     area_m2: float
     force_samples: int
     velocity_samples: int
+    area_std_m2: float = 0.0
 
 
 def drag_coefficient(force: float, velocity: float, area: float, density: float = WATER_DENSITY,
@@ -153,7 +154,7 @@ class DragAligner:
             except DragError:
                 self.unmatched += 1
                 continue
-            done.append(Drag(t, cd, cd_std, force, velocity, area, len(forces), len(velocities)))
+            done.append(Drag(t, cd, cd_std, force, velocity, area, len(forces), len(velocities), area_std))
         return done
 
 

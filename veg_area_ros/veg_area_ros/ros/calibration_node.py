@@ -45,19 +45,21 @@ class CalibrationNode(Node):
         super().__init__(name, **kwargs)
         board_text = declare(self, "board", DEFAULT_BOARD, "Board spec, as for `veg-area calibrate --board`.",
                              read_only=True)
-        self.medium = declare(self, "medium", "water", "Medium the calibration is made in.", choices=("air", "water"))
+        self.medium = declare(self, "medium", "water", "Medium the calibration is made in.", choices=("air", "water"),
+                              read_only=True)
         self.distance = declare(self, "calibration_distance_m", 0.7, "Camera-to-board distance, metres.",
-                                low=0.01, high=100.0)
+                                low=0.01, high=100.0, read_only=True)
         self.min_views = declare(self, "min_views", 12, "Views kept before an automatic fit (which also waits for "
-                                 "enough variety: see ~/feedback).", low=4, high=500)
+                                 "enough variety: see ~/feedback).", low=4, high=500, read_only=True)
         declare(self, "model", "auto", "Camera model fitted (ROS's distortion_model); auto fits all three and picks "
                 "the one that best predicts held-out views (as `veg-area calibrate --model`); read at each fit.",
                 choices=("auto", *MODELS))  # refused at start by `declare`, at each fit by `calibrate`
-        self.auto_calibrate = declare(self, "auto_calibrate", True, "Fit once min_views varied views are in.")
-        self.camera_name = declare(self, "camera_name", "camera", "camera_name written in the YAML.")
+        self.auto_calibrate = declare(self, "auto_calibrate", True, "Fit once min_views varied views are in.",
+                                      read_only=True)
+        self.camera_name = declare(self, "camera_name", "camera", "camera_name written in the YAML.", read_only=True)
         url = declare(self, "camera_info_url", "file://" + os.path.expanduser("~/.ros/camera_info/veg_area.yaml"),
                       "Where the calibration is loaded from at start and written to (file://).", read_only=True)
-        self.frame_id = declare(self, "frame_id", "camera", "frame_id of the published camera_info.")
+        self.frame_id = declare(self, "frame_id", "camera", "frame_id of the published camera_info.", read_only=True)
         try:
             self.board = BoardSpec.parse(board_text)
         except BoardSpecError as exc:

@@ -27,11 +27,13 @@ class CameraNode(Node):
                          "'synthetic', a V4L2 device (index or /dev/videoN), a video file, an image folder or glob, "
                          "a rosbag2 bag.",
                          read_only=True)
-        self.frame_id = declare(self, "frame_id", "camera", "frame_id of the published headers.")
+        self.frame_id = declare(self, "frame_id", "camera", "frame_id of the published headers.", read_only=True)
         rate = declare(self, "rate_hz", 10.0, "Frames per second published.", low=0.1, high=1000.0)
-        loop = declare(self, "loop", False, "Start files over at their end (else stop cleanly).")
-        width = declare(self, "image_width", 0, "Requested device width (0: the device's).", low=0, high=20000)
-        height = declare(self, "image_height", 0, "Requested device height (0: the device's).", low=0, high=20000)
+        loop = declare(self, "loop", False, "Start files over at their end (else stop cleanly).", read_only=True)
+        width = declare(self, "image_width", 0, "Requested device width (0: the device's).", low=0, high=20000,
+                        read_only=True)
+        height = declare(self, "image_height", 0, "Requested device height (0: the device's).", low=0, high=20000,
+                         read_only=True)
         url = declare(self, "camera_info_url", "", "file:// YAML calibration published on camera_info.",
                       read_only=True)
         scene = declare(self, "synthetic_scene", "board_then_cube", "What the synthetic camera shows.",
