@@ -278,6 +278,7 @@ def test_dslr_bush_in_the_flume_reads_its_levels_as_deep_inside_as_the_blur_reac
 
 
 TONE_CASES = [("endoscope", 0.5, roll, seed) for seed, roll in enumerate((0.0, 30.0, 90.0, -33.0))] + [
+    ("endoscope", 1.2, roll, seed) for seed, roll in enumerate((0.0, 143.0))] + [
     ("dslr", 3.0, roll, seed) for seed, roll in enumerate((30.0, 90.0))]
 
 
@@ -286,8 +287,9 @@ def test_an_srgb_camera_is_measured_in_light(camera_name, blur, roll, seed):
     """A camera that encodes light with the sRGB curve (as most JPEG cameras do): an edge blurred in light is
     no longer a symmetric ramp of grey levels, so read as they are the shares put it a fixed fraction of a pixel
     towards the white and the cube reads low by 0.7-1.1 %, beyond its std (beyond 3 std where the edges cross
-    the pixel grid obliquely). With tone curve `srgb` Otsu's
-    threshold and the shares are read in light: within 0.3 % and 3 std, in the default sub-pixel mode."""
+    the pixel grid obliquely); at 1.2 px of blur at 640x480 the markers' black cells thin so much that they are
+    not found. With tone curve `srgb` Otsu's threshold and the shares are read in light and the markers found in
+    light: within 0.3 % and 3 std, in the default sub-pixel mode."""
     scene = cube_scene(side=0.1, markers=SQUARE_MARKERS,
                        pixels_per_metre=2000.0 if camera_name == "endoscope" else 6000.0)
     frame = render_scene(CAMERAS[camera_name], scene, 0.7, roll_deg=roll, seed=seed, blur_sigma_px=blur,
@@ -295,13 +297,21 @@ def test_an_srgb_camera_is_measured_in_light(camera_name, blur, roll, seed):
     camera = calibrated_camera(camera_name, "air")
     found = {}
     for tone in ("linear", "srgb"):
-        result = AreaMeasurer(camera, targets_for(scene), Classifier(tone_curve=tone)).measure(frame)
+        try:
+            result = AreaMeasurer(camera, targets_for(scene), Classifier(tone_curve=tone)).measure(frame)
+        except (TargetsError, ClassifyError) as exc:  # too few markers found for a scale, or a region
+            found[tone] = str(exc)
+            continue
         found[tone] = (result.area_m2 / scene.true_area_m2 - 1, result.area_std_m2 / scene.true_area_m2)
         assert result.subpixel_applied and result.summary()["levels"]["tone_curve"] == tone
+        assert result.summary()["tone_curve"] == tone and (tone == "linear" or not result.missing_targets)
     error, std = found["srgb"]
     assert abs(error) <= 0.003 and abs(error) <= 3 * std, found
-    error, std = found["linear"]
-    assert error < -0.005 and -error > (std if roll % 90 == 0 else 3 * std), found
+    if camera_name == "endoscope" and blur > 1:
+        assert isinstance(found["linear"], str), found
+    else:
+        error, std = found["linear"]
+        assert error < -0.005 and -error > (std if roll % 90 == 0 else 3 * std), found
 
 
 def test_the_tone_curve_reads_shares_and_otsu_in_light():

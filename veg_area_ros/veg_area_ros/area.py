@@ -60,7 +60,7 @@ class AreaMeasurer:
         self.view = IdealView(camera)
         self.light_settings = LightSettings.checked(classifier, area_mode, levels, background, even_light,
                                                     camera.image_size if camera is not None else None)
-        self.locator = Locator(targets, self.view)
+        self.locator = Locator(targets, self.view, classifier.tone_curve)
         self.region = Region(targets, self.view, roi)
         self.weighting = Weighting(targets, self.view, self.region)
         self.check_settings = CheckSettings(classifier, area_mode, threshold_delta, self.view, calibration_conditions)

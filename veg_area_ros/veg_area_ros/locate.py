@@ -12,8 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
+from .classify import to_light
 from .idealize import IdealView
 from .markers import DetectedMarker, marker_centre, track_markers
 from .scale import PlaneScale
@@ -63,8 +65,12 @@ def _collinear(planes: np.ndarray) -> bool:
 class Locator:
     """Locates one camera's targets (`TargetsSpec`) in its frames."""
 
-    def __init__(self, targets: TargetsSpec, view: IdealView):
+    def __init__(self, targets: TargetsSpec, view: IdealView, tone_curve: str = "linear"):
         self.targets, self.view = targets, view
+        # markers are found in light: a blurred edge's grey levels through the sRGB curve thin the black cells
+        # (at 1.2 px of blur a 640x480 frame's markers were found 1 in 4 times in encoded levels, 4 in 4 decoded)
+        self.light_table = (None if tone_curve == "linear" else
+                            np.clip(np.rint(to_light(np.arange(256), tone_curve)), 0, 255).astype(np.uint8))
         self.hand_pixels = view.to_ideal(np.array([p for p, _ in targets.points]).reshape(-1, 2))
         self.skip_unmoved_markers = True  # markers whose windows did not move keep their corners (markers.unmoved)
 
@@ -86,6 +92,8 @@ class Locator:
         targets = self.targets
         located = Located(None, [], [], [], [], [])
         if targets.markers:
+            if self.light_table is not None:
+                frame = cv2.LUT(frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), self.light_table)
             tracking.markers = track_markers(frame, targets.dictionary, tracking.markers, set(targets.markers),
                                              self._hidden_marker_guesses(tracking),
                                              skip_unmoved=self.skip_unmoved_markers)
