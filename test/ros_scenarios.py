@@ -427,15 +427,15 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         def set_parameter(name: str, value):
             return call(parameters, SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()]))
 
-        bad = set_parameter("threshold", 300.0)
-        out["bad_threshold"] = None if bad is None else [bad.results[0].successful, bad.results[0].reason]
-        bad_roi = set_parameter("roi", [1.0, 2.0])
-        out["bad_roi"] = None if bad_roi is None else [bad_roi.results[0].successful, bad_roi.results[0].reason]
-        far_roi = set_parameter("roi", [2000.0, 2000.0, 2100.0, 2000.0, 2100.0, 2100.0])
-        out["far_roi"] = None if far_roi is None else [far_roi.results[0].successful, far_roi.results[0].reason]
-        median = set_parameter("threshold_mode", "median")
-        out["bad_threshold_mode"] = None if median is None else [median.results[0].successful,
-                                                                 median.results[0].reason]
+        def refusal(name: str, value) -> list | None:
+            """[successful, reason] of a change, None when the service did not answer."""
+            done = set_parameter(name, value)
+            return None if done is None else [done.results[0].successful, done.results[0].reason]
+
+        out["bad_threshold"] = refusal("threshold", 300.0)
+        out["bad_roi"] = refusal("roi", [1.0, 2.0])
+        out["far_roi"] = refusal("roi", [2000.0, 2000.0, 2100.0, 2000.0, 2100.0, 2100.0])
+        out["bad_threshold_mode"] = refusal("threshold_mode", "median")
         good = set_parameter("threshold", 60.0)  # the default mode is otsu, as on the command line: kept, said
         out["good_threshold"] = None if good is None else good.results[0].successful
         fixed = set_parameter("threshold_mode", "fixed")
@@ -446,21 +446,15 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         spin_until(lambda: len(calibrated(mark)) >= 6, 30)
         out["thresholds_after_change"] = sorted({i["threshold"] for i in calibrated(mark)[3:]})
         out["area_modes_before"] = sorted({i["area_mode"] for i in calibrated(mark)[3:]})
-        bad_mode = set_parameter("area_mode", "fractional")
-        out["bad_area_mode"] = None if bad_mode is None else [bad_mode.results[0].successful,
-                                                              bad_mode.results[0].reason]
-        bad_levels = set_parameter("levels", [100.0, 101.0])
-        out["bad_levels"] = None if bad_levels is None else [bad_levels.results[0].successful,
-                                                             bad_levels.results[0].reason]
+        out["bad_area_mode"] = refusal("area_mode", "fractional")
+        out["bad_levels"] = refusal("levels", [100.0, 101.0])
         good_mode = set_parameter("area_mode", "count")
         out["good_area_mode"] = None if good_mode is None else good_mode.results[0].successful
         mark = len(infos)
         spin_until(lambda: len(calibrated(mark)) >= 6, 30)
         out["area_modes_after_change"] = sorted({i["area_mode"] for i in calibrated(mark)[3:]})
         set_parameter("area_mode", "subpixel")
-        bad_tone = set_parameter("tone_curve", "gamma")
-        out["bad_tone_curve"] = None if bad_tone is None else [bad_tone.results[0].successful,
-                                                               bad_tone.results[0].reason]
+        out["bad_tone_curve"] = refusal("tone_curve", "gamma")
         good_tone = set_parameter("tone_curve", "srgb")
         out["good_tone_curve"] = None if good_tone is None else good_tone.results[0].successful
         mark = len(infos)
