@@ -817,10 +817,10 @@ def scenario_drag(options: dict, nodes: Nodes) -> dict:
         while len(received) < options["seconds"] * 10 - 2 and time.monotonic() < deadline:
             rclpy.spin_once(probe, timeout_sec=0.1)
         client = probe.create_client(SetParameters, "drag_node/set_parameters")
-        client.wait_for_service(timeout_sec=10)
+        client.wait_for_service(timeout_sec=30)
         future = client.call_async(SetParameters.Request(parameters=[Parameter("density", value=1000.0)
                                                                      .to_parameter_msg()]))
-        rclpy.spin_until_future_complete(probe, future, timeout_sec=10)
+        rclpy.spin_until_future_complete(probe, future, timeout_sec=30)
         refused = None if future.result() is None else [future.result().results[0].successful,
                                                         future.result().results[0].reason]
     finally:

