@@ -46,7 +46,6 @@ class DragNode(Node):
         check_axis(self.force_axis)
         check_axis(self.velocity_axis)
         self.aligner = DragAligner(tolerance, density, force_std, velocity_std)
-        self.density = density
         self.cd_pub = self.create_publisher(DragCoefficient, "drag_coefficient", RESULT_QOS)
         # deprecated: the Vector3Stamped that `drag_coefficient` was, for recordings and nodes made for it
         self.cd_vector_pub = self.create_publisher(Vector3Stamped, "drag_coefficient/vector", RESULT_QOS)
@@ -77,7 +76,7 @@ class DragNode(Node):
             sec = int(drag.time_s // 1)
             stamp_sec, stamp_nanosec, frame_id, warnings = self.headers.pop(
                 drag.time_s, (sec, round((drag.time_s - sec) * 1e9) % 1_000_000_000, "", []))
-            out = drag_message(drag, self.density, warnings)
+            out = drag_message(drag, self.aligner.density, warnings)
             out.header.stamp.sec, out.header.stamp.nanosec, out.header.frame_id = stamp_sec, stamp_nanosec, frame_id
             publish_safely(self, self.cd_pub, out)
             if self.cd_vector_pub.get_subscription_count() > 0:
