@@ -75,10 +75,22 @@ class FlatPort:
         return cls(distance, water_index, thickness, glass)
 
 
+def along(vectors: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Each 3-vector of `vectors` (..., 3) dotted with `axis` (3,) -> (...). One flat matrix-vector product:
+    numpy's matmul over an (H, W, 3) stack is some twenty times slower for a whole image of rays."""
+    vectors = np.ascontiguousarray(vectors)
+    return (vectors.reshape(-1, 3) @ axis).reshape(vectors.shape[:-1])
+
+
+def in_frame(vectors: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """Each 3-vector of `vectors` (..., 3) times the 3x3 `rotation` (row vectors, v @ R) -> (..., 3)."""
+    return np.einsum("...i,ij->...j", vectors, rotation)
+
+
 def _refract(directions: np.ndarray, normal: np.ndarray, eta: float) -> np.ndarray:
     """Vector Snell's law: unit directions crossing a surface of unit normal `normal` (pointing the way they go)
     from index n1 to n2, eta = n1 / n2."""
-    cos_in = directions @ normal
+    cos_in = along(directions, normal)
     sin2_out = eta**2 * (1.0 - cos_in**2)
     cos_out = np.sqrt(np.maximum(1.0 - sin2_out, 0.0))
     return eta * directions + (cos_out - eta * cos_in)[..., None] * normal
@@ -88,9 +100,9 @@ def rays_in_water(port: FlatPort, air: np.ndarray) -> tuple[np.ndarray, np.ndarr
     """Unit air rays from the projection centre (..., 3) -> (origins on the port's outer surface, unit
     directions in water), both (..., 3): two ray-plane intersections and Snell's law at each surface."""
     n = port.normal
-    inner = air * (port.distance / (air @ n))[..., None]
+    inner = air * (port.distance / along(air, n))[..., None]
     glass = _refract(air, n, 1.0 / port.glass_index)
-    outer = inner + glass * (port.thickness / (glass @ n))[..., None]
+    outer = inner + glass * (port.thickness / along(glass, n))[..., None]
     return outer, _refract(glass, n, port.glass_index / port.water_index)
 
 

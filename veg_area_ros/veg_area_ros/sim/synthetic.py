@@ -15,7 +15,7 @@ import numpy as np
 
 from ..board import BoardSpec
 from ..camera_model import BrownCamera
-from ..flat_port import FlatPort, air_rays_to, rays_in_water
+from ..flat_port import FlatPort, air_rays_to, along, in_frame, rays_in_water
 from ..targets import TargetsSpec
 
 # the synthetic set-up: camera, calibration board and object at the paper's 0.7 m, 15 calibration views
@@ -28,6 +28,11 @@ ENDOSCOPE = BrownCamera(640, 480, c=520.0, xp=326.0, yp=236.5, aspect=1.004,
                         k1=-0.32, k2=0.12, k3=-0.02, p1=0.0012, p2=-0.0008)
 
 
+# rays are computed and traced a band of image rows at a time: a whole 10 MP image's temporaries cost more in
+# page faults than in arithmetic
+_BAND_RAYS = 1 << 16
+
+
 @lru_cache(maxsize=4)
 def _pixel_rays(camera: BrownCamera, supersample: int) -> np.ndarray:
     """Unit rays (H*s, W*s, 3) in camera coordinates for every sub-pixel sample, cached per camera."""
@@ -35,11 +40,14 @@ def _pixel_rays(camera: BrownCamera, supersample: int) -> np.ndarray:
     offsets = (np.arange(s) + 0.5) / s - 0.5
     u = (np.arange(camera.width)[:, None] + offsets[None, :]).ravel()
     v = (np.arange(camera.height)[:, None] + offsets[None, :]).ravel()
-    uu, vv = np.meshgrid(u, v)
-    xy = camera.pixels_to_normalized(np.column_stack([uu.ravel(), vv.ravel()]))
-    rays = np.column_stack([xy, np.ones(len(xy))])
-    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-    rays = rays.reshape(len(v), len(u), 3)
+    rays = np.empty((len(v), len(u), 3))
+    rows = max(1, _BAND_RAYS // len(u))
+    for top in range(0, len(v), rows):  # in bands, as plane_coordinates: each ray depends on its pixel alone
+        uu, vv = np.meshgrid(u, v[top:top + rows])
+        xy = camera.pixels_to_normalized(np.column_stack([uu.ravel(), vv.ravel()]))
+        band = np.column_stack([xy, np.ones(len(xy))])
+        band /= np.linalg.norm(band, axis=1, keepdims=True)
+        rays[top:top + rows] = band.reshape(-1, len(u), 3)
     rays.setflags(write=False)
     return rays
 
@@ -66,18 +74,26 @@ def plane_coordinates(
     """For every (sub-)pixel, the (x, y) in metres where its ray meets the plane z = 0 of the pose; NaN
     where it misses (behind the camera or parallel)."""
     rays = _pixel_rays(camera, supersample)
+    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=float))
+    t = np.asarray(tvec, dtype=float).ravel()
+    xy = np.empty((*rays.shape[:2], 2))
+    rows = max(1, _BAND_RAYS // rays.shape[1])
+    for top in range(0, rays.shape[0], rows):
+        xy[top:top + rows] = _plane_hits(rays[top:top + rows], R, t, port)
+    return xy
+
+
+def _plane_hits(rays: np.ndarray, R: np.ndarray, t: np.ndarray, port: FlatPort | None) -> np.ndarray:
     if port is None:
         origins, directions = np.zeros_like(rays), rays
     else:
         origins, directions = refract_at_port(rays, port)
-    R, _ = cv2.Rodrigues(np.asarray(rvec, dtype=float))
-    t = np.asarray(tvec, dtype=float).ravel()
     normal = R[:, 2]
-    denom = directions @ normal
+    denom = along(directions, normal)
     with np.errstate(divide="ignore", invalid="ignore"):
-        depth = ((t - origins) @ normal) / denom
+        depth = along(t - origins, normal) / denom
     hit = origins + directions * depth[..., None]
-    local = (hit - t) @ R  # R^T (hit - t), row-wise
+    local = in_frame(hit - t, R)  # R^T (hit - t), row-wise
     xy = local[..., :2]
     xy[~(depth > 0)] = np.nan
     return xy
