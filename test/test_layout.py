@@ -9,10 +9,14 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers import SOURCE, installed
+from helpers import HOST_NETWORK, SOURCE, installed
+
+pytestmark = pytest.mark.xdist_group(HOST_NETWORK)  # its nodes run on the host's network
 
 NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node",
          "console_node"]
+
+
 @pytest.fixture(scope="module")
 def prefix():
     return installed("share/ament_index", "ament layout")

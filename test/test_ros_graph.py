@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import HOST_NETWORK
 from ros_harness import netns_available, run_scenario
 
 from veg_area_ros.flat_port import FlatPort
@@ -379,6 +380,7 @@ os.kill(os.getpid(), signal.SIGKILL)  # a node killed leaves its segment and por
 """
 
 
+@pytest.mark.xdist_group(HOST_NETWORK)  # the host's /dev/shm is compared: no node beside it may write there
 def test_a_killed_node_leaves_nothing_in_the_hosts_shared_memory(tmp_path):
     """Confined runs clean up after nodes that could not: a node killed mid-run leaves Fast DDS files that a
     private /dev/shm takes away with it, or that the harness removes from the host's."""
