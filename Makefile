@@ -13,7 +13,7 @@ demo: install
 
 test: install browser
 	$(PY) -m ruff check .
-	VEG_AREA_REQUIRE_INSTALL=1 $(PY) -m pytest -n auto --dist loadgroup
+	VEG_AREA_REQUIRE_INSTALL=1 $(PY) -m pytest -n auto --dist loadfile --no-loadscope-reorder
 
 install: $(VENV)/.deps-installed $(VENV)/.package-installed
 

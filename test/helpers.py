@@ -21,10 +21,6 @@ OPENCV_LEFT = TEST_DATA / "opencv-left"
 OPENCV_REFERENCE_RMS = 0.4087  # OpenCV 5.0 on the same 13 images (test/data/README.md)
 CHESSBOARD = "chessboard:9x6:0.03"
 
-# the xdist group of tests that start ROS nodes on the host's own network and /dev/shm (not in a private
-# namespace) or check the host's /dev/shm for what nodes left: one after another on one worker, never side by side
-HOST_NETWORK = "host network and shared memory"
-
 INSTALL_PREFIX = Path(os.environ.get("VEG_AREA_PREFIX", REPO / ".venv"))
 
 

@@ -9,9 +9,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from helpers import HOST_NETWORK, SOURCE, installed
-
-pytestmark = pytest.mark.xdist_group(HOST_NETWORK)  # its nodes run on the host's network
+from helpers import SOURCE, installed
 
 NODES = ["camera_node", "calibration_node", "area_node", "graph_node", "record_node", "drag_node", "play_node",
          "console_node"]
@@ -343,3 +341,42 @@ def test_a_parameter_a_node_does_not_apply_at_run_time_is_read_only():
     wrong = [(node, name) for (node, name), read_only in found.items()
              if read_only == (name in APPLIED_AT_RUN_TIME.get(node, set()))]
     assert not wrong, f"applied at run time and read-only, or neither: {wrong}"
+
+
+def test_make_test_runs_each_module_whole_on_one_worker():
+    """The check below compares the host's /dev/shm while this module's nodes are the only ones that write
+    there: it holds only if no other worker runs them beside it."""
+    recipe = (SOURCE.parent / "Makefile").read_text().split("\ntest:", 1)[1].split("\n\n", 1)[0]
+    assert "-m pytest -n auto --dist loadfile" in recipe, recipe
+
+
+KILLED_NODE = """
+import os, signal, time
+import rclpy
+from rclpy.node import Node
+from std_msgs.msg import String
+rclpy.init()
+node = Node("doomed")
+publisher = node.create_publisher(String, "chatter", 10)
+for _ in range(5):
+    publisher.publish(String(data="x" * 100_000))  # over shared memory: Fast DDS's segment in /dev/shm
+    time.sleep(0.05)
+print("published", flush=True)
+os.kill(os.getpid(), signal.SIGKILL)  # a node killed leaves its segment and port locks behind
+"""
+
+
+def test_a_killed_node_leaves_nothing_in_the_hosts_shared_memory(tmp_path):
+    """Confined runs clean up after nodes that could not: a node killed mid-run leaves Fast DDS files that a
+    private /dev/shm takes away with it, or that the harness removes from the host's. In this module because
+    its other nodes are the suite's only ones on the host's /dev/shm: `make test` runs a module whole on one
+    worker (`--dist loadfile`), so none of them runs beside this comparison."""
+    import sys
+
+    from veg_area_ros.ros.confine import run_confined, shm_files
+
+    before = shm_files()
+    done = run_confined([sys.executable, "-c", KILLED_NODE], tmp_path, timeout=60)
+    assert "published" in done.stdout, done.stderr[-2000:]
+    assert done.returncode != 0, done.returncode  # killed (-9; unshare reports its child's death as 1)
+    assert shm_files() - before == set()

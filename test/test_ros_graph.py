@@ -7,7 +7,6 @@ import json
 
 import numpy as np
 import pytest
-from helpers import HOST_NETWORK
 from ros_harness import netns_available, run_scenario
 
 from veg_area_ros.flat_port import FlatPort
@@ -308,6 +307,7 @@ def test_a_file_a_node_cannot_read_at_start_is_logged_and_the_node_runs_on(tmp_p
     assert any("Af less trustworthy: targets missing" in line for line in result["logs"]["area_node"])
     assert all(result["alive_at_end"].values()), result["alive_at_end"]
 
+
 BUSY_NODE = """
 import os, signal, sys, time
 from pathlib import Path
@@ -362,37 +362,6 @@ def test_a_stop_signal_lets_the_running_callback_finish_and_a_second_interrupts_
     assert (tmp_path / "finished").exists() == finished
     assert "stopping after the current callback" in done.stderr
     assert ("a callback failed, the nodes go on" in done.stderr) == (during == "raise")
-
-
-KILLED_NODE = """
-import os, signal, time
-import rclpy
-from rclpy.node import Node
-from std_msgs.msg import String
-rclpy.init()
-node = Node("doomed")
-publisher = node.create_publisher(String, "chatter", 10)
-for _ in range(5):
-    publisher.publish(String(data="x" * 100_000))  # over shared memory: Fast DDS's segment in /dev/shm
-    time.sleep(0.05)
-print("published", flush=True)
-os.kill(os.getpid(), signal.SIGKILL)  # a node killed leaves its segment and port locks behind
-"""
-
-
-@pytest.mark.xdist_group(HOST_NETWORK)  # the host's /dev/shm is compared: no node beside it may write there
-def test_a_killed_node_leaves_nothing_in_the_hosts_shared_memory(tmp_path):
-    """Confined runs clean up after nodes that could not: a node killed mid-run leaves Fast DDS files that a
-    private /dev/shm takes away with it, or that the harness removes from the host's."""
-    import sys
-
-    from veg_area_ros.ros.confine import run_confined, shm_files
-
-    before = shm_files()
-    done = run_confined([sys.executable, "-c", KILLED_NODE], tmp_path, timeout=60)
-    assert "published" in done.stdout, done.stderr[-2000:]
-    assert done.returncode != 0, done.returncode  # killed (-9; unshare reports its child's death as 1)
-    assert shm_files() - before == set()
 
 
 @pytest.mark.parametrize("sequence, needed", [
