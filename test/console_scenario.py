@@ -179,10 +179,12 @@ def scenario_console(options: dict, nodes) -> dict:
             out["af_after_threshold"] = after["area_m2"] if after else None
 
             # --- a ROI dragged on the image -------------------------------------------------------------------
-            box = page.locator("#frame").bounding_box()
             spin(0.5)
             out["af_before_roi"] = infos[-1]["area_m2"]  # the threshold's frames: the probe spins while it waits
-            page.click("#draw-roi")
+            page.click("#draw-roi")  # shows the area view: its image is drawn on once it has loaded
+            page.wait_for_function("(() => { const f = document.getElementById('frame');"
+                                   " return f.complete && f.naturalWidth > 0; })()", timeout=30000)
+            box = page.locator("#frame").bounding_box()
             # between the targets (a ROI over a marker counts its print: said in the result), through the cube
             start = (box["x"] + 0.3 * box["width"], box["y"] + 0.3 * box["height"])
             end = (box["x"] + 0.5 * box["width"], box["y"] + 0.7 * box["height"])

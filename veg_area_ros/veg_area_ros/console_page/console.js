@@ -103,7 +103,11 @@ function setupRoi() {
     $("draw-roi").classList.toggle("drawing", drawing);
     if (drawing) { chooseView("area"); say("drag a rectangle on the image"); }
   };
-  canvas.onmousedown = (event) => { dragStart = imagePoint(event); };
+  canvas.onmousedown = (event) => {
+    // before the view's first image has loaded it has no size: a point on it would be read as 0, 0
+    if (!$("frame").naturalWidth) { say("no image shown yet: drag again once it is"); return; }
+    dragStart = imagePoint(event);
+  };
   canvas.onmousemove = (event) => { if (dragStart) drawRectangle(dragStart, imagePoint(event)); };
   canvas.onmouseup = async (event) => {
     if (!dragStart) return;
