@@ -102,7 +102,7 @@ def test_a_missing_marker_is_reported_and_its_place_still_bounds_the_roi():
     assert result.missing_targets == [2] and result.scale.kind == "affine"
     # the ROI is the whole target frame, not the triangle of the three found: the cube is counted whole
     assert abs(result.area_m2 / SCENE.true_area_m2 - 1) <= 0.01
-    assert result.roi.sum() == pytest.approx(full.roi.sum(), rel=0.02)
+    assert np.count_nonzero(result.roi) == pytest.approx(np.count_nonzero(full.roi), rel=0.02)  # not uint64 sums
 
 
 def test_reported_uncertainty_covers_the_true_error_in_random_scenes():

@@ -528,3 +528,29 @@ def test_a_roi_over_a_marker_is_said(roi, holds):
     assert said == ([f"the ROI holds marker(s) {holds}: their dark print is classified like the object and counted "
                      "in Af (draw the ROI between the targets, or use the default ROI, which cuts the markers out)"]
                     if holds else [])
+
+
+def test_an_object_with_many_edge_pixels_is_not_taken_for_none():
+    """A chessboard of 14-16 px squares, blurred by 1.2 px, its blacks crushed at 0: a third of its white
+    pixels are mixed, and they widened the background's spread to 74 DN, so its peaks 207 DN apart read as
+    "one class" and Af as 0. The histogram falls to a twentieth of its peaks between them: two classes, and
+    the board's black area inside its rectangle is measured within 0.5 %."""
+    from veg_area_ros.board import BoardSpec
+    from veg_area_ros.sim.synthetic import board_views, render_board_views
+    from veg_area_ros.tone_evidence import board_case
+
+    board = BoardSpec.parse("chessboard:9x6:0.02")
+    poses = board_views(ENDOSCOPE, board, 4, 0.7, np.random.default_rng(5), max_tilt_deg=25)
+    measured = 0
+    for image in render_board_views(ENDOSCOPE, board, poses, noise_sigma=2.0, rng=np.random.default_rng(1),
+                                    blur_sigma_px=1.2):
+        detection = board.detect(image)
+        case = None if detection is None else board_case("view", detection, board, ENDOSCOPE)
+        if case is None:
+            continue
+        assert case.square_px < 17
+        result = AreaMeasurer(ENDOSCOPE, case.targets, Classifier(threshold="otsu"), roi=case.roi).measure(image)
+        assert not any(w.startswith("no object found") for w in result.warnings), result.warnings
+        assert abs(result.area_m2 / case.true_area_m2(board, case.first_black(image)) - 1) < 0.005
+        measured += 1
+    assert measured >= 2

@@ -219,6 +219,10 @@ def _fractions_of_every_value(levels: Levels) -> np.ndarray:
 
 
 ONE_CLASS_SPREADS = 3  # class peaks closer than this many background spreads: one class, no object
+# ... unless the histogram falls between them below this share of the lower peak: two classes with many edge
+# pixels (a board of 16 px squares: a third of its whites mixed, which widen the background's spread)
+VALLEY_SHARE = 0.25
+VALLEY_SMOOTHING = 5  # bins of the box the histogram is smoothed with before its valley is read
 
 
 class LevelEstimator:
@@ -283,6 +287,11 @@ class LevelEstimator:
         return self._levels_at[split]
 
 
+    def _valley_between(self, split: int) -> bool:
+        """Whether the histogram falls deep between the modes of the two sides of `split`: two classes, however
+        wide their spreads."""
+        return _valley_share(self.counts, split) < VALLEY_SHARE
+
     def no_object(self, threshold: float) -> str | None:
         """Why the ROI holds no object at this threshold, or None: no pixel on the object's side, or the two
         sides peak within ONE_CLASS_SPREADS of the background's spread of each other (one class of grey levels,
@@ -298,11 +307,21 @@ class LevelEstimator:
         if levels is None:
             return None
         apart = abs(levels.background - levels.object)
-        if apart < ONE_CLASS_SPREADS * levels.background_spread:
+        if apart < ONE_CLASS_SPREADS * levels.background_spread and not self._valley_between(split):
             return (f"the region of interest's grey levels form one class: the two sides of the threshold "
                     f"{threshold:g} peak {apart:.1f} DN apart, within {ONE_CLASS_SPREADS} times the background's "
                     f"spread ({levels.background_spread:.1f} DN)")
         return None
+
+
+def _valley_share(counts: np.ndarray, split: int) -> float:
+    """The smoothed histogram's lowest point between the modes of its two sides of `split`, as a share of the
+    lower mode (1: no valley between them)."""
+    smooth = np.convolve(counts, np.ones(VALLEY_SMOOTHING) / VALLEY_SMOOTHING, mode="same")
+    low = int(smooth[:split + 1].argmax())
+    high = split + 1 + int(smooth[split + 1:].argmax())
+    peaks = min(smooth[low], smooth[high])
+    return float(smooth[low:high + 1].min() / peaks) if peaks > 0 else 1.0
 
 
 def pure_level(counts: np.ndarray) -> tuple[float, float, float] | None:
@@ -419,13 +438,42 @@ def check_roi_in_image(polygon, width: int, height: int) -> np.ndarray:
 
 
 def polygon_roi(shape: tuple[int, int], polygon: np.ndarray, holes: list[np.ndarray] = ()) -> np.ndarray:
-    """uint8 ROI mask: inside `polygon` (N, 2 px) and outside every hole polygon."""
-    roi = np.zeros(shape[:2], np.uint8)
-    polygon = check_polygon(polygon)
-    shift = 4
-    cv2.fillPoly(roi, [np.round(polygon * 2**shift).astype(np.int32)], 255, cv2.LINE_8, shift)
+    """uint8 ROI mask: the pixels whose centre lies inside `polygon` (N, 2 px) and outside every hole polygon,
+    so that the mask's area is the polygon's on average (OpenCV's fill also takes every pixel its outline
+    touches: half a pixel too much all round, +1.5 % on a 30 px square)."""
+    roi = centre_mask(shape, check_polygon(polygon))
     for hole in holes:
-        cv2.fillPoly(roi, [np.round(np.asarray(hole, float) * 2**shift).astype(np.int32)], 0, cv2.LINE_8, shift)
+        roi[centre_mask(shape, np.asarray(hole, float).reshape(-1, 2)) > 0] = 0
     if not roi.any():
         raise ClassifyError("the region of interest is empty")
     return roi
+
+
+def centre_mask(shape: tuple[int, ...], polygon: np.ndarray) -> np.ndarray:
+    """uint8 mask of the pixels whose centre lies inside the polygon (even-odd rule): OpenCV's fill, its
+    outline's pixels and their neighbours (the fill takes too many there, and misses a few) tested one by one."""
+    shift = 4
+    mask = np.zeros(shape[:2], np.uint8)
+    cv2.fillPoly(mask, [np.round(polygon * 2**shift).astype(np.int32)], 255, cv2.LINE_8, shift)
+    cross = np.ones((3, 3), np.uint8)
+    inner = cv2.erode(mask, cross, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    outline = cv2.findNonZero(cv2.subtract(cv2.dilate(mask, cross), inner))
+    if outline is not None:
+        u, v = outline.reshape(-1, 2).T
+        mask[v, u] = np.where(_centres_inside(u, v, polygon), 255, 0).astype(np.uint8)
+    return mask
+
+
+def _centres_inside(u: np.ndarray, v: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Whether each point (u, v) lies inside the polygon: the even-odd count of its edges crossed by a ray
+    to the right, the edges taken a band of points at a time."""
+    x0, y0 = polygon[:, 0], polygon[:, 1]
+    x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
+    inside = np.zeros(len(u), bool)
+    for start in range(0, len(u), 4096):
+        pu, pv = u[start:start + 4096, None].astype(float), v[start:start + 4096, None].astype(float)
+        spans = (y0 > pv) != (y1 > pv)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            crossing = x0 + (pv - y0) * (x1 - x0) / (y1 - y0)
+        inside[start:start + 4096] = np.count_nonzero(spans & (pu < crossing), axis=1) % 2 == 1
+    return inside

@@ -12,12 +12,14 @@ import numpy as np
 
 from .area import AreaMeasurer
 from .camera_model import BrownCamera
-from .classify import AREA_MODES, Classifier, ClassifyError, check_levels, check_polygon
+from .classify import AREA_MODES, TONE_CURVES, Classifier, ClassifyError, check_levels, check_polygon
 from .flat_port import FlatPortCamera
 from .port_area import PortAreaMeasurer
 from .targets import TargetsSpec
 
 THRESHOLD_MODES = ("fixed", "otsu")
+# auto: the curve the calibration file records, judged on its own board views (tone_evidence), else linear
+TONE_CURVE_CHOICES = ("auto", *TONE_CURVES)
 NO_ROI = (0.0,)  # how a ROS parameter (typed, never empty on the command line) says "inside the targets"
 NO_LEVELS = (0.0,)
 
@@ -57,12 +59,14 @@ class MeasurementSettings:
     area_mode: str = "subpixel"
     levels: tuple[float, float] | None = None
     sweep_step: float = 5.0
-    tone_curve: str = "linear"  # how the camera encodes light in its grey levels: linear, or srgb (most JPEGs)
+    tone_curve: str = "auto"  # how the camera encodes light in its grey levels (TONE_CURVE_CHOICES)
 
     def __post_init__(self) -> None:
         roi = roi_polygon(self.roi)
         object.__setattr__(self, "roi", None if roi is None else tuple(roi))
         object.__setattr__(self, "levels", given_levels(self.levels))
+        if self.tone_curve not in TONE_CURVE_CHOICES:
+            raise ClassifyError(f"tone_curve must be one of {', '.join(TONE_CURVE_CHOICES)}, got {self.tone_curve!r}")
         if self.area_mode not in AREA_MODES:
             raise ClassifyError(f"area_mode must be one of {', '.join(AREA_MODES)}, got {self.area_mode!r}")
         if not (math.isfinite(self.sweep_step) and self.sweep_step > 0):
@@ -79,20 +83,34 @@ class MeasurementSettings:
             raise ClassifyError(f"threshold_mode must be fixed or otsu, got {mode!r}")
         return replace(self, threshold="otsu" if mode == "otsu" else float(value))
 
-    def classifier(self) -> Classifier:
+    def tone_curve_for(self, calibration: dict | None) -> str:
+        """The tone curve frames are read with: the one set, or for 'auto' the one the calibration file's
+        metadata records (judged on its views by `veg-area calibrate`), else linear. An excess-green index is
+        read as it is."""
+        if self.tone_curve != "auto":
+            return self.tone_curve
+        curve = (calibration or {}).get("tone_curve", "linear")
+        if curve not in TONE_CURVES:
+            raise ClassifyError(f"the calibration file's tone_curve {curve!r} is none of {', '.join(TONE_CURVES)}")
+        return "linear" if self.object == "green" else curve
+
+    def classifier(self, calibration: dict | None = None) -> Classifier:
+        """The classifier; `calibration`: the calibration file's metadata ('auto' reads its tone curve)."""
         return Classifier(threshold=self.threshold, object=self.object, channel=self.channel,
-                          open_px=int(self.open_px), close_px=int(self.close_px), tone_curve=self.tone_curve)
+                          open_px=int(self.open_px), close_px=int(self.close_px),
+                          tone_curve=self.tone_curve_for(calibration))
 
     def measurer(self, camera: BrownCamera | None, targets: TargetsSpec, port_camera: FlatPortCamera | None = None,
                  background: np.ndarray | None = None,
                  calibration_conditions: dict | None = None) -> AreaMeasurer | PortAreaMeasurer:
         """The measurer for frames of `camera` (None: uncalibrated); with `port_camera`, the exact flat-port model
         of that camera's calibration file. `background`: a frame of the empty scene to even the light with;
-        `calibration_conditions`: the calibration file's metadata (medium, distance), said when the frames
-        leave them. Raises ClassifyError or TargetsError with the reason."""
+        `calibration_conditions`: the calibration file's metadata (medium, distance, said when the frames
+        leave them; the tone curve 'auto' takes). Raises ClassifyError or TargetsError with the reason."""
         options = dict(roi=None if self.roi is None else list(self.roi), threshold_delta=self.sweep_step,
                        area_mode=self.area_mode, levels=self.levels, background=background)
         if port_camera is not None:  # the port model holds at any distance: no calibration conditions to leave
-            return PortAreaMeasurer(port_camera, targets, self.classifier(), **options)
-        return AreaMeasurer(camera, targets, self.classifier(), calibration_conditions=calibration_conditions,
+            return PortAreaMeasurer(port_camera, targets, self.classifier(calibration_conditions), **options)
+        return AreaMeasurer(camera, targets, self.classifier(calibration_conditions),
+                            calibration_conditions=calibration_conditions,
                             **options)

@@ -7,10 +7,17 @@ import argparse
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .common import EXIT_REFUSED, EXIT_USAGE, CliError, check_outputs, check_writable, positive_float, progress
+
+if TYPE_CHECKING:
+    from ..board import BoardSpec
+    from ..camera_model import BrownCamera
+    from ..tone_evidence import ToneChoice
 
 VIEWS_PER_VIDEO = 60  # consecutive frames add little but time
 DETECT_WORKERS = 2  # board searches at once: the two cores of a lab PC (OpenCV runs them without the GIL)
@@ -229,17 +236,22 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                        f"{result.camera.aspect:.3g}, principal point ({result.camera.xp:.0f}, {result.camera.yp:.0f}) "
                        f"px): is --board {board} the board in the images? Nothing was written")
 
+    tone = judge_tone_curve(found, files, board, result.camera, step, args.video_step <= 0, say)
     summary = result.summary()
     summary.update(unreadable=found.unreadable, no_board=found.no_board, wrong_size=found.wrong_size,
-                   repeated_poses=found.repeated, output=str(output), variety=found.guide.summary())
+                   repeated_poses=found.repeated, output=str(output), variety=found.guide.summary(),
+                   tone_curve=tone.as_dict())
     if previous is not None:
         verdict = judge(previous.camera, previous.metadata, result)
         if not verdict.replace:
             raise CliError(f"{output}: kept the calibration it holds: {verdict.reason}. Use --replace to write this "
                            "one anyway, or write elsewhere with -o", EXIT_REFUSED)
         say(f"{output}: replaced: {verdict.reason}")
-    write_calibration(output, result.camera, args.camera_name,
-                      fit_metadata(summary, args.medium, args.distance, str(board), "veg-area calibrate"))
+    metadata = fit_metadata(summary, args.medium, args.distance, str(board), "veg-area calibrate")
+    metadata["tone_curve_evidence"] = tone.reason
+    if tone.decided:  # what `measure --tone-curve auto` (the default) reads this camera's frames with
+        metadata["tone_curve"] = tone.curve
+    write_calibration(output, result.camera, args.camera_name, metadata)
     if args.report:
         from ..report import write_calibration_report
 
@@ -251,7 +263,35 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(json.dumps(summary))
     else:
         print(format_calibration(result, output))
+        print(f"tone curve {tone.curve}" + ("" if tone.decided else " (the default)") + f": {tone.reason}")
     return 0
+
+
+def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, camera: BrownCamera, step: int,
+                     spread: bool, say: Callable[[str], None]) -> ToneChoice:
+    """Which tone curve the camera encodes light with, judged on the calibration's own chessboard views
+    (tone_evidence): up to tone_evidence.MAX_VIEWS of them, evenly over the board's sizes, read again one at a
+    time (a frame is kept only while it is measured)."""
+    from collections import Counter
+
+    from ..frames import iter_frames, shown_name
+    from ..tone_evidence import MIN_VIEWS, board_case, choose_tone_curve, spread_by_size
+
+    named = Counter(view.name for view in found.views)  # a name two files share cannot be read again surely
+    cases = spread_by_size([case for view in found.views if named[view.name] == 1
+                            and (case := board_case(view.name, view.detection, board, camera)) is not None])
+    if len(cases) < MIN_VIEWS:  # said as such, without reading any frame again
+        return choose_tone_curve(iter(()), board, camera)
+    wanted = {case.name: case for case in cases}
+    sources = set(wanted) | {name.rsplit("#", 1)[0] for name in wanted}  # images, and videos' frames NAME#N
+    say(f"tone curve: measuring the board's black area in {len(cases)} views, near and far")
+
+    def views():
+        for frame in iter_frames([f for f in files if shown_name(f) in sources], step, grey=True, spread=spread):
+            if frame.name in wanted and frame.image is not None:
+                yield wanted.pop(frame.name), frame.image
+
+    return choose_tone_curve(views(), board, camera)
 
 
 def _calibrate_port(args: argparse.Namespace, say) -> int:

@@ -7,8 +7,7 @@ import argparse
 import math
 from pathlib import Path
 
-from ..classify import TONE_CURVES
-from ..settings import MeasurementSettings
+from ..settings import TONE_CURVE_CHOICES, MeasurementSettings
 from .batch import measure_batch
 from .common import EXIT_USAGE, CliError, positive_float
 from .measure_job import SEGMENT_FRAMES, MeasureJob, TimeBound, measure, time_bound
@@ -80,10 +79,12 @@ def add_parser(sub) -> None:
                           "between the object's and the background's; count: whole pixels, as in the paper")
     mea.add_argument("--levels", type=_levels, default=None, metavar="OBJECT,BACKGROUND",
                      help="sub-pixel mode: the object's and background's grey levels (default: from each frame)")
-    mea.add_argument("--tone-curve", default=DEFAULTS.tone_curve, choices=list(TONE_CURVES),
-                     help="how the camera encodes light in its grey levels: linear (default; raw and machine-vision "
-                          "cameras, our renders) or srgb (most JPEG photos and video, action cameras): Otsu's "
-                          "threshold and the sub-pixel shares are then read in light (docs/measuring.md)")
+    mea.add_argument("--tone-curve", default=DEFAULTS.tone_curve, choices=list(TONE_CURVE_CHOICES),
+                     help="how the camera encodes light in its grey levels: auto (default) takes the curve the "
+                          "calibration file records, judged by `calibrate` on its own board views near and far, "
+                          "else linear; linear (raw and machine-vision cameras, our renders) or srgb (most JPEG "
+                          "photos and video, action cameras): Otsu's threshold and the sub-pixel shares are then "
+                          "read in light (docs/measuring.md)")
     mea.add_argument("--open", type=int, default=DEFAULTS.open_px, metavar="PX", help="morphological opening radius")
     mea.add_argument("--close", type=int, default=DEFAULTS.close_px, metavar="PX", help="morphological closing radius")
     mea.add_argument("--background", metavar="IMAGE",

@@ -255,6 +255,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
             raise CliError(str(exc)) from exc
 
     measurer = new_measurer(camera) if not from_bag else None
+    if job.settings.tone_curve == "auto" and conditions and "tone_curve" in conditions:
+        say(f"tone curve {job.settings.tone_curve_for(conditions)}, as {job.calibration} records it "
+            f"({conditions.get('tone_curve_evidence', 'no evidence recorded')}); --tone-curve sets another")
     if job.idealized and camera is not None:
         folder = Path(job.idealized)
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",

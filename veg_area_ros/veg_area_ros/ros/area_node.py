@@ -35,13 +35,13 @@ from veg_area_msgs.msg import ProjectedArea
 from ..calib_io import read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, decode_compressed_image, decode_image, stamp_ns, unstamped
-from ..classify import AREA_MODES, CHANNELS, OBJECTS, TONE_CURVES, ClassifyError
+from ..classify import AREA_MODES, CHANNELS, OBJECTS, ClassifyError
 from ..frames import read_image
 from ..idealize import FrameSizeError
 from ..latest import FrameTally
 from ..light import LightError
 from ..overlay import draw_overlay
-from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, MeasurementSettings
+from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, TONE_CURVE_CHOICES, MeasurementSettings
 from ..sources import default_targets
 from ..targets import TargetsError, TargetsSpec
 from .health import CountedWarnings, InputWatch, publish_safely
@@ -82,8 +82,9 @@ class AreaNode(Node):
         declare(self, "levels", list(NO_LEVELS), "Sub-pixel mode: [object, background] grey levels; [0.0] = "
                 "from each frame.")
         declare(self, "tone_curve", DEFAULTS.tone_curve, "How the camera encodes light in its grey levels: "
-                "'linear' as they are, 'srgb' the sRGB curve (most JPEG cameras): Otsu's threshold and the sub-pixel "
-                "shares are then read in light.", choices=TONE_CURVES)
+                "'auto' the curve calibration_file records (judged on its board views by veg-area calibrate), else "
+                "linear; 'linear' as they are, 'srgb' the sRGB curve (most JPEG cameras): Otsu's threshold and the "
+                "sub-pixel shares are then read in light.", choices=TONE_CURVE_CHOICES)
         declare(self, "background_file", "", "Sub-pixel mode: an image of the empty scene (the flume before the "
                 "plant goes in), same camera and settings, to even the light with; '' = fitted in each frame.")
         declare(self, "preview_rate_hz", 5.0, "overlay/preview is drawn at most this often (viewers, the console).",

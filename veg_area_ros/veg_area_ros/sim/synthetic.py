@@ -215,15 +215,17 @@ def render_board_views(
     camera: BrownCamera, board: BoardSpec, poses: list[tuple[np.ndarray, np.ndarray]],
     port: FlatPort | None = None, noise_sigma: float = 1.0, rng: np.random.Generator | None = None,
     blur_sigma_px: float = 0.0, light_gradient: float = 0.0, supersample: int = 3, gain: float = 1.0,
+    tone_curve: str = "linear",
 ) -> list[np.ndarray]:
     """Grey images of the board at each pose, with mild sensor noise (and flume degradation if asked). The
-    board's white renders at BOARD_WHITE, as a well-exposed camera leaves headroom; `gain` over 1.09 clips it."""
+    board's white renders at BOARD_WHITE, as a well-exposed camera leaves headroom; `gain` over 1.09 clips it;
+    `tone_curve` as `degrade` takes it."""
     rng = rng or np.random.default_rng(0)
     pixels_per_metre = 40.0 / board.square  # 40 texels per square: finer than any camera pixel here
     texture = np.round(board.texture(pixels_per_metre).astype(np.float32) * (BOARD_WHITE / 255)).astype(np.uint8)
     return [degrade(render_plane(camera, texture, board.extent(), rvec, tvec, port, background=110,
                                  supersample=supersample), rng, noise_sigma, blur_sigma_px, light_gradient,
-                    gain=gain)
+                    gain=gain, tone_curve=tone_curve)
             for rvec, tvec in poses]
 
 

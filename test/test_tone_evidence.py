@@ -1,0 +1,181 @@
+"""The camera's tone curve judged on its calibration views (veg_area_ros/tone_evidence.py): a chessboard's black
+area inside the rectangle through its outer squares' centres is known, so each view near and far is a
+measurement with a known answer; under the camera's curve the far views read as the near ones. Rendered boards
+encoded with each curve (computable truth), then the real GoPro and webcam photos through `veg-area calibrate`
+and `veg-area measure`."""
+
+from __future__ import annotations
+
+import functools
+import json
+
+import numpy as np
+import pytest
+import yaml
+from helpers import OPENCV_LEFT, run_cli, shared
+
+from veg_area_ros.area import AreaMeasurer
+from veg_area_ros.board import BoardSpec
+from veg_area_ros.classify import Classifier, ClassifyError, polygon_roi
+from veg_area_ros.settings import MeasurementSettings
+from veg_area_ros.sim.synthetic import ENDOSCOPE, board_views, render_board_views
+from veg_area_ros.tone_evidence import board_case, choose_tone_curve
+
+BOARD = BoardSpec.parse("chessboard:9x6:0.02")
+
+
+@functools.cache
+def _poses(near_and_far: bool) -> tuple:
+    """Board poses at 0.25-0.7 m (squares of 13-39 px), or all at about 0.4 m and little tilted."""
+    if not near_and_far:
+        return tuple(board_views(ENDOSCOPE, BOARD, 10, 0.4, np.random.default_rng(3), max_tilt_deg=8))
+    rng = np.random.default_rng(5)
+    return tuple(pose for distance in (0.25, 0.35, 0.5, 0.7)
+                 for pose in board_views(ENDOSCOPE, BOARD, 3, distance, rng, max_tilt_deg=25))
+
+
+@functools.cache
+def _cases(tone_curve: str, near_and_far: bool = True) -> list:
+    """(case, image) of each rendered view (blur 0.7 px, 2 DN of noise) encoded with `tone_curve`."""
+    images = render_board_views(ENDOSCOPE, BOARD, list(_poses(near_and_far)), noise_sigma=2.0,
+                                rng=np.random.default_rng(1), blur_sigma_px=0.7, tone_curve=tone_curve)
+    found = []
+    for k, image in enumerate(images):
+        detection = BOARD.detect(image)
+        case = None if detection is None else board_case(f"view{k}", detection, BOARD, ENDOSCOPE)
+        if case is not None:
+            found.append((case, image))
+    return found
+
+
+def test_a_boards_black_area_is_measured_right_near_and_far():
+    """The rendered board's black area inside its rectangle, from 13 to 39 px a square, within 0.35 % in the
+    default sub-pixel mode and 0.7 % counted. The ROI is the pixels whose centre lies inside it: OpenCV's fill
+    took every pixel its outline touched, and the board read +0.7 % at 38 px a square, +1.9 % at 20 px."""
+    cases = _cases("linear")
+    assert len(cases) >= 10
+    sizes = [case.square_px for case, _ in cases]
+    assert min(sizes) < 16 and max(sizes) > 35
+    for case, image in cases:
+        truth = case.true_area_m2(BOARD, case.first_black(image))
+        for mode, bound in (("subpixel", 0.0035), ("count", 0.007)):
+            result = AreaMeasurer(ENDOSCOPE, case.targets, Classifier(threshold="otsu"), roi=case.roi,
+                                  area_mode=mode).measure(image)
+            assert abs(result.area_m2 / truth - 1) < bound, (case.name, case.square_px, mode, result.area_m2 / truth)
+
+
+def test_a_roi_holds_the_pixels_whose_centre_lies_inside_it():
+    """Squares at random places and angles: the mask holds exactly the pixels whose centre the polygon holds
+    (so its area is the polygon's on average), holes likewise taken out."""
+    rng = np.random.default_rng(0)
+    v, u = np.mgrid[0:120, 0:120]
+    excess = []
+    for _ in range(200):
+        angle = rng.uniform(0, np.pi)
+        rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+        square = rng.uniform(50, 60, 2) + (np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * 15.0) @ rotation.T
+        hole = square.mean(axis=0) + (square - square.mean(axis=0)) / 3
+        mask = polygon_roi((120, 120), square, [hole]) > 0
+        inside = _even_odd(u, v, square) & ~_even_odd(u, v, hole)
+        assert np.array_equal(mask, inside)
+        excess.append(np.count_nonzero(mask) / (900 - 100) - 1)
+    assert abs(np.mean(excess)) < 0.002, np.mean(excess)  # OpenCV's fill alone: +6 % on these 30 px squares
+
+
+def _even_odd(u: np.ndarray, v: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Whether each pixel centre lies inside the polygon, by matplotlib-free brute force: the winding of a
+    convex polygon's edges (all cross products of one sign)."""
+    signs = []
+    for a, b in zip(polygon, np.roll(polygon, -1, axis=0), strict=True):
+        signs.append((b[0] - a[0]) * (v - a[1]) - (b[1] - a[1]) * (u - a[0]))
+    signs = np.array(signs)
+    return np.all(signs > 0, axis=0) | np.all(signs < 0, axis=0)
+
+
+@pytest.mark.parametrize("tone_curve", ["linear", "srgb"])
+def test_the_views_near_and_far_tell_the_curve_the_camera_encodes_with(tone_curve):
+    """Boards rendered from 13 to 39 px a square and encoded as a linear camera or an sRGB one: read with the
+    other curve the far views drift by 2-8 % against the near ones, with the camera's within their error; the
+    camera's curve is taken and the reason says the drifts."""
+    choice = choose_tone_curve(_cases(tone_curve), BOARD, ENDOSCOPE)
+    assert choice.decided and choice.curve == tone_curve, choice.reason
+    other = "srgb" if tone_curve == "linear" else "linear"
+    reach = 1 / choice.square_px[0] - 1 / choice.square_px[1]
+    assert abs(choice.slopes[tone_curve]["slope"] * reach) < 0.01, choice.slopes
+    assert abs(choice.slopes[other]["slope"] * reach) > 0.02, choice.slopes
+    assert choice.views >= 10 and not choice.left_out
+    assert f"{tone_curve} drifts the least" in choice.reason
+
+
+def test_views_at_one_distance_leave_the_default_and_say_why():
+    """Ten views at about 0.4 m, little tilted (squares within 1.3x of each other): not judged, linear kept,
+    and the reason says to photograph the board near and far. A ChArUco board is not judged either."""
+    choice = choose_tone_curve(_cases("srgb", near_and_far=False), BOARD, ENDOSCOPE)
+    assert not choice.decided and choice.curve == "linear"
+    assert "too alike in distance" in choice.reason and "near and far" in choice.reason
+    charuco = choose_tone_curve(iter(()), BoardSpec.parse("charuco:5x7:0.04:0.03:DICT_4X4_50"), ENDOSCOPE)
+    assert not charuco.decided and "charuco" in charuco.reason
+
+
+def test_auto_reads_the_calibrations_curve_and_refuses_one_it_does_not_know():
+    """`tone_curve` auto (the default) takes the curve the calibration file records, linear where it records
+    none; a curve set by hand wins; an excess-green index is read as it is; a file naming an unknown curve is
+    refused with its name."""
+    settings = MeasurementSettings()
+    assert settings.tone_curve == "auto"
+    assert settings.classifier({"tone_curve": "srgb"}).tone_curve == "srgb"
+    assert settings.classifier({"medium": "air"}).tone_curve == "linear"
+    assert settings.classifier(None).tone_curve == "linear"
+    assert MeasurementSettings(tone_curve="linear").classifier({"tone_curve": "srgb"}).tone_curve == "linear"
+    assert MeasurementSettings(object="green").classifier({"tone_curve": "srgb"}).tone_curve == "linear"
+    with pytest.raises(ClassifyError, match="'gamma22'"):
+        settings.classifier({"tone_curve": "gamma22"})
+    with pytest.raises(ClassifyError, match="tone_curve must be one of auto, linear, srgb"):
+        MeasurementSettings(tone_curve="log")
+
+
+def test_a_real_gopros_calibration_records_srgb_and_measure_reads_its_photos_with_it(tmp_path):
+    """`veg-area calibrate` on the 35 real GoPro photos (../shared/data/gopro-wide): its 10 views with the whole
+    board inside the frame, 20-135 px a square, read 4.5 % apart (far against near) as grey levels and about
+    1 % apart through the sRGB curve: srgb is recorded with the evidence. `measure` of a photo with that file
+    reads it through srgb by default (and says so), through linear when told."""
+    from board_photos import board_photos
+
+    from veg_area_ros.calib_io import read_calibration
+
+    folder = shared("gopro-wide")
+    calibration = tmp_path / "gopro.yaml"
+    done = run_cli("calibrate", str(folder), "--board", "chessboard:8x6:0.025", "--medium", "air", "-o",
+                   str(calibration), "-q")
+    assert done.returncode == 0, done.stderr
+    assert "tone curve srgb: " in done.stdout
+    block = yaml.safe_load(calibration.read_text())["veg_area_ros"]
+    assert block["tone_curve"] == "srgb", block.get("tone_curve_evidence")
+    assert "srgb drifts the least" in block["tone_curve_evidence"]
+    camera = read_calibration(calibration).camera
+    photo = next(p for p in board_photos(folder, "chessboard:8x6:0.025", camera=camera) if p.name == "GOPR0059.jpg")
+    targets = tmp_path / "targets.yaml"
+    points = [{"pixel": [float(c) for c in pixel], "plane": [float(c) for c in plane]}
+              for pixel, plane in photo.targets.points]
+    targets.write_text(yaml.safe_dump({"points": points}))
+    roi = ",".join(f"{c:.3f}" for corner in photo.roi for c in corner)
+    measured = {}
+    for option in ([], ["--tone-curve", "linear"]):
+        done = run_cli("measure", str(folder / photo.name), "--calibration", str(calibration), "--targets",
+                       str(targets), "--roi", roi, "--json", *option, cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        measured[tuple(option)] = json.loads(done.stdout.splitlines()[-1])
+        assert ("tone curve srgb, as" in done.stderr) == (not option), done.stderr
+    assert measured[()]["tone_curve"] == "srgb" and measured[("--tone-curve", "linear")]["tone_curve"] == "linear"
+
+
+def test_webcam_photos_at_one_distance_record_no_curve_and_say_why(tmp_path):
+    """OpenCV's 13 webcam photos (test/data/opencv-left), all at one distance (35-43 px a square): the
+    calibration records no tone curve, and says why in the output and the file."""
+    webcam = tmp_path / "webcam.yaml"
+    done = run_cli("calibrate", str(OPENCV_LEFT), "--board", "chessboard:9x6:0.025", "--medium", "air",
+                   "-o", str(webcam), "-q")
+    assert done.returncode == 0, done.stderr
+    assert "tone curve linear (the default): not judged" in done.stdout
+    block = yaml.safe_load(webcam.read_text())["veg_area_ros"]
+    assert "tone_curve" not in block and "too alike in distance" in block["tone_curve_evidence"]

@@ -1,0 +1,208 @@
+"""Which tone curve a camera encodes light with, judged on its own calibration views. No ROS here.
+
+A JPEG's grey levels are encoded light (most cameras: the sRGB curve). An edge blurred in light is not blurred
+symmetrically in encoded levels, so read with the wrong curve every edge moves a fixed fraction of a pixel
+towards one side, and the error in an area goes as one over the object's size in pixels. A chessboard seen at
+several distances shows it: the black area inside the rectangle through its outer squares' centres is known
+(the board's squares), so each view is a measurement with a known answer; under the camera's curve the views
+from afar read as the near ones, under another they drift with 1/(pixels per square). The curve whose drift is
+clearly the smaller is taken; views too alike in distance cannot tell the curves apart, and the result says so.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from .area import AreaMeasurer
+from .board import BoardSpec, Detection
+from .camera_model import BrownCamera
+from .classify import TONE_CURVES, Classifier
+from .targets import TargetsSpec
+
+MAX_VIEWS = 40  # views measured per curve: evenly over the board's sizes (seconds, not minutes, at 10 MP)
+MIN_VIEWS = 6  # a slope and its scatter need a few more views than its two parameters
+MIN_SIZE_RATIO = 1.3  # nearest to farthest board (pixels per square): below it the views cannot tell curves apart
+# what moves a board's area by more than the curves do (burnt-out whites: 1-5 % low; no object found: all of
+# it); crushed blacks, common in action cameras' JPEGs, move every view alike and stay in
+SPOILS_THE_EVIDENCE = ("clipped highlights", "the ROI reaches beyond the image", "no object found")
+DECISIVE_SIGMA = 3.0  # one curve's drift smaller than the other's by this many combined standard errors
+
+
+@dataclass
+class BoardCase:
+    """One view of a chessboard as an Af measurement with a known answer."""
+
+    name: str
+    targets: TargetsSpec  # the four outer inner corners, their board coordinates in metres
+    roi: np.ndarray  # (4, 2) idealized px: the rectangle through the outer squares' centres
+    square_px: float  # idealized pixels per square: the board's size in the image
+    first_black_probe: np.ndarray  # (2, 2) raw px: the outer square at the first corner, and its neighbour
+
+    def true_area_m2(self, board: BoardSpec, first_black: bool) -> float:
+        """The black squares' area inside the rectangle: quarter squares at its corners, halves along its sides."""
+        total = 0.0
+        for i in range(board.cols + 1):
+            for j in range(board.rows + 1):
+                if ((i + j) % 2 == 0) == first_black:
+                    total += (0.5 if i in (0, board.cols) else 1.0) * (0.5 if j in (0, board.rows) else 1.0)
+        return total * board.square**2
+
+    def first_black(self, grey: np.ndarray) -> bool:
+        """Whether the outer square at the first corner is the black one, read in the view's grey image."""
+        values = [float(grey[round(v), round(u)]) for u, v in self.first_black_probe]
+        return values[0] < values[1]
+
+
+def board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownCamera, inside_only: bool = True
+               ) -> BoardCase | None:
+    """The view as a measurement, or None where it cannot be one: not a full chessboard, or (`inside_only`)
+    the rectangle or the probe of the first square's colour reaching beyond the image."""
+    cols, rows = board.cols, board.rows
+    if board.kind != "chessboard" or len(detection) != cols * rows:
+        return None
+    ideal = camera.ideal()
+    ids = np.asarray(detection.ids).ravel()
+    squares = np.asarray(detection.object_points, float)[:, :2] / board.square  # board coordinates in squares
+    raw = np.asarray(detection.image_points, float).reshape(-1, 2)
+    points = []
+    for corner in (0, cols - 1, cols * rows - 1, cols * (rows - 1)):
+        k = int(np.flatnonzero(ids == corner)[0])
+        points.append({"pixel": raw[k].tolist(), "plane": (squares[k] * board.square).tolist()})
+    targets = TargetsSpec.from_dict({"points": points, "pixel_std": 0.1})
+    idealized = ideal.normalized_to_pixels(camera.pixels_to_normalized(raw))
+    homography, _ = cv2.findHomography(squares.astype(np.float32), idealized.astype(np.float32))
+    if homography is None:
+        return None
+    (x0, y0), (x1, y1) = squares.min(axis=0) - 0.5, squares.max(axis=0) + 0.5
+
+    def placed(board_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Board points in idealized and in raw pixels."""
+        image = cv2.perspectiveTransform(np.float32(board_points).reshape(-1, 1, 2), homography).reshape(-1, 2)
+        return image, camera.normalized_to_pixels(ideal.pixels_to_normalized(image.astype(float)))
+
+    corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+    roi, _ = placed(corners)
+    sx, sy = squares[0]
+    _, probe = placed(np.array([[sx - 0.5, sy - 0.5], [sx + 0.5, sy - 0.5]]))
+    # the rectangle's outline, sampled, must lie inside the idealized image (a wide lens's is cropped) and
+    # have raw pixels behind it (the lens bends its sides outwards), the probe too
+    t = np.linspace(0, 1, 16, endpoint=False)[:, None]
+    outline = np.concatenate([a + t * (b - a) for a, b in zip(corners, np.roll(corners, -1, axis=0), strict=True)])
+    idealized_outline, raw_outline = placed(outline)
+    if inside_only and not (_within(idealized_outline, camera, 0)
+                            and _within(np.concatenate([raw_outline, probe]), camera, 2)):
+        return None
+    square_px = math.sqrt(cv2.contourArea(np.float32(roi)) / ((x1 - x0) * (y1 - y0)))
+    return BoardCase(name, targets, roi, square_px, probe)
+
+
+def _within(points: np.ndarray, camera: BrownCamera, margin: float) -> bool:
+    """Whether every point lies in the camera's image, `margin` px inside its outer pixels' centres."""
+    return bool(np.all(np.isfinite(points)) and points.min() >= margin
+                and np.all(points[:, 0] <= camera.width - 1 - margin)
+                and np.all(points[:, 1] <= camera.height - 1 - margin))
+
+
+@dataclass
+class ToneChoice:
+    """The curve taken, why, and the evidence: per curve, the slope of the views' relative error against
+    1/(pixels per square) and its standard error."""
+
+    curve: str  # one of TONE_CURVES
+    decided: bool  # False: the views could not tell the curves apart; `curve` is then the linear default
+    reason: str
+    views: int = 0
+    square_px: tuple[float, float] = (math.nan, math.nan)
+    slopes: dict[str, dict[str, float]] = field(default_factory=dict)
+    left_out: dict[str, str] = field(default_factory=dict)  # view name -> why it was not measured
+
+    def as_dict(self) -> dict:
+        return {"curve": self.curve, "decided": self.decided, "reason": self.reason, "views": self.views,
+                "square_px": [round(float(s), 1) for s in self.square_px],
+                "slopes": {c: {k: round(float(v), 4) for k, v in s.items()} for c, s in self.slopes.items()},
+                "left_out": len(self.left_out)}
+
+
+def spread_by_size(cases: list[BoardCase], count: int = MAX_VIEWS) -> list[BoardCase]:
+    """At most `count` of the cases, evenly over their board sizes (nearest and farthest always kept)."""
+    ordered = sorted(cases, key=lambda case: case.square_px)
+    if len(ordered) <= count:
+        return ordered
+    return [ordered[round(k)] for k in np.linspace(0, len(ordered) - 1, count)]
+
+
+def _slope(errors: np.ndarray, inverse_size: np.ndarray) -> tuple[float, float]:
+    """Least-squares slope of errors against 1/size (with an intercept: the ink's gain), and its standard error."""
+    design = np.column_stack([np.ones_like(inverse_size), inverse_size])
+    coef, *_ = np.linalg.lstsq(design, errors, rcond=None)
+    residual = errors - design @ coef
+    variance = float(residual @ residual) / max(len(errors) - 2, 1)
+    return float(coef[1]), math.sqrt(variance * float(np.linalg.inv(design.T @ design)[1, 1]))
+
+
+def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: BoardSpec, camera: BrownCamera
+                      ) -> ToneChoice:
+    """Measure each (case, grey image) under every tone curve (taken one at a time: a reader's generator keeps
+    one frame in memory), whole pixels at Otsu's threshold (the edge's
+    place alone, without the shares' levels), and take the curve under which the error does not drift with the
+    board's size, where the other's clearly does. Views with clipped highlights or the ROI beyond the image are
+    left out."""
+    if board.kind != "chessboard":
+        return ToneChoice("linear", False, f"not judged: the tone curve is read from a chessboard's squares, "
+                                           f"the views show a {board.kind} board")
+    errors: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
+    sizes: list[float] = []
+    left_out: dict[str, str] = {}
+    for case, grey in cases:
+        truth = case.true_area_m2(board, case.first_black(grey))
+        measured = {}
+        for curve in TONE_CURVES:
+            try:
+                result = AreaMeasurer(camera, case.targets, Classifier(threshold="otsu", tone_curve=curve),
+                                      roi=case.roi, area_mode="count").measure(grey)
+            except ValueError as exc:  # targets, light, a frame the measurement refuses: the view is no case
+                left_out[case.name] = f"{curve}: {exc}"
+                break
+            spoiled = [w for w in result.warnings if w.startswith(SPOILS_THE_EVIDENCE)]
+            if spoiled:
+                left_out[case.name] = f"{curve}: {spoiled[0]}"
+                break
+            measured[curve] = result.area_m2 / truth - 1
+        else:
+            for curve, error in measured.items():
+                errors[curve].append(error)
+            sizes.append(case.square_px)
+    n = len(sizes)
+    span = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
+    choice = ToneChoice("linear", False, "", n, span, left_out=left_out)
+    if n < MIN_VIEWS:
+        choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard well inside the image, "
+                         f"whites not clipped, near and far, tell the curves apart; {n} could be measured")
+        return choice
+    inverse = 1.0 / np.array(sizes)
+    for curve in TONE_CURVES:
+        slope, error = _slope(np.array(errors[curve]), inverse)
+        choice.slopes[curve] = {"slope": slope, "std": error, "spread": float(np.std(errors[curve], ddof=1))}
+    if span[1] / span[0] < MIN_SIZE_RATIO:
+        choice.reason = (f"not judged: the boards span {span[0]:.0f}-{span[1]:.0f} px per square, too alike in "
+                         "distance to tell the curves apart (photograph the board near and far)")
+        return choice
+    best, other = sorted(TONE_CURVES, key=lambda c: abs(choice.slopes[c]["slope"]))[:2]
+    gap = abs(choice.slopes[other]["slope"]) - abs(choice.slopes[best]["slope"])
+    combined = math.hypot(choice.slopes[best]["std"], choice.slopes[other]["std"])
+    reach = 1 / span[0] - 1 / span[1]  # the farthest view against the nearest, in 1/(px per square)
+    described = "; ".join(f"{c} {100 * s['slope'] * reach:+.2f} +/- {100 * s['std'] * reach:.2f} %" for c, s in
+                          choice.slopes.items())
+    if gap <= DECISIVE_SIGMA * combined:
+        choice.reason = (f"not told apart: the farthest of {n} views ({span[0]:.0f} px per square) reads against the "
+                         f"nearest ({span[1]:.0f} px) about alike under both curves ({described}); linear kept")
+        return choice
+    choice.curve, choice.decided = best, True
+    choice.reason = (f"the board's black area in the farthest of {n} views ({span[0]:.0f} px per square) reads "
+                     f"against the nearest ({span[1]:.0f} px): {described}; {best} drifts the least")
+    return choice
