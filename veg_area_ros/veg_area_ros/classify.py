@@ -451,16 +451,26 @@ def polygon_roi(shape: tuple[int, int], polygon: np.ndarray, holes: list[np.ndar
 
 def centre_mask(shape: tuple[int, ...], polygon: np.ndarray) -> np.ndarray:
     """uint8 mask of the pixels whose centre lies inside the polygon (even-odd rule): OpenCV's fill, its
-    outline's pixels and their neighbours (the fill takes too many there, and misses a few) tested one by one."""
+    outline's pixels and their neighbours (the fill takes too many there, and misses a few) tested one by one;
+    all within the polygon's bounding box."""
+    height, width = shape[:2]
+    mask = np.zeros((height, width), np.uint8)
+    x0, y0 = (max(int(np.floor(v)) - 2, 0) for v in polygon.min(axis=0))
+    x1, y1 = (int(np.ceil(v)) + 3 for v in polygon.max(axis=0))
+    x1, y1 = min(x1, width), min(y1, height)
+    if x1 <= x0 or y1 <= y0:
+        return mask
+    local = polygon - (x0, y0)
+    box = np.zeros((y1 - y0, x1 - x0), np.uint8)
     shift = 4
-    mask = np.zeros(shape[:2], np.uint8)
-    cv2.fillPoly(mask, [np.round(polygon * 2**shift).astype(np.int32)], 255, cv2.LINE_8, shift)
-    cross = np.ones((3, 3), np.uint8)
-    inner = cv2.erode(mask, cross, borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    outline = cv2.findNonZero(cv2.subtract(cv2.dilate(mask, cross), inner))
+    cv2.fillPoly(box, [np.round(local * 2**shift).astype(np.int32)], 255, cv2.LINE_8, shift)
+    # two pixels deep: OpenCV's fill of a polygon that leaves the image also takes pixels a whole pixel off it
+    inner = cv2.erode(box, np.ones((5, 5), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    outline = cv2.findNonZero(cv2.subtract(cv2.dilate(box, np.ones((3, 3), np.uint8)), inner))
     if outline is not None:
         u, v = outline.reshape(-1, 2).T
-        mask[v, u] = np.where(_centres_inside(u, v, polygon), 255, 0).astype(np.uint8)
+        box[v, u] = np.where(_centres_inside(u, v, local), 255, 0).astype(np.uint8)
+    mask[y0:y1, x0:x1] = box
     return mask
 
 
