@@ -454,6 +454,10 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         spin_until(lambda: len(calibrated(mark)) >= 6, 30)
         out["area_modes_after_change"] = sorted({i["area_mode"] for i in calibrated(mark)[3:]})
         set_parameter("area_mode", "subpixel")
+        mark = len(infos)  # tone_curve auto (the default), a calibration from camera_info: read as grey levels
+        spin_until(lambda: len(calibrated(mark)) >= 5, 30)
+        out["tone_curves_by_default"] = sorted({str((i.get("levels") or {}).get("tone_curve"))
+                                                for i in calibrated(mark)[3:]})
         out["bad_tone_curve"] = refusal("tone_curve", "gamma")
         good_tone = set_parameter("tone_curve", "srgb")
         out["good_tone_curve"] = None if good_tone is None else good_tone.results[0].successful
@@ -461,7 +465,7 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         spin_until(lambda: len(calibrated(mark)) >= 5, 30)
         out["tone_curves_after_change"] = sorted({str((i.get("levels") or {}).get("tone_curve"))
                                                   for i in calibrated(mark)[3:]})
-        set_parameter("tone_curve", "linear")
+        set_parameter("tone_curve", "auto")
 
         # bad frames on image_raw: wrong encoding, wrong size, empty data, lying step
         for encoding, width, height, data in (("16UC1", 640, 480, bytes(640 * 480 * 2)),

@@ -85,8 +85,9 @@ def test_parameters_are_validated_and_change_at_run_time(graph):
     assert not ok and "too close" in reason
     assert graph["area_modes_before"] == ["subpixel"]
     assert graph["good_area_mode"] is True and graph["area_modes_after_change"] == ["count"]
+    assert graph["tone_curves_by_default"] == ["linear"]  # auto, with no calibration file to read a curve from
     ok, reason = graph["bad_tone_curve"]
-    assert not ok and "linear, srgb" in reason
+    assert not ok and "auto, linear, srgb" in reason
     assert graph["good_tone_curve"] is True and graph["tone_curves_after_change"] == ["srgb"]
 
 

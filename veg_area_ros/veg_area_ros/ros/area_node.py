@@ -129,7 +129,9 @@ class AreaNode(Node):
             self.camera, self.port_camera = calibration.camera, calibration.port_camera()
             self.file_camera, self.file_conditions = calibration.camera, calibration.metadata
             port = " (lens and flat port: the exact refraction model)" if self.port_camera else ""
-            self.get_logger().info(f"calibration from {calibration_file}{port}")
+            tone = calibration.metadata.get("tone_curve")
+            recorded = f"; tone curve {tone} as it records (tone_curve auto reads it)" if tone else ""
+            self.get_logger().info(f"calibration from {calibration_file}{port}{recorded}")
         self.settings = self._settings({})  # a value out of range or choices at start: the node does not start
         # read when targets_file is set (set it again to re-read an edited file), not at every new calibration
         targets_file = self.get_parameter("targets_file").value
