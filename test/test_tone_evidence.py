@@ -143,7 +143,7 @@ def test_a_real_gopros_calibration_records_srgb_and_measure_reads_its_photos_wit
     """`veg-area calibrate` on the 35 real GoPro photos (../shared/data/gopro-wide): its 10 views with the whole
     board inside the frame, 20-135 px a square, read 4.5 % apart (far against near) as grey levels and about
     1 % apart through the sRGB curve: srgb is recorded with the evidence. `measure` of a photo with that file
-    reads it through srgb by default (and says so), through linear when told."""
+    reads it through srgb by default (and says so), through linear when told. The report draws the evidence."""
     from board_photos import board_photos
 
     from veg_area_ros.calib_io import read_calibration
@@ -151,9 +151,10 @@ def test_a_real_gopros_calibration_records_srgb_and_measure_reads_its_photos_wit
     folder = shared("gopro-wide")
     calibration = tmp_path / "gopro.yaml"
     done = run_cli("calibrate", str(folder), "--board", "chessboard:8x6:0.025", "--medium", "air", "-o",
-                   str(calibration), "-q")
+                   str(calibration), "-q", "--report", str(tmp_path / "report"))
     assert done.returncode == 0, done.stderr
     assert "tone curve srgb: " in done.stdout
+    assert (tmp_path / "report" / "tone_curve.png").stat().st_size > 10_000  # the evidence drawn
     block = yaml.safe_load(calibration.read_text())["veg_area_ros"]
     assert block["tone_curve"] == "srgb", block.get("tone_curve_evidence")
     assert "srgb drifts the least" in block["tone_curve_evidence"]

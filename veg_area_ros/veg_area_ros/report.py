@@ -24,9 +24,10 @@ def _pyplot():
 
 
 
-def write_calibration_report(result: CalibrationResult, folder: str | Path, guide=None) -> list[Path]:
+def write_calibration_report(result: CalibrationResult, folder: str | Path, guide=None, tone=None) -> list[Path]:
     """Write residuals.png, per_view.png, coverage.png, radial.png, uncertainty.png and calibration.json into
-    `folder`; with `guide` (guidance.CalibrationGuide over the views) also variety.png, the bars."""
+    `folder`; with `guide` (guidance.CalibrationGuide over the views) also variety.png, the bars; with `tone`
+    (tone_evidence.ToneChoice) that measured views, tone_curve.png."""
     plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -125,6 +126,8 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
 
     if guide is not None:
         written.append(plot_variety(guide, folder / "variety.png", result.views_used))
+    if tone is not None and tone.sizes:
+        written.append(plot_tone_evidence(tone, folder / "tone_curve.png"))
     written.append(folder / "calibration.json")
     written[-1].write_text(json.dumps(result.summary(), indent=2))
     return written
@@ -148,6 +151,40 @@ def plot_variety(guide, path: str | Path, distinct: int | None = None) -> Path:
              else f"{distinct} distinct views ({len(guide.kept)} looked at, the others repeats)")
     ax.set_title(f"{views}; " + (f"still needed: {needed}" if needed else "variety enough"),
                  fontsize=10)
+    path = Path(path)
+    save_figure(fig, path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot_tone_evidence(tone, path: str | Path) -> Path:
+    """Each measured view's error in the board's black area against its size, under each tone curve, with the
+    fitted drift (error = a + slope / px per square): the camera's curve is the flat one."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    sizes = np.asarray(tone.sizes)
+    line = np.linspace(sizes.min(), sizes.max(), 100)
+    for (curve, errors), colour in zip(tone.errors.items(), ("tab:blue", "tab:orange"), strict=False):
+        errors = 100 * np.asarray(errors)
+        ax.plot(sizes, errors, "o", color=colour, label=f"{curve}")
+        slope = tone.slopes.get(curve, {}).get("slope")
+        if slope is not None:
+            offset = np.mean(errors) - 100 * slope * np.mean(1 / sizes)
+            ax.plot(line, offset + 100 * slope / line, "-", color=colour, lw=1)
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(ScalarFormatter())
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    low, high = ax.get_xlim()
+    ax.set_xticks([t for t in (10, 15, 20, 30, 50, 70, 100, 150, 200, 300, 500) if low <= t <= high]
+                  or [round(line[0]), round(line[-1])])
+    ax.set_xlabel("board size in the view [px per square]")
+    ax.set_ylabel("black area: error against the print [%]")
+    verdict = f"{tone.curve} taken" if tone.decided else "not told apart: linear kept"
+    ax.set_title(f"Tone curve from {len(sizes)} views: {verdict}", fontsize=10)
+    ax.legend(title="read as")
+    ax.grid(alpha=0.3)
     path = Path(path)
     save_figure(fig, path, dpi=110, bbox_inches="tight")
     plt.close(fig)

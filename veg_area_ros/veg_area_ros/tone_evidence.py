@@ -120,6 +120,8 @@ class ToneChoice:
     square_px: tuple[float, float] = (math.nan, math.nan)
     slopes: dict[str, dict[str, float]] = field(default_factory=dict)
     left_out: dict[str, str] = field(default_factory=dict)  # view name -> why it was not measured
+    sizes: list[float] = field(default_factory=list)  # each measured view's px per square
+    errors: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's relative error
 
     def as_dict(self) -> dict:
         return {"curve": self.curve, "decided": self.decided, "reason": self.reason, "views": self.views,
@@ -179,7 +181,7 @@ def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
             sizes.append(case.square_px)
     n = len(sizes)
     span = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
-    choice = ToneChoice("linear", False, "", n, span, left_out=left_out)
+    choice = ToneChoice("linear", False, "", n, span, left_out=left_out, sizes=sizes, errors=errors)
     if n < MIN_VIEWS:
         choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard well inside the image, "
                          f"whites not clipped, near and far, tell the curves apart; {n} could be measured")

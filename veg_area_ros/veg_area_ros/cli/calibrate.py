@@ -255,7 +255,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.report:
         from ..report import write_calibration_report
 
-        for path in write_calibration_report(result, args.report, found.guide):
+        for path in write_calibration_report(result, args.report, found.guide, tone):
             say(f"report: {path}")
     for warning in result.warnings:
         say(f"warning: {warning}")
