@@ -141,8 +141,8 @@ def test_auto_reads_the_calibrations_curve_and_refuses_one_it_does_not_know():
 
 def test_a_real_gopros_calibration_records_srgb_and_measure_reads_its_photos_with_it(tmp_path):
     """`veg-area calibrate` on the 35 real GoPro photos (../shared/data/gopro-wide): its 10 views with the whole
-    board inside the frame, 20-135 px a square, read 4.5 % apart (far against near) as grey levels and about
-    1 % apart through the sRGB curve: srgb is recorded with the evidence. `measure` of a photo with that file
+    board inside the frame, 20-135 px a square, read 4.1 % apart (far against near) as grey levels and 0.7 %
+    apart through the sRGB curve: srgb is recorded with the evidence. `measure` of a photo with that file
     reads it through srgb by default (and says so), through linear when told. The report draws the evidence."""
     from board_photos import board_photos
 
