@@ -78,7 +78,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminate_as_interrupt)
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()  # here, not at exit: a reader gone by then (`| head`) is handled below
+        return code
     except CliError as exc:
         print(f"veg-area {args.command}: {exc}", file=sys.stderr)
         return exc.code
