@@ -143,7 +143,8 @@ def test_a_real_gopros_calibration_records_srgb_and_measure_reads_its_photos_wit
     """`veg-area calibrate` on the 35 real GoPro photos (../shared/data/gopro-wide): its 10 views with the whole
     board inside the frame, 20-135 px a square, read 4.1 % apart (far against near) as grey levels and 0.7 %
     apart through the sRGB curve: srgb is recorded with the evidence. `measure` of a photo with that file
-    reads it through srgb by default (and says so), through linear when told. The report draws the evidence."""
+    reads it through srgb by default (and says so), through linear when told, and an excess-green index as it
+    is (said). The report draws the evidence."""
     from board_photos import board_photos
 
     from veg_area_ros.calib_io import read_calibration
@@ -173,6 +174,9 @@ def test_a_real_gopros_calibration_records_srgb_and_measure_reads_its_photos_wit
         measured[tuple(option)] = json.loads(done.stdout.splitlines()[-1])
         assert ("tone curve srgb, as" in done.stderr) == (not option), done.stderr
     assert measured[()]["tone_curve"] == "srgb" and measured[("--tone-curve", "linear")]["tone_curve"] == "linear"
+    green = run_cli("measure", str(folder / photo.name), "--calibration", str(calibration), "--targets",
+                    str(targets), "--roi", roi, "--object", "green", cwd=tmp_path)
+    assert "tone curve linear: " in green.stderr and "does not apply to --object green" in green.stderr
 
 
 def test_webcam_photos_at_one_distance_record_no_curve_and_say_why(tmp_path):

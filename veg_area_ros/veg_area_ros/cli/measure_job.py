@@ -256,8 +256,13 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
 
     measurer = new_measurer(camera) if not from_bag else None
     if job.settings.tone_curve == "auto" and conditions and "tone_curve" in conditions:
-        say(f"tone curve {job.settings.tone_curve_for(conditions)}, as {job.calibration} records it "
-            f"({conditions.get('tone_curve_evidence', 'no evidence recorded')}); --tone-curve sets another")
+        curve = job.settings.tone_curve_for(conditions)
+        if curve != conditions["tone_curve"]:  # the excess-green index is no light to decode
+            say(f"tone curve {curve}: {job.calibration} records {conditions['tone_curve']}, which does not apply "
+                f"to --object {job.settings.object}")
+        else:
+            say(f"tone curve {curve}, as {job.calibration} records it "
+                f"({conditions.get('tone_curve_evidence', 'no evidence recorded')}); --tone-curve sets another")
     if job.idealized and camera is not None:
         folder = Path(job.idealized)
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
