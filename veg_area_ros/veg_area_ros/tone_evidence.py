@@ -24,7 +24,7 @@ from .camera_model import BrownCamera
 from .classify import TONE_CURVES, Classifier
 from .targets import TargetsSpec
 
-MAX_VIEWS = 40  # views measured per curve: evenly over the board's sizes (seconds, not minutes, at 10 MP)
+MAX_VIEWS = 24  # views measured, evenly over the board's sizes: about 1.5 s each at 10 MP (both curves)
 MIN_VIEWS = 6  # a slope and its scatter need a few more views than its two parameters
 MIN_SIZE_RATIO = 1.3  # nearest to farthest board (pixels per square): below it the views cannot tell curves apart
 # what moves a board's area by more than the curves do (burnt-out whites: 1-5 % low; no object found: all of
