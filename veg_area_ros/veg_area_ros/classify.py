@@ -286,7 +286,6 @@ class LevelEstimator:
                                                 background_error=bg_error, tone_curve=self.tone_curve)
         return self._levels_at[split]
 
-
     def _valley_between(self, split: int) -> bool:
         """Whether the histogram falls deep between the modes of the two sides of `split`: two classes, however
         wide their spreads."""
@@ -474,16 +473,20 @@ def centre_mask(shape: tuple[int, ...], polygon: np.ndarray) -> np.ndarray:
     return mask
 
 
+POINTS_PER_BAND = 4096  # points tested against every edge at once: a bounded temporary for long outlines
+
+
 def _centres_inside(u: np.ndarray, v: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     """Whether each point (u, v) lies inside the polygon: the even-odd count of its edges crossed by a ray
     to the right, the edges taken a band of points at a time."""
     x0, y0 = polygon[:, 0], polygon[:, 1]
     x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
     inside = np.zeros(len(u), bool)
-    for start in range(0, len(u), 4096):
-        pu, pv = u[start:start + 4096, None].astype(float), v[start:start + 4096, None].astype(float)
+    for start in range(0, len(u), POINTS_PER_BAND):
+        band = slice(start, start + POINTS_PER_BAND)
+        pu, pv = u[band, None].astype(float), v[band, None].astype(float)
         spans = (y0 > pv) != (y1 > pv)
         with np.errstate(divide="ignore", invalid="ignore"):
             crossing = x0 + (pv - y0) * (x1 - x0) / (y1 - y0)
-        inside[start:start + 4096] = np.count_nonzero(spans & (pu < crossing), axis=1) % 2 == 1
+        inside[band] = np.count_nonzero(spans & (pu < crossing), axis=1) % 2 == 1
     return inside
