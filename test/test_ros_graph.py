@@ -35,6 +35,9 @@ def test_calibration_is_served_persisted_and_latched(graph):
     assert "plumb_bob predicts best" in graph["persisted_model"]["reason"] or "too few" in \
         graph["persisted_model"]["reason"]
     assert graph["served_fx"] == pytest.approx(UNDERWATER_FX, rel=0.01)
+    # the tone curve judged on the kept views' frames (rendered as a linear camera gives them): said either way
+    tone = graph["persisted_tone"]
+    assert tone["tone_curve"] in (None, "linear") and tone["tone_curve_evidence"], tone
 
 
 def test_area_of_the_rendered_cube_within_half_a_percent(graph):

@@ -189,3 +189,35 @@ def test_webcam_photos_at_one_distance_record_no_curve_and_say_why(tmp_path):
     assert "tone curve linear (the default): not judged" in done.stdout
     block = yaml.safe_load(webcam.read_text())["veg_area_ros"]
     assert "tone_curve" not in block and "too alike in distance" in block["tone_curve_evidence"]
+
+
+def test_a_live_calibration_keeps_its_views_frames_and_judges_the_curve_on_them(monkeypatch):
+    """The calibration node's store (`KeptFrames`): each kept view's grey frame, PNG-encoded (lossless), then
+    judged at the fit as `veg-area calibrate` judges files: the sRGB renders near and far give srgb. A partly
+    seen board keeps no frame; past the byte budget none is kept, and the reason says how many."""
+    import veg_area_ros.tone_evidence as tone_evidence
+    from veg_area_ros.calibration import View
+    from veg_area_ros.tone_evidence import KeptFrames
+
+    cases = _cases("srgb")
+    kept = KeptFrames(BOARD)
+    views = []
+    for case, image in cases:
+        detection = BOARD.detect(image)
+        views.append(View(case.name, detection))
+        kept.offer(case.name, detection, np.dstack([image] * 3))  # a colour frame is kept in grey
+    assert set(kept.frames) == {case.name for case, _ in cases}
+    partial = BOARD.detect(cases[0][1])
+    kept.offer("partial", type(partial)(partial.image_points[:10], partial.object_points[:10], partial.ids[:10]),
+               cases[0][1])
+    assert "partial" not in kept.frames
+    choice = kept.judge(views, ENDOSCOPE)
+    assert choice.decided and choice.curve == "srgb", choice.reason
+
+    monkeypatch.setattr(tone_evidence, "MAX_KEPT_BYTES", 1)
+    small = KeptFrames(BOARD)
+    for view, (_, image) in zip(views, cases, strict=True):
+        small.offer(view.name, view.detection, image)
+    assert len(small.frames) == 1 and small.over_budget == len(views) - 1
+    assert not small.judge(views, ENDOSCOPE).decided
+    assert f"({len(views) - 1} views past the first 1 kept no frame)" in small.judge(views, ENDOSCOPE).reason

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from .area import AreaMeasurer
-from .board import BoardSpec, Detection
+from .board import BoardSpec, Detection, to_grey
 from .camera_model import BrownCamera
 from .classify import TONE_CURVES, Classifier
 from .targets import TargetsSpec
@@ -32,6 +32,7 @@ MIN_SIZE_RATIO = 1.3  # nearest to farthest board (pixels per square): below it 
 SPOILS_THE_EVIDENCE = ("clipped highlights", "the ROI reaches beyond the image", "no object found")
 DECISIVE_SIGMA = 3.0  # one curve's drift smaller than the other's by this many combined standard errors
 EVIDENCE_MODE = "subpixel"  # the mode frames are measured in by default
+MAX_KEPT_BYTES = 256 * 2**20  # a live calibration's kept frames, PNG: a few hundred views of 10 MP
 
 
 @dataclass
@@ -137,6 +138,45 @@ def spread_by_size(cases: list[BoardCase], count: int = MAX_VIEWS) -> list[Board
     if len(ordered) <= count:
         return ordered
     return [ordered[round(k)] for k in np.linspace(0, len(ordered) - 1, count)]
+
+
+def chosen_cases(views: Iterable, board: BoardSpec, camera: BrownCamera) -> list[BoardCase]:
+    """The views (calibration.View) that can be measurements, at most MAX_VIEWS evenly over their sizes."""
+    return spread_by_size([case for view in views
+                           if (case := board_case(view.name, view.detection, board, camera)) is not None])
+
+
+@dataclass
+class KeptFrames:
+    """The grey frames of the views a live calibration keeps (the calibration node; `veg-area calibrate` reads
+    its files again instead), PNG-encoded (lossless) until its fit judges the tone curve on them. Frames whose
+    board is not a whole chessboard are not kept; past MAX_KEPT_BYTES none are, and the judgement says so."""
+
+    board: BoardSpec
+    frames: dict[str, bytes] = field(default_factory=dict)
+    size: int = 0
+    over_budget: int = 0
+
+    def offer(self, name: str, detection: Detection, image: np.ndarray) -> None:
+        if self.board.kind != "chessboard" or len(detection) != self.board.cols * self.board.rows:
+            return
+        if self.size >= MAX_KEPT_BYTES:
+            self.over_budget += 1
+            return
+        encoded, png = cv2.imencode(".png", to_grey(image), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+        if encoded:
+            self.frames[name] = png.tobytes()
+            self.size += len(self.frames[name])
+
+    def judge(self, views: Iterable, camera: BrownCamera) -> ToneChoice:
+        """The tone curve judged on the kept frames of `views` (calibration.View)."""
+        cases = chosen_cases([view for view in views if view.name in self.frames], self.board, camera)
+        pairs = ((case, cv2.imdecode(np.frombuffer(self.frames[case.name], np.uint8), cv2.IMREAD_GRAYSCALE))
+                 for case in cases)
+        choice = choose_tone_curve(pairs if len(cases) >= MIN_VIEWS else iter(()), self.board, camera)
+        if self.over_budget:
+            choice.reason += f" ({self.over_budget} views past the first {len(self.frames)} kept no frame)"
+        return choice
 
 
 def _slope(errors: np.ndarray, inverse_size: np.ndarray) -> tuple[float, float]:

@@ -275,11 +275,10 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, cam
     from collections import Counter
 
     from ..frames import iter_frames, shown_name
-    from ..tone_evidence import MIN_VIEWS, board_case, choose_tone_curve, spread_by_size
+    from ..tone_evidence import MIN_VIEWS, choose_tone_curve, chosen_cases
 
     named = Counter(view.name for view in found.views)  # a name two files share cannot be read again surely
-    cases = spread_by_size([case for view in found.views if named[view.name] == 1
-                            and (case := board_case(view.name, view.detection, board, camera)) is not None])
+    cases = chosen_cases([view for view in found.views if named[view.name] == 1], board, camera)
     if len(cases) < MIN_VIEWS:  # said as such, without reading any frame again
         return choose_tone_curve(iter(()), board, camera)
     wanted = {case.name: case for case in cases}

@@ -33,6 +33,7 @@ from ..feedback import FitView, fit_reach, render_feedback
 from ..guidance import CalibrationGuide
 from ..replacement import Judgement, judge
 from ..sources import DEFAULT_BOARD
+from ..tone_evidence import KeptFrames
 from .health import CountedWarnings, InputWatch, publish_safely
 from .messages import ImageMessageError, camera_to_info, image_bytes, info_to_camera, progress_message
 from .params import declare, read_start_file
@@ -66,6 +67,7 @@ class CalibrationNode(Node):
             raise ValueError(f"parameter board: {exc}") from exc
         self.path = camera_info_url_to_path(url)
         self.views: list[View] = []
+        self.kept_frames = KeptFrames(self.board)  # the views' frames, for the tone curve judged at each fit
         self.guide: CalibrationGuide | None = None  # from the first frame on (its size)
         self.image_size: tuple[int, int] | None = None
         self.frames_seen = 0
@@ -157,6 +159,7 @@ class CalibrationNode(Node):
             verdict = self.guide.offer(detection, image)
             if verdict.kept:
                 self.views.append(View(f"frame{self.frames_seen}", detection))
+                self.kept_frames.offer(self.views[-1].name, detection, image)
                 self._report(f"view {len(self.views)} kept ({len(detection)} points, coverage "
                              f"{self._coverage():.0%} of an 8x6 grid)")
             elif verdict.kind != "similar":
@@ -206,10 +209,15 @@ class CalibrationNode(Node):
                                 result.residuals[-1] if result.residuals else None, fit_reach(result.camera))
         warnings = list(result.warnings)
         metadata = fit_metadata(result.summary(), self.medium, self.distance, str(self.board), "calibration_node")
+        tone = self.kept_frames.judge(self.views, result.camera)
+        metadata["tone_curve_evidence"] = tone.reason
+        if tone.decided:  # what an area node or `veg-area measure` given this file reads frames with
+            metadata["tone_curve"] = tone.curve
         described = (f"{result.views_used} views ({result.camera.model}"
                      + (f"; {result.model_choice['reason']}" if result.model_choice else "")
                      + f"): RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} fy {result.camera.fy:.2f} "
-                     f"cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}")
+                     f"cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}; tone curve "
+                     + (tone.curve if tone.decided else "not told"))
         verdict = (judge(self.camera, self.served_metadata, result) if self.camera is not None
                    else Judgement(True, "no calibration served yet"))
         if not verdict.replace:
