@@ -217,7 +217,7 @@ class CalibrationNode(Node):
                      + (f"; {result.model_choice['reason']}" if result.model_choice else "")
                      + f"): RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} fy {result.camera.fy:.2f} "
                      f"cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}; tone curve "
-                     + (tone.curve if tone.decided else "not judged (tone_curve_evidence in the file says why)"))
+                     + (tone.curve if tone.decided else tone.reason))
         verdict = (judge(self.camera, self.served_metadata, result) if self.camera is not None
                    else Judgement(True, "no calibration served yet"))
         if not verdict.replace:
