@@ -246,7 +246,8 @@ def test_the_node_commands_start_say_their_transport_and_stop_on_ctrl_c(checkout
     lines = [line for line in done.stdout.splitlines() if line.startswith("RESULT ")]
     assert done.returncode == 0 and lines, done.stdout[-2000:] + done.stderr[-4000:]
     for node in json.loads(lines[-1][len("RESULT "):]):
-        assert node["transport_logged"] and node["alive_before_sigint"] and node["exit"] == 0, node
+        assert node["transport_logged"] and node["alive_before_sigint"] and node["exit"] == 0, (
+            node["command"], node["exit"], node["stopped_after_s"], node["output"][-2500:])
         transport = next(line for line in node["output"].splitlines() if "transport:" in line)
         assert "found via" in transport and "Fast DDS defaults" not in transport, transport
 
