@@ -109,7 +109,7 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path)
                 for page in pages:
                     page.goto("http://127.0.0.1:8080/")
                 for page in pages:
-                    page.wait_for_function("document.getElementById('frame').naturalWidth > 0", timeout=60000)
+                    page.wait_for_function("document.getElementById('frame').dataset.shown === '1'", timeout=60000)
                 spin(probe, 2.0)
                 roles["chromium"] = chromium_pids()
                 before, started = cpu_ticks(roles), time.monotonic()

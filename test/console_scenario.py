@@ -19,6 +19,9 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-
 CONSOLE = "http://127.0.0.1:8080"
 OPEN_CONSOLE = "http://127.0.0.1:8081"  # a second console bound to 0.0.0.0, with a token
 OPEN_TOKEN = "lab-token-for-the-test"
+# the page has drawn an image of this view (the image is a canvas: drawn once its JPEG is decoded)
+SHOWN = ("(() => { const f = document.getElementById('frame');"
+         " return f.dataset.shown === '1' && f.dataset.view === '%s'; })()")
 
 
 def api_state(base: str = CONSOLE) -> dict:
@@ -131,7 +134,7 @@ def scenario_console(options: dict, nodes) -> dict:
 
             # --- calibration: the feedback image, views collected, fit / discard / fit / commit ---------------
             page.click("button[data-view=calibration]")
-            page.wait_for_function("document.getElementById('frame').naturalWidth > 0", timeout=60000)
+            page.wait_for_function(SHOWN % "calibration", timeout=60000)
             spin_until(lambda: (api_state()["calibration"]["progress"].get("views_kept") or 0) >= 10, 90)
             page.wait_for_timeout(1500)  # the page's next poll shows the views
             out["views_kept_before_fit"] = api_state()["calibration"]["progress"].get("views_kept")
@@ -155,12 +158,17 @@ def scenario_console(options: dict, nodes) -> dict:
             # --- measurement: the overlay and Af --------------------------------------------------------------
             page.click("button[data-view=area]")
             spin_until(lambda: len([i for i in infos if i.get("calibrated")]) >= 5, 90)
-            page.wait_for_function("document.getElementById('frame').naturalWidth > 0 && "
-                                   "document.getElementById('frame').dataset.frameSize === '640x480'", timeout=60000)
+            page.wait_for_function(SHOWN % "area" + " && document.getElementById('frame').dataset.frameSize === "
+                                   "'640x480'", timeout=60000)
             page.wait_for_function("document.getElementById('af-now').textContent.includes('cm²')", timeout=30000)
             out["af_text"] = page.inner_text("#af-now")
             out["frames_text"] = page.inner_text("#frames")
-            out["overlay_natural_width"] = page.evaluate("document.getElementById('frame').naturalWidth")
+            # the page asks for the points it does not have: its copy is the server's window, in order
+            page.wait_for_timeout(3000)
+            on_page = page.evaluate("series.points.map((p) => p[0])")
+            on_server = [p[0] for p in api_state()["area"]["points"]]
+            out["series_on_page"], out["series_on_server"] = on_page, on_server
+            out["overlay_natural_width"] = page.evaluate("document.getElementById('frame').width")
             shot(page, "console-measurement")
 
             # --- the threshold slider: the node's parameter, then the next Af --------------------------------
@@ -182,8 +190,7 @@ def scenario_console(options: dict, nodes) -> dict:
             spin(0.5)
             out["af_before_roi"] = infos[-1]["area_m2"]  # the threshold's frames: the probe spins while it waits
             page.click("#draw-roi")  # shows the area view: its image is drawn on once it has loaded
-            page.wait_for_function("(() => { const f = document.getElementById('frame');"
-                                   " return f.complete && f.naturalWidth > 0; })()", timeout=30000)
+            page.wait_for_function(SHOWN % "area", timeout=30000)
             box = page.locator("#frame").bounding_box()
             # between the targets (a ROI over a marker counts its print: said in the result), through the cube
             start = (box["x"] + 0.3 * box["width"], box["y"] + 0.3 * box["height"])
@@ -225,7 +232,7 @@ def scenario_console(options: dict, nodes) -> dict:
             viewer = browser.new_page(viewport={"width": 1360, "height": 960})
             viewer.goto(OPEN_CONSOLE + "/")
             viewer.wait_for_function("document.body.dataset.polls > 1", timeout=30000)
-            viewer.wait_for_function("document.getElementById('frame').naturalWidth > 0", timeout=30000)
+            viewer.wait_for_function(SHOWN % "area", timeout=30000)
             out["viewer_access"] = viewer.inner_text("#access")
             out["viewer_controls_disabled"] = viewer.evaluate(
                 "[...document.querySelectorAll('.control')].every((c) => c.disabled)")

@@ -20,6 +20,7 @@ from veg_area_ros.console_server import ConsoleServer
 from veg_area_ros.console_state import (
     MAX_RATE_HZ,
     MAX_WIDTH_PX,
+    SERIES_POINTS,
     Access,
     AreaSeries,
     ConsoleInputError,
@@ -106,6 +107,26 @@ def test_the_series_starts_over_when_a_replay_restarts():
     assert [p[0] for p in series.as_dict()["points"]] == [0.0]
 
 
+def test_a_page_is_sent_only_the_points_it_does_not_have():
+    series = AreaSeries()
+    for t in range(5):
+        series.add_area(100.0 + t, 1e-2, 1e-5)
+    first = series.as_dict()
+    assert first["complete"] and len(first["points"]) == 5 and first["appended"] == 5
+    shown = (first["run"], first["appended"])
+    assert series.as_dict(shown)["points"] == [] and not series.as_dict(shown)["complete"]
+    series.add_area(105.0, 3e-2, 1e-5)
+    newer = series.as_dict(shown)
+    assert newer["points"] == [(5.0, 3e-2, 1e-5)] and not newer["complete"]
+    for t in range(SERIES_POINTS + 3):  # the page fell behind the whole window: it is sent the window
+        series.add_area(106.0 + t, 1e-2, 1e-5)
+    behind = series.as_dict(shown)
+    assert behind["complete"] and len(behind["points"]) == SERIES_POINTS
+    series.add_area(10.0, 1e-2, 1e-5)  # a replay that restarted: a new run, sent whole
+    restarted = series.as_dict((behind["run"], behind["appended"]))
+    assert restarted["complete"] and restarted["run"] != behind["run"] and len(restarted["points"]) == 1
+
+
 class StandIn:
     """The nodes as the server sees them: records what it was asked."""
 
@@ -137,7 +158,8 @@ def served():
     feeds = {"area": ImageFeed()}
     feeds["area"].offer(np.zeros((480, 640), np.uint8))
     controls, access, port = StandIn(), Access.for_host("127.0.0.1"), free_port()
-    server = ConsoleServer(feeds, lambda: {"parameters": {}}, controls, access, port)
+    server = ConsoleServer(feeds, lambda shown: controls.asked.append(("state", shown)) or {"parameters": {}},
+                           controls, access, port)
     server.start()
     yield f"http://127.0.0.1:{port}", controls, access
     server.stop()
@@ -152,6 +174,14 @@ def ask(url: str, body=None, token: str | None = None, host: str | None = None) 
             return answer.status, answer.read()
     except urllib.error.HTTPError as error:
         return error.code, error.read()
+
+
+def test_a_page_says_which_points_it_has_and_a_malformed_ask_gets_them_all(served):
+    base, controls, _ = served
+    assert ask(base + "/api/state?run=2&appended=7")[0] == 200
+    assert ask(base + "/api/state?run=2&appended=x")[0] == 200
+    assert ask(base + "/api/state")[0] == 200
+    assert [shown for kind, shown in controls.asked if kind == "state"] == [(2, 7), None, None]
 
 
 def test_the_server_serves_the_page_with_its_files_and_refuses_what_it_must(served):
@@ -188,7 +218,7 @@ def test_a_taken_port_stops_the_start_with_the_reason():
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen()
-        server = ConsoleServer({}, dict, StandIn(), Access.for_host("127.0.0.1"), taken.getsockname()[1])
+        server = ConsoleServer({}, lambda shown: {}, StandIn(), Access.for_host("127.0.0.1"), taken.getsockname()[1])
         with pytest.raises(OSError):
             server.start()
 
@@ -228,6 +258,20 @@ def test_the_page_shows_the_overlay_and_af(console):
 
 
 @needs_browser
+@needs_browser
+def test_the_page_keeps_the_series_it_was_sent_piece_by_piece(console):
+    """The page is sent only the points after those it has; what it holds is the server's series up to the
+    page's last poll, each point once, in order."""
+    on_page, on_server = console["series_on_page"], console["series_on_server"]
+    assert len(on_page) > 20 and on_page == sorted(set(on_page))
+    if on_page[0] in on_server:
+        start = on_server.index(on_page[0])
+        assert on_page == on_server[start:start + len(on_page)]
+    else:  # the server's window moved on since the page's last poll
+        start = on_page.index(on_server[0])
+        assert on_page[start:] == on_server[:len(on_page) - start]
+
+
 def test_the_threshold_slider_sets_the_nodes_parameter_and_the_next_af(console):
     assert console["threshold_parameters"] == {"threshold": console["threshold_wanted"], "threshold_mode": "fixed"}
     assert console["af_after_threshold"] is not None  # a frame measured with the slider's threshold

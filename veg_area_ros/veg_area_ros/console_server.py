@@ -41,8 +41,8 @@ def page_files() -> dict[str, bytes]:
 
 
 class ConsoleServer:
-    def __init__(self, feeds: dict[str, ImageFeed], state: Callable[[], dict], controls: Controls, access: Access,
-                 port: int) -> None:
+    def __init__(self, feeds: dict[str, ImageFeed], state: Callable[[tuple[int, int] | None], dict],
+                 controls: Controls, access: Access, port: int) -> None:
         self.feeds, self.state, self.controls, self.access, self.port = feeds, state, controls, access, port
         self.files = page_files()
         self.requests = 0
@@ -116,7 +116,11 @@ class ConsoleServer:
                             headers={"Cache-Control": "no-store"})
 
     async def _state(self, request: web.Request) -> web.Response:
-        state = await asyncio.get_running_loop().run_in_executor(None, self.state)
+        try:  # the series the page has already: only the points after it are sent
+            shown = (int(request.query["run"]), int(request.query["appended"]))
+        except (KeyError, ValueError):
+            shown = None
+        state = await asyncio.get_running_loop().run_in_executor(None, self.state, shown)
         given = request.headers.get(TOKEN_HEADER)
         state["choices"] = {name: list(values) for name, values in CHOICES.items()}
         state["access"] = {"may_change": self.access.may_change(given), "loopback_only": self.access.loopback_only}

@@ -6,6 +6,7 @@ rule for who may change anything (a token). The console node fills it; the conso
 from __future__ import annotations
 
 import ipaddress
+import itertools
 import json
 import math
 import secrets
@@ -111,6 +112,8 @@ class AreaSeries:
     first_stamp_s: float | None = None
     latest: dict | str = field(default_factory=dict)
     received: int = 0
+    run: int = 0  # a new run (a replay that restarted) starts the points afresh
+    appended: int = 0  # points appended in this run: a page asks only for those after the ones it has
     _lock: threading.Lock = field(default_factory=threading.Lock)
 
     def add_area(self, stamp_s: float, area_m2: float, std_m2: float) -> None:
@@ -122,7 +125,10 @@ class AreaSeries:
             if self.first_stamp_s is None or stamp_s < self.first_stamp_s:  # a replay that restarted: new run
                 self.first_stamp_s = stamp_s
                 self.points.clear()
+                self.run += 1
+                self.appended = 0
             self.points.append((round(stamp_s - self.first_stamp_s, 4), area_m2, std_m2))
+            self.appended += 1
 
     def add_info(self, summary: dict | str) -> None:
         """The newest result's summary, or its JSON text (parsed only when a page reads it: results come at
@@ -130,7 +136,10 @@ class AreaSeries:
         with self._lock:
             self.latest = summary
 
-    def as_dict(self) -> dict:
+    def as_dict(self, shown: tuple[int, int] | None = None) -> dict:
+        """The series and the newest summary. `shown`: the (run, appended) a page already has: then only the
+        points after those (all of them when the run changed or the page fell behind the window), so a page
+        polling twice a second is not sent the whole window each time."""
         with self._lock:
             latest = self.latest
         if isinstance(latest, str):
@@ -140,7 +149,11 @@ class AreaSeries:
                 latest = {}
             latest = latest if isinstance(latest, dict) else {}
         with self._lock:
-            return {"points": list(self.points), "received": self.received,
+            new = self.appended - shown[1] if shown is not None and shown[0] == self.run else len(self.points)
+            new = min(max(new, 0), len(self.points))
+            points = list(itertools.islice(self.points, len(self.points) - new, None))
+            return {"points": points, "complete": new == len(self.points), "run": self.run,
+                    "appended": self.appended, "window": SERIES_POINTS, "received": self.received,
                     "warnings": latest.get("warnings", []),
                     "frames": {"measured": latest.get("frames_measured"), "skipped": latest.get("frames_dropped"),
                                "lost": latest.get("frames_lost"), "received": latest.get("frames_received")},

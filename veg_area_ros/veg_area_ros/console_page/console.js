@@ -10,6 +10,27 @@ let state = null;
 let editing = null; // a setting the operator is changing: not overwritten by the next poll
 let drawing = false;
 let dragStart = null;
+let series = { run: null, appended: 0, points: [] }; // the Af series as far as this page has it
+const shownText = new Map(); // what each element shows: a poll that changes nothing touches no element
+
+// An element's text or children only when they differ from what it shows: every change costs the browser
+// a layout and a paint, twice a second per page, on the machine that measures.
+function setText(id, text) {
+  if (shownText.get(id) === text) return;
+  shownText.set(id, text);
+  $(id).textContent = text;
+}
+
+function setList(id, items) {
+  const key = JSON.stringify(items);
+  if (shownText.get(id) === key) return;
+  shownText.set(id, key);
+  $(id).replaceChildren(...items.map((item) => { const li = document.createElement("li"); li.textContent = item; return li; }));
+}
+
+function setClass(id, name) {
+  if ($(id).className !== name) $(id).className = name;
+}
 
 function say(text, failed) {
   const status = $("status");
@@ -33,6 +54,8 @@ async function post(path, body) {
 }
 
 // --- the image ------------------------------------------------------------------------------------------
+// Drawn into a canvas from a bitmap decoded off the page's main thread: swapping an <img>'s source cost the
+// browser about twice the CPU per frame (bench/console_load.py).
 async function imageLoop() {
   for (;;) {
     const asked = view;
@@ -41,10 +64,14 @@ async function imageLoop() {
     try {
       const answer = await fetch(`/api/frame/${asked}?after=${after}`, { headers: HEADERS });
       if (answer.status === 200 && asked === view) {
-        const url = URL.createObjectURL(await answer.blob());
-        const old = img.src;
-        await new Promise((done) => { img.onload = done; img.onerror = done; img.src = url; });
-        if (old.startsWith("blob:")) URL.revokeObjectURL(old);
+        const bitmap = await createImageBitmap(await answer.blob());
+        if (img.width !== bitmap.width || img.height !== bitmap.height) {
+          img.width = bitmap.width;
+          img.height = bitmap.height;
+        }
+        img.getContext("2d").drawImage(bitmap, 0, 0);
+        bitmap.close();
+        img.dataset.shown = "1";
         img.dataset.frameNumber = answer.headers.get("X-Frame-Number");
         img.dataset.view = asked;
         img.dataset.frameSize = answer.headers.get("X-Frame-Size");
@@ -77,15 +104,15 @@ function chooseView(next) {
 function imagePoint(event) {
   const img = $("frame");
   const box = img.getBoundingClientRect();
-  return [(event.clientX - box.left) * img.naturalWidth / box.width,
-          (event.clientY - box.top) * img.naturalHeight / box.height];
+  return [(event.clientX - box.left) * img.width / box.width,
+          (event.clientY - box.top) * img.height / box.height];
 }
 
 function drawRectangle(a, b) {
   const canvas = $("roi-canvas");
   const img = $("frame");
-  canvas.width = img.naturalWidth || 1;
-  canvas.height = img.naturalHeight || 1;
+  canvas.width = img.dataset.shown ? img.width : 1;
+  canvas.height = img.dataset.shown ? img.height : 1;
   const ctx = canvas.getContext("2d");
   ctx.clearRect(0, 0, canvas.width, canvas.height);
   if (!a || !b) return;
@@ -105,7 +132,7 @@ function setupRoi() {
   };
   canvas.onmousedown = (event) => {
     // before the view's first image has loaded it has no size: a point on it would be read as 0, 0
-    if (!$("frame").naturalWidth) { say("no image shown yet: drag again once it is"); return; }
+    if (!$("frame").dataset.shown) { say("no image shown yet: drag again once it is"); return; }
     dragStart = imagePoint(event);
   };
   canvas.onmousemove = (event) => { if (dragStart) drawRectangle(dragStart, imagePoint(event)); };
@@ -131,7 +158,7 @@ function setupSettings() {
   const slider = $("threshold");
   slider.oninput = () => {
     editing = "threshold";
-    $("threshold-value").textContent = slider.value;
+    setText("threshold-value", slider.value);
     clearTimeout(thresholdTimer);
     // a fixed threshold: the slider's value is what classifies (otsu would ignore it)
     thresholdTimer = setTimeout(async () => {
@@ -159,18 +186,21 @@ function showSettings(parameters, choices) {
     if (select.options.length === 0 && choices[name]) {
       for (const choice of choices[name]) select.add(new Option(choice, choice));
     }
-    if (editing !== name && parameters[name] !== undefined) select.value = parameters[name];
+    if (editing !== name && parameters[name] !== undefined && select.value !== String(parameters[name])) {
+      select.value = parameters[name];
+    }
   }
   if (editing !== "threshold" && parameters.threshold !== undefined) {
-    $("threshold").value = parameters.threshold;
-    $("threshold-value").textContent = Number(parameters.threshold).toFixed(0);
+    if (Number($("threshold").value) !== Number(parameters.threshold)) $("threshold").value = parameters.threshold;
+    setText("threshold-value", Number(parameters.threshold).toFixed(0));
   }
   for (const name of ["open_px", "close_px"]) {
-    if (editing !== name && parameters[name] !== undefined && document.activeElement !== $(name)) $(name).value = parameters[name];
+    if (editing !== name && parameters[name] !== undefined && document.activeElement !== $(name) &&
+        $(name).value !== String(parameters[name])) $(name).value = parameters[name];
   }
   const roi = parameters.roi;
-  $("roi-value").textContent = !roi ? "–" : (roi.length === 1 ? "inside the targets" :
-    roi.map((v) => Number(v).toFixed(0)).join(", "));
+  setText("roi-value", !roi ? "–" : (roi.length === 1 ? "inside the targets" :
+    roi.map((v) => Number(v).toFixed(0)).join(", ")));
 }
 
 // --- Af -------------------------------------------------------------------------------------------------
@@ -207,21 +237,33 @@ function drawChart(points) {
   ctx.fillText(t1.toFixed(1) + " s (run time; band: ± 1 std)", w - 190, h - 6);
 }
 
+// The points after those the page has (all of them when `complete`), kept to the server's window.
+function mergeSeries(area) {
+  const changed = area.complete || area.points.length > 0 || area.run !== series.run;
+  const points = area.complete || area.run !== series.run ? area.points : series.points.concat(area.points);
+  series = { run: area.run, appended: area.appended, points: points.slice(-area.window) };
+  return changed;
+}
+
 function showArea(area) {
-  const points = area.points;
-  if (points.length) {
-    const [, a, s] = points[points.length - 1];
-    $("af-now").textContent = `${(a * 1e4).toFixed(3)} ± ${(s * 1e4).toFixed(3)} cm²  (${a.toExponential(4)} m²)`;
+  const points = series.points;
+  if (!mergeSeries(area)) return showAreaText(area);
+  if (series.points.length) {
+    const [, a, s] = series.points[series.points.length - 1];
+    setText("af-now", `${(a * 1e4).toFixed(3)} ± ${(s * 1e4).toFixed(3)} cm²  (${a.toExponential(4)} m²)`);
   }
-  drawChart(points);
+  if (series.points.length || points.length) drawChart(series.points);
+  showAreaText(area);
+}
+
+function showAreaText(area) {
   const f = area.frames;
   const count = (v) => (v === null || v === undefined ? "–" : v);
-  $("frames").textContent = `frames measured ${count(f.measured)}, skipped ${count(f.skipped)}, lost ${count(f.lost)}` +
+  setText("frames", `frames measured ${count(f.measured)}, skipped ${count(f.skipped)}, lost ${count(f.lost)}` +
     (area.area_mode ? ` · mode ${area.area_mode}${area.subpixel_applied === false ? " (counted whole pixels)" : ""}` : "") +
     (area.threshold !== null && area.threshold !== undefined ? ` · threshold ${Number(area.threshold).toFixed(1)}` : "") +
-    (area.calibrated === false ? " · UNCALIBRATED" : "");
-  const list = $("warnings");
-  list.replaceChildren(...area.warnings.map((w) => { const li = document.createElement("li"); li.textContent = w; return li; }));
+    (area.calibrated === false ? " · UNCALIBRATED" : ""));
+  setList("warnings", area.warnings);
 }
 
 // --- calibration and recording ------------------------------------------------------------------------
@@ -229,50 +271,53 @@ function showCalibration(calibration) {
   const p = calibration.progress || {};
   const rejected = Object.entries(p.rejected || {}).map(([k, v]) => `${k} ${v}`).join(", ") || "none";
   const served = calibration.served;
-  $("calibration-figures").innerHTML = "";
   const lines = [
     `views kept ${p.views_kept ?? 0} · frames seen ${p.frames_seen ?? 0} · coverage ${p.coverage !== undefined ? Math.round(p.coverage * 100) + " %" : "–"}`,
     `rejected: ${rejected}`,
     `fit: ${p.fitted ? "yes" : "no"}${p.rms_px ? ", RMS " + p.rms_px.toFixed(4) + " px" : ""}`,
     served ? `served: ${served.model} ${served.width}x${served.height}, fx ${served.fx.toFixed(2)}, fy ${served.fy.toFixed(2)}, cx ${served.cx.toFixed(2)}, cy ${served.cy.toFixed(2)}` : "served: no calibration yet",
   ];
-  for (const line of lines) { const div = document.createElement("div"); div.textContent = line; $("calibration-figures").append(div); }
-  $("still-needed").textContent = p.still_needed ? "still needed: " + p.still_needed : "";
-  $("calibration-messages").replaceChildren(...calibration.messages.slice().reverse().map((m) => {
-    const li = document.createElement("li"); li.textContent = m; return li;
-  }));
+  const key = JSON.stringify(lines);
+  if (shownText.get("calibration-figures") !== key) {
+    shownText.set("calibration-figures", key);
+    $("calibration-figures").replaceChildren(...lines.map((line) => {
+      const div = document.createElement("div"); div.textContent = line; return div;
+    }));
+  }
+  setText("still-needed", p.still_needed ? "still needed: " + p.still_needed : "");
+  setList("calibration-messages", calibration.messages.slice().reverse());
 }
 
 function showRecording(recording) {
-  if (!recording) { $("recording").textContent = "not recording"; return; }
+  if (!recording) { setText("recording", "not recording"); return; }
   const mb = (recording.bytes / 1e6).toFixed(1);
-  $("recording").textContent = recording.running && !recording.started ? "starting the recorder..." :
+  setText("recording", recording.running && !recording.started ? "starting the recorder..." :
     recording.running ? `recording into ${recording.bag}: ${mb} MB` :
-    `last bag ${recording.bag}: ${mb} MB (recorder exit code ${recording.exit_code})`;
+    `last bag ${recording.bag}: ${mb} MB (recorder exit code ${recording.exit_code})`);
 }
 
 function showNodes(nodes, access) {
   for (const [key, node] of Object.entries(nodes)) {
-    const badge = $("node-" + key);
-    badge.textContent = `${node.name} ${node.present ? "up" : "missing"}`;
-    badge.className = "badge " + (node.present ? "up" : "down");
+    setText("node-" + key, `${node.name} ${node.present ? "up" : "missing"}`);
+    setClass("node-" + key, "badge " + (node.present ? "up" : "down"));
   }
   const canChange = access.may_change;
-  $("access").textContent = canChange ? "control" : "view only (no token)";
-  $("access").className = "badge " + (canChange ? "up" : "viewonly");
+  setText("access", canChange ? "control" : "view only (no token)");
+  setClass("access", "badge " + (canChange ? "up" : "viewonly"));
   document.querySelectorAll(".control").forEach((c) => {
     const panel = c.closest("section").id;
     const needs = panel === "calibration-panel" ? nodes.calibration.present :
       (panel === "record-panel" ? true : nodes.area.present);
-    c.disabled = !canChange || !needs;
+    if (c.disabled !== (!canChange || !needs)) c.disabled = !canChange || !needs;
   });
-  $("parameters-note").textContent = nodes.area.present ? "" : `(${nodes.area.name} is not running)`;
+  setText("parameters-note", nodes.area.present ? "" : `(${nodes.area.name} is not running)`);
 }
 
 async function stateLoop() {
   for (;;) {
     try {
-      const answer = await fetch("/api/state", { headers: HEADERS });
+      const since = series.run === null ? "" : `?run=${series.run}&appended=${series.appended}`;
+      const answer = await fetch("/api/state" + since, { headers: HEADERS });
       state = await answer.json();
       showNodes(state.nodes, state.access);
       showArea(state.area);

@@ -154,7 +154,8 @@ class ConsoleNode(Node):
                            for name, v in values.items()}
 
     # --- what the page reads ---------------------------------------------------------------------------------
-    def state(self) -> dict:
+    def state(self, shown: tuple[int, int] | None = None) -> dict:
+        """What a page shows; `shown`: the (run, appended) of the Af series the page has (AreaSeries.as_dict)."""
         recording = None
         with self._recorder_lock:
             if self.bag is not None:
@@ -165,7 +166,7 @@ class ConsoleNode(Node):
         return {"nodes": {"area": {"name": self.area_name, "present": self.present[self.area_name]},
                           "calibration": {"name": self.calibration_name,
                                           "present": self.present[self.calibration_name]}},
-                "area": self.series.as_dict(), "calibration": self.calibration_log.as_dict(),
+                "area": self.series.as_dict(shown), "calibration": self.calibration_log.as_dict(),
                 "parameters": self.parameters, "recording": recording}
 
     # --- what the page asks for (from the server's worker threads) --------------------------------------------
