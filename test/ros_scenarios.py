@@ -309,7 +309,8 @@ def main() -> int:
                   "two_machines": scenario_two_machines, "bad_start_files": scenario_bad_start_files,
                   "guidance": scenario_guidance, "replay_into_recorder": scenario_replay_into_recorder,
                   "compressed_driver": scenario_compressed_driver,
-                  "calibration_trap": scenario_calibration_trap, "console": scenario_console}[name](
+                  "calibration_trap": scenario_calibration_trap, "console": scenario_console,
+                  "metadata": scenario_metadata}[name](
                       options, nodes)
         result["interfaces"] = interfaces()
         result["off_machine"] = off_machine(_sockets_in(result))
@@ -1284,6 +1285,44 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     recorder.wait(20)
     return {"areas": areas, "published": published, "jpeg": np.asarray(jpeg).ravel().tolist(),
             "recorder_exit": recorder.returncode}
+
+
+def scenario_metadata(options: dict, nodes: Nodes) -> dict:
+    """A calibration whose file records the tone curve srgb and the medium air, served on camera_info by the
+    camera node (camera_info_url) or the calibration node (its camera_info_url) to an area node given no
+    calibration_file (tone_curve auto): the tone curve the area node's results were read with."""
+    from veg_area_ros.calib_io import write_calibration
+    from veg_area_ros.sim.synthetic import ENDOSCOPE
+
+    calibration = Path("endoscope_srgb.yaml").resolve()
+    write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air", "tone_curve": options["tone_curve"]})
+    if options["server"] == "camera":
+        nodes.start("camera_node", rate_hz=5.0, synthetic_scene="cube", synthetic_medium="air",
+                    camera_info_url=f"file://{calibration}")
+    else:
+        nodes.start("calibration_node", camera_info_url=f"file://{calibration}")
+        nodes.start("camera_node", rate_hz=5.0, synthetic_scene="cube", synthetic_medium="air")
+    nodes.start("area_node")
+    import rclpy
+    from rclpy.node import Node
+    from std_msgs.msg import String
+
+    from veg_area_ros.ros.qos import RESULT_QOS
+
+    rclpy.init()
+    probe = Node("metadata_probe")
+    infos: list[dict] = []
+    probe.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)), RESULT_QOS)
+    try:
+        def settled() -> bool:  # ten results, the last five read with one curve
+            curves = [i.get("tone_curve") for i in infos if i.get("calibrated")]
+            return len(curves) >= 10 and len(set(curves[-5:])) == 1
+
+        spin_for(probe, 0.0, until=settled, longest=float(options["seconds"]))
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return {"tone_curves": [i.get("tone_curve") for i in infos if i.get("calibrated")]}
 
 
 if __name__ == "__main__":

@@ -1,3 +1,4 @@
+import dataclasses
 import os
 from pathlib import Path
 
@@ -277,3 +278,21 @@ def test_an_empty_distortion_list_is_refused_as_a_missing_one_is(tmp_path):
     path.write_text(yaml.safe_dump(content))
     with pytest.raises(CalibrationFileError, match="'distortion_coefficients' holds no numbers"):
         read_calibration(path)
+
+
+def test_a_calibrations_metadata_travels_beside_camera_info_and_applies_to_that_calibration_only():
+    from veg_area_ros.calib_io import metadata_for, metadata_message
+    from veg_area_ros.camera_info import camera_from_info, camera_info_fields
+    from veg_area_ros.sim.synthetic import DSLR
+
+    recorded = {"medium": "water", "calibration_distance_m": 0.7, "tone_curve": "srgb", "rms_px": np.float64(0.2)}
+    text = metadata_message(ENDOSCOPE, recorded)
+    fields = camera_info_fields(ENDOSCOPE)
+    through_camera_info = camera_from_info(**{n: fields[n] for n in ("width", "height", "distortion_model", "d", "k")})
+    assert metadata_for(through_camera_info, text) == {**recorded, "rms_px": 0.2}
+    assert metadata_for(DSLR, text) is None  # another calibration: not this one's metadata
+    refitted = dataclasses.replace(ENDOSCOPE, k1=ENDOSCOPE.k1 * 1.001 + 1e-6)
+    assert metadata_for(refitted, text) is None
+    for broken in ("", "[]", '{"calibration": {}}', '{"calibration": {}, "metadata": 3}'):
+        with pytest.raises(ValueError, match="not a calibration metadata message"):
+            metadata_for(ENDOSCOPE, broken)

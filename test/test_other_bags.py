@@ -383,3 +383,19 @@ def test_playing_a_topic_the_bag_lacks_names_the_topics_it_has(workspace, scenes
     write_bag(bag, "mcap", [("/image_raw", "sensor_msgs/msg/Image", [_image(scenes["left"][0], 0, "cam")])])
     done = run_cli("play", str(bag), "--topics", "/nope")
     assert done.returncode == 1 and "no topic /nope in the bag (it has /image_raw)" in done.stderr, done.stderr
+
+
+@pytest.mark.parametrize("server", ["camera", "calibration"])
+@pytest.mark.parametrize("tone_curve", ["srgb", "linear"])
+def test_an_area_node_given_camera_info_reads_the_calibrations_tone_curve(tmp_path, server, tone_curve):
+    """camera_info has no field for what a calibration file records beside the lens (the tone curve judged on
+    its views, the medium, the distance): the node serving it publishes that on camera_info/metadata, and an
+    area node with tone_curve auto and no calibration_file reads its frames with the curve the file records,
+    as `veg-area measure` given the file does (it read them as grey levels before, whatever the file said)."""
+    from ros_harness import run_scenario
+
+    result = run_scenario("metadata", tmp_path, server=server, tone_curve=tone_curve, seconds=90.0)
+    curves = result["tone_curves"]
+    assert len(curves) >= 10, result["log"]
+    first = curves.index(tone_curve)  # a frame measured before the metadata came is read as grey levels
+    assert set(curves[first:]) == {tone_curve} and len(curves) - first >= 5, curves

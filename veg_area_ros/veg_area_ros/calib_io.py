@@ -11,6 +11,7 @@ the idealized image this package measures.
 from __future__ import annotations
 
 import datetime as dt
+import json
 import math
 import os
 import re
@@ -67,6 +68,39 @@ def to_camera_info_dict(camera: BrownCamera, camera_name: str = "camera",
     if metadata:
         content[METADATA_KEY] = plain(metadata)
     return content
+
+
+METADATA_MATCH_FIELDS = ("width", "height", "distortion_model", "k", "d")
+
+
+def metadata_message(camera: BrownCamera, metadata: dict[str, Any]) -> str:
+    """A calibration's metadata (medium, distance, tone curve...: what camera_info cannot carry) as the JSON
+    text the nodes publish beside camera_info (`camera_info/metadata`), with the calibration it belongs to so
+    a receiver applies it only to that calibration."""
+    fields = camera_info_fields(camera)
+    return json.dumps({"calibration": {name: plain(fields[name]) for name in METADATA_MATCH_FIELDS},
+                       "metadata": plain(metadata)}, default=str)
+
+
+def metadata_for(camera: BrownCamera, text: str) -> dict[str, Any] | None:
+    """The metadata in `text` (`metadata_message`) if it belongs to `camera`'s calibration, else None. Raises
+    ValueError for text that is not such a message."""
+    try:
+        content = json.loads(text)
+        calibration, metadata = content["calibration"], content["metadata"]
+        if not isinstance(metadata, dict) or not isinstance(calibration, dict):
+            raise TypeError("calibration and metadata must be objects")
+        fields = camera_info_fields(camera)
+        for name in METADATA_MATCH_FIELDS:
+            mine, theirs = fields[name], calibration[name]
+            if name == "distortion_model":
+                if mine != theirs:
+                    return None
+            elif np.shape(mine) != np.shape(theirs) or not np.allclose(mine, theirs, rtol=1e-9, atol=1e-12):
+                return None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"not a calibration metadata message: {exc}") from exc
+    return metadata
 
 
 def plain(value: Any) -> Any:

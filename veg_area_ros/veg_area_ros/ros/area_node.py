@@ -32,7 +32,7 @@ from std_msgs.msg import String
 
 from veg_area_msgs.msg import ProjectedArea
 
-from ..calib_io import read_calibration
+from ..calib_io import metadata_for, read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, decode_compressed_image, decode_image, stamp_ns, unstamped
 from ..classify import AREA_MODES, CHANNELS, OBJECTS, ClassifyError
@@ -47,7 +47,7 @@ from ..targets import TargetsError, TargetsSpec
 from .health import CountedWarnings, InputWatch, publish_safely
 from .messages import ImageMessageError, image_bytes, projected_area, projected_area_vector
 from .params import declare, read_start_file
-from .qos import ANY_INFO_QOS, IMAGE_QOS, PER_FRAME_INFO_QOS, RESULT_QOS
+from .qos import ANY_INFO_QOS, IMAGE_QOS, LATCHED_QOS, PER_FRAME_INFO_QOS, RESULT_QOS
 from .run import run_nodes
 
 TALLY_LOG_PERIOD_S = 10.0  # the skipped and lost frames' log lines, at most once in this long
@@ -122,6 +122,7 @@ class AreaNode(Node):
         self.warn = CountedWarnings(self.get_logger())
         self.file_camera = None
         self.file_conditions = None  # calibration_file's medium and distance, said when frames leave them
+        self.info_metadata = None  # the text last heard on camera_info/metadata (calib_io.metadata_message)
         self.port_camera = None  # a flat port's exact model from calibration_file, for frames of its camera
         calibration = read_start_file(self, "calibration_file", lambda: read_calibration(calibration_file),
                                       "waiting for camera_info instead") if calibration_file else None
@@ -152,6 +153,8 @@ class AreaNode(Node):
                                      raw=True, event_callbacks=quiet),
             self.create_subscription(CameraInfo, "camera_info", self._on_camera_info_received, ANY_INFO_QOS,
                                      raw=True)]
+        # what camera_info cannot carry (tone curve, medium, distance) from the node that serves the calibration
+        self.create_subscription(String, "camera_info/metadata", self._on_info_metadata, LATCHED_QOS)
         self._take_unavailable = False
         image_topic = "image_raw" if self.transport == "raw" else "image_raw/compressed"
         self.create_subscription(Image if self.transport == "raw" else CompressedImage, image_topic, self._on_frame,
@@ -200,7 +203,39 @@ class AreaNode(Node):
             return None
         from_file = camera is not None and camera == self.file_camera  # not a camera_info that replaced it
         return settings.measurer(camera, targets, self.port_camera if from_file else None, background,
-                                 self.file_conditions if from_file else None)
+                                 self.file_conditions if from_file else self._info_conditions(camera))
+
+    def _info_conditions(self, camera) -> dict | None:
+        """The metadata heard on camera_info/metadata if it belongs to `camera` (a camera_info's), else None."""
+        if camera is None or self.info_metadata is None:
+            return None
+        try:
+            return metadata_for(camera, self.info_metadata)
+        except ValueError as exc:
+            self.warn("camera_info/metadata ignored", str(exc))
+            return None
+
+    def _on_info_metadata(self, msg: String) -> None:
+        if msg.data == self.info_metadata:
+            return
+        self.info_metadata = msg.data
+        if self.camera is None or self.camera == self.file_camera:  # a calibration_file's own metadata rules
+            return
+        conditions = self._info_conditions(self.camera)
+        if conditions is None:
+            return
+        try:
+            self.measurer = self._build(self.settings, self.camera, self.targets, self.background)
+        except Exception as exc:  # e.g. a tone curve this version does not know: measured as before
+            self.get_logger().error(f"camera_info/metadata not applied ({exc.__class__.__name__}: {exc})")
+            return
+        self._say_metadata(conditions)
+
+    def _say_metadata(self, conditions: dict) -> None:
+        tone = conditions.get("tone_curve")
+        medium = conditions.get("medium")
+        self.get_logger().info("calibration metadata with camera_info" + (f": medium {medium}" if medium else "")
+                               + (f"; tone curve {tone} (tone_curve auto reads it)" if tone else ""))
 
     def _check_parameters(self, parameters) -> SetParametersResult:
         """A run-time change is accepted only if it builds a measurer (nothing is changed here)."""
@@ -289,6 +324,9 @@ class AreaNode(Node):
             return
         self.camera, self.measurer = camera, measurer
         self.get_logger().info(f"calibration received: {camera.width}x{camera.height}, fx {camera.fx:.2f}")
+        conditions = self._info_conditions(camera)
+        if conditions is not None:
+            self._say_metadata(conditions)
 
     def _take_waiting_camera_info(self) -> None:
         """Every camera_info already waiting, before the frame is counted: the executor hands this node one message

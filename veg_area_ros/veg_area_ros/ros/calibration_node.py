@@ -13,6 +13,7 @@ import time
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from sensor_msgs.srv import SetCameraInfo
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from veg_area_msgs.msg import CalibrationProgress
@@ -21,6 +22,7 @@ from ..board import BoardSpec, BoardSpecError, detect_scaled
 from ..calib_io import (
     camera_info_url_to_path,
     fit_metadata,
+    metadata_message,
     provenance,
     quality_rms,
     read_calibration,
@@ -82,6 +84,8 @@ class CalibrationNode(Node):
         self.fitted = False
         self.fit_view: FitView | None = None
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
+        # what camera_info cannot carry (tone curve, medium, distance), for an area node given camera_info only
+        self.metadata_pub = self.create_publisher(String, "camera_info/metadata", LATCHED_QOS)
         self.progress_pub = self.create_publisher(CalibrationProgress, "~/progress", RESULT_QOS)
         self.feedback_pub = self.create_publisher(Image, "~/feedback", IMAGE_QOS)
         self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS, raw=True)  # a view, no copy
@@ -271,6 +275,7 @@ class CalibrationNode(Node):
                 self.get_logger().error(f"calibration served but {failed}")
         self.camera, self.rms, self.served_metadata = camera, rms, metadata or {}
         info = camera_to_info(camera, self.frame_id, self.get_clock().now().to_msg())
+        publish_safely(self, self.metadata_pub, String(data=metadata_message(camera, self.served_metadata)))
         publish_safely(self, self.info_pub, info)
         return failed
 

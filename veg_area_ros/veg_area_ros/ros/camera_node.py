@@ -9,8 +9,9 @@ import contextlib
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image
+from std_msgs.msg import String
 
-from ..calib_io import camera_info_url_to_path, read_calibration
+from ..calib_io import camera_info_url_to_path, metadata_message, read_calibration
 from ..cdr import restamp
 from ..sources import SYNTHETIC_SCENES, DeviceSource, SourceError, open_source
 from .health import publish_safely
@@ -44,12 +45,16 @@ class CameraNode(Node):
         self.frames_published = 0
         self.image_pub = self.create_publisher(Image, "image_raw", IMAGE_QOS)
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
+        # what camera_info cannot carry (tone curve, medium, distance), for an area node given camera_info only
+        self.metadata_pub = self.create_publisher(String, "camera_info/metadata", LATCHED_QOS)
         self.camera_info = None
         path = camera_info_url_to_path(url)
         calibration = read_start_file(self, "camera_info_url", lambda: read_calibration(path),
                                       "publishing image_raw without camera_info") if path is not None else None
         if calibration is not None:  # serialized once; each frame only changes its stamp
             self.camera_info = serialize_message(camera_to_info(calibration.camera, self.frame_id))
+            publish_safely(self, self.metadata_pub,
+                           String(data=metadata_message(calibration.camera, calibration.metadata)))
             self.get_logger().info(f"camera_info from {path}")
         self.source = open_source(source, loop, width, height, scene, medium)
         self.source_name = source
