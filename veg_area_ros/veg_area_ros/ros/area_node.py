@@ -82,9 +82,10 @@ class AreaNode(Node):
         declare(self, "levels", list(NO_LEVELS), "Sub-pixel mode: [object, background] grey levels; [0.0] = "
                 "from each frame.")
         declare(self, "tone_curve", DEFAULTS.tone_curve, "How the camera encodes light in its grey levels: "
-                "'auto' the curve calibration_file records (judged on its board views by veg-area calibrate), else "
-                "linear; 'linear' as they are, 'srgb' the sRGB curve (most JPEG cameras): Otsu's threshold and the "
-                "sub-pixel shares are then read in light.", choices=TONE_CURVE_CHOICES)
+                "'auto' the curve calibration_file records (judged on its board views by veg-area calibrate) or "
+                "camera_info/metadata says, else linear; 'linear' as they are, 'srgb' the sRGB curve (most JPEG "
+                "cameras): Otsu's threshold and the sub-pixel shares are then read in light.",
+                choices=TONE_CURVE_CHOICES)
         declare(self, "background_file", "", "Sub-pixel mode: an image of the empty scene (the flume before the "
                 "plant goes in), same camera and settings, to even the light with; '' = fitted in each frame.")
         declare(self, "preview_rate_hz", 5.0, "overlay/preview is drawn at most this often (viewers, the console).",
