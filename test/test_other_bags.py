@@ -385,6 +385,30 @@ def test_playing_a_topic_the_bag_lacks_names_the_topics_it_has(workspace, scenes
     assert done.returncode == 1 and "no topic /nope in the bag (it has /image_raw)" in done.stderr, done.stderr
 
 
+@pytest.mark.parametrize("whose", ["this camera's", "another camera's", "none"])
+def test_a_bags_recorded_calibration_metadata_gives_the_tone_curve(workspace, scenes, whose):
+    """A bag that recorded camera_info/metadata beside camera_info (the nodes publish it; record it with the
+    other topics) is measured with `--calibration bag` as the live area node measured it: the tone curve the
+    metadata records, when it is this camera_info's calibration's, and said."""
+    from veg_area_ros.calib_io import metadata_message
+
+    recorded = {"medium": "air", "tone_curve": "srgb", "tone_curve_evidence": "judged on 12 views"}
+    topics = [("/left/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "left") for k in range(FRAMES)]),
+              ("/left/image_raw", "sensor_msgs/msg/Image",
+               [_image(frame, k, "left") for k, frame in enumerate(scenes["left"])])]
+    if whose != "none":
+        text = metadata_message(ENDOSCOPE if whose == "this camera's" else RIGHT, recorded)
+        topics.insert(1, ("/left/camera_info/metadata", "std_msgs/msg/String", [TYPES.types["std_msgs/msg/String"](
+            data=text)]))
+    bag = workspace / "with_metadata"
+    write_bag(bag, "mcap", topics)
+    rows, done = _measure(workspace, bag, "--calibration", "bag")
+    assert done.returncode == 0 and len(rows) == FRAMES, done.stderr
+    wanted = "srgb" if whose == "this camera's" else "linear"
+    assert {row["tone_curve"] for row in rows} == {wanted}, rows
+    assert ("as the bag's camera_info/metadata records it (judged on 12 views)" in done.stderr) == (wanted == "srgb")
+
+
 @pytest.mark.parametrize("server", ["camera", "calibration"])
 @pytest.mark.parametrize("tone_curve", ["srgb", "linear"])
 def test_an_area_node_given_camera_info_reads_the_calibrations_tone_curve(tmp_path, server, tone_curve):

@@ -9,6 +9,7 @@ being filled is lost. Reading hands image messages over as zero-copy views (veg_
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import sqlite3
@@ -425,6 +426,7 @@ class BagFrame:
     image: ImageFields | CompressedImageFields
     camera_info: CameraInfoFields | None  # the latest camera_info of its camera recorded before this frame
     camera_info_problem: str = ""  # why camera_info is None although one was recorded
+    camera_metadata: str | None = None  # the latest camera_info/metadata beside that camera_info, as recorded
 
 
 def _open_reader(path: str | Path) -> Reader:
@@ -508,17 +510,25 @@ def bag_camera_info(path: str | Path, image_topic: str | None = None) -> tuple[s
 
 def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterator[BagFrame]:
     """The bag's image messages in recording order, each with its camera's camera_info last recorded before it
-    (`_info_connections`). Without a topic name: the only image topic (an error if there are several). An
-    image whose frame_id differs from that camera_info's gets none, and the reason."""
+    (`_info_connections`) and the calibration metadata recorded beside it (`<camera_info>/metadata`, text as
+    `calib_io.metadata_message` makes it). Without a topic name: the only image topic (an error if there are
+    several). An image whose frame_id differs from that camera_info's gets none, and the reason."""
     reader = _open_reader(path)
     try:
         images = _image_connections(reader, path, image_topic)
         infos, unpaired = _info_connections(reader, path, images[0].topic)
-        camera_info = None
+        metadata = [c for c in reader.connections if infos and c.topic == f"{infos[0].topic}/metadata"
+                    and c.msgtype == "std_msgs/msg/String"][:1]
+        store = typestore() if metadata else None
+        camera_info = camera_metadata = None
         index = 0
-        for connection, timestamp, data in reader.messages(connections=images + infos[:1]):
+        for connection, timestamp, data in reader.messages(connections=images + infos[:1] + metadata):
             if connection.msgtype == "sensor_msgs/msg/CameraInfo":
                 camera_info = decode_camera_info(data)
+                continue
+            if connection.msgtype == "std_msgs/msg/String":
+                with contextlib.suppress(Exception):  # undecodable: as if not recorded
+                    camera_metadata = store.deserialize_cdr(bytes(data), "std_msgs/msg/String").data
                 continue
             image = _decode_image(connection.msgtype, data)
             info, problem = camera_info, unpaired
@@ -527,7 +537,7 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
                 info, problem = None, (f"the camera_info on {infos[0].topic} is frame {info.header.frame_id!r}, "
                                        f"the image on {connection.topic} frame {image.header.frame_id!r}: "
                                        "another camera's calibration")
-            yield BagFrame(index, timestamp, image, info, problem)
+            yield BagFrame(index, timestamp, image, info, problem, camera_metadata if info is not None else None)
             index += 1
     finally:
         reader.close()

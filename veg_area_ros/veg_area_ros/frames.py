@@ -40,6 +40,7 @@ class Frame:
     position: int | None = None  # a video's frame index or a bag's image message index; None for an image file
     grey: np.ndarray | None = None  # a colour image in grey, where made beside the decoding (`with_grey`)
     camera_info_problem: str = ""  # a bag frame's: why its camera's camera_info is not given (another camera's)
+    camera_metadata: str | None = None  # a bag frame's camera_info/metadata recorded beside its camera_info
 
     def __post_init__(self) -> None:
         if self.image is None and self.lost == 0:
@@ -379,7 +380,8 @@ def _bag_frame(path: Path, frame) -> Frame:
     except ImageMessageError as exc:
         image, problem = None, str(exc)
     return Frame(f"{shown_name(path)}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
-                 frame.camera_info, position=frame.index, camera_info_problem=frame.camera_info_problem)
+                 frame.camera_info, position=frame.index, camera_info_problem=frame.camera_info_problem,
+                 camera_metadata=frame.camera_metadata)
 
 
 def spread_offset(window: int, step: int) -> int:

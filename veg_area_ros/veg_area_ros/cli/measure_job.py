@@ -14,6 +14,7 @@ from datetime import UTC
 from pathlib import Path
 from typing import NamedTuple
 
+from ..calib_io import metadata_for
 from ..settings import MeasurementSettings
 from .common import (
     EXIT_FAILED,
@@ -245,16 +246,39 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         if background is None:
             raise CliError(f"--background {job.background}: {problem}", EXIT_USAGE)
 
-    def new_measurer(camera):
+    def new_measurer(camera, recorded_conditions: dict | None = None):
         try:  # the exact port model for frames of the port file's camera, not its plumb_bob stand-in
             return job.settings.measurer(camera, targets, port_camera if camera is file_camera else None,
-                                         background, conditions if camera is file_camera else None)
+                                         background, conditions if camera is file_camera else recorded_conditions)
         except (ClassifyError, LightError) as exc:
             raise CliError(str(exc), EXIT_USAGE) from exc
         except TargetsError as exc:
             raise CliError(str(exc)) from exc
 
+    said_metadata: set[str] = set()
+
+    def bag_conditions(camera, text: str | None, say) -> dict | None:
+        """The metadata recorded beside the bag's camera_info (camera_info/metadata) if it is that camera's."""
+        if text is None:
+            return None
+        try:
+            recorded = metadata_for(camera, text)
+        except ValueError as exc:
+            note = f"the bag's camera_info/metadata is not used: {exc}"
+        else:
+            if recorded is None:
+                return None
+            curve = job.settings.tone_curve_for(recorded) if job.settings.tone_curve == "auto" else None
+            note = (f"tone curve {curve}, as the bag's camera_info/metadata records it "
+                    f"({recorded.get('tone_curve_evidence', 'no evidence recorded')}); --tone-curve sets another"
+                    if curve and "tone_curve" in recorded else "")
+        if note and note not in said_metadata:
+            said_metadata.add(note)
+            say(note)
+        return None if note.startswith("the bag's") else recorded
+
     measurer = new_measurer(camera) if not from_bag else None
+    recorded_metadata = None  # a bag's camera_info/metadata the measurer was made with
     if job.settings.tone_curve == "auto" and conditions and "tone_curve" in conditions:
         curve = job.settings.tone_curve_for(conditions)
         if curve != conditions["tone_curve"]:  # the excess-green index is no light to decode
@@ -318,9 +342,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                     if frame.camera_info is None:
                         raise InputError(frame.camera_info_problem or "no camera_info recorded before this frame")
                     recorded = info_to_camera(frame.camera_info)
-                    if recorded != camera or measurer is None:
-                        camera = recorded
-                        measurer = new_measurer(camera)
+                    if recorded != camera or frame.camera_metadata != recorded_metadata or measurer is None:
+                        camera, recorded_metadata = recorded, frame.camera_metadata
+                        measurer = new_measurer(camera, bag_conditions(camera, recorded_metadata, say))
                 result = measurer.measure(frame.image, keep_images=bool(job.overlay or job.idealized),
                                           grey=frame.grey)
                 if frame.name.rsplit("#", 1)[0] in other_camera:
