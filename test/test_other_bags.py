@@ -409,6 +409,22 @@ def test_a_bags_recorded_calibration_metadata_gives_the_tone_curve(workspace, sc
     assert ("as the bag's camera_info/metadata records it (judged on 12 views)" in done.stderr) == (wanted == "srgb")
 
 
+def test_a_bags_recorded_tone_curve_is_said_not_to_apply_to_the_green_index(workspace, scenes):
+    """As for a calibration file: the excess-green index is read as it is, and the run says why it does not
+    take the curve the bag's metadata records."""
+    from veg_area_ros.calib_io import metadata_message
+
+    text = metadata_message(ENDOSCOPE, {"medium": "air", "tone_curve": "srgb"})
+    bag = workspace / "green"
+    write_bag(bag, "mcap", [
+        ("/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "left") for k in range(FRAMES)]),
+        ("/camera_info/metadata", "std_msgs/msg/String", [TYPES.types["std_msgs/msg/String"](data=text)]),
+        ("/image_raw", "sensor_msgs/msg/Image", [_image(frame, k, "left") for k, frame in enumerate(scenes["left"])])])
+    _, done = _measure(workspace, bag, "--calibration", "bag", "--object", "green")  # the grey cube: no object
+    assert "the bag's camera_info/metadata records srgb, which does not apply to --object green" in done.stderr
+    assert "as the bag's camera_info/metadata records it" not in done.stderr
+
+
 @pytest.mark.parametrize("server", ["camera", "calibration"])
 @pytest.mark.parametrize("tone_curve", ["srgb", "linear"])
 def test_an_area_node_given_camera_info_reads_the_calibrations_tone_curve(tmp_path, server, tone_curve):

@@ -34,9 +34,11 @@ from .cdr import (
     CameraInfoFields,
     CompressedImageFields,
     ImageFields,
+    ImageMessageError,
     decode_camera_info,
     decode_compressed_image,
     decode_image,
+    decode_string,
 )
 from .files import os_reason, special_file, write_atomic
 from .strict_yaml import load_text, read_text
@@ -519,7 +521,6 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
         infos, unpaired = _info_connections(reader, path, images[0].topic)
         metadata = [c for c in reader.connections if infos and c.topic == f"{infos[0].topic}/metadata"
                     and c.msgtype == "std_msgs/msg/String"][:1]
-        store = typestore() if metadata else None
         camera_info = camera_metadata = None
         index = 0
         for connection, timestamp, data in reader.messages(connections=images + infos[:1] + metadata):
@@ -527,8 +528,8 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
                 camera_info = decode_camera_info(data)
                 continue
             if connection.msgtype == "std_msgs/msg/String":
-                with contextlib.suppress(Exception):  # undecodable: as if not recorded
-                    camera_metadata = store.deserialize_cdr(bytes(data), "std_msgs/msg/String").data
+                with contextlib.suppress(ImageMessageError):  # undecodable: as if not recorded
+                    camera_metadata = decode_string(data)
                 continue
             image = _decode_image(connection.msgtype, data)
             info, problem = camera_info, unpaired

@@ -299,6 +299,11 @@ def _camera_info_writer(info: CameraInfoFields) -> _Writer:
     return writer
 
 
+def decode_string(buffer) -> str:
+    """A std_msgs/String message's text."""
+    return _Reader(buffer).string()
+
+
 def decode_camera_info(buffer) -> CameraInfoFields:
     reader = _Reader(buffer)
     header = reader.header()

@@ -255,38 +255,39 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         except TargetsError as exc:
             raise CliError(str(exc)) from exc
 
-    said_metadata: set[str] = set()
+    def tone_note(recorded: dict, source: str) -> str:
+        """What the run says of the tone curve a calibration's metadata records, read under --tone-curve auto."""
+        curve = job.settings.tone_curve_for(recorded)
+        if curve != recorded["tone_curve"]:  # the excess-green index is no light to decode
+            return (f"tone curve {curve}: {source} records {recorded['tone_curve']}, which does not apply to "
+                    f"--object {job.settings.object}")
+        return (f"tone curve {curve}, as {source} records it "
+                f"({recorded.get('tone_curve_evidence', 'no evidence recorded')}); --tone-curve sets another")
 
-    def bag_conditions(camera, text: str | None, say) -> dict | None:
+    said: set[str] = set()  # what a bag's metadata made the run say, said once
+
+    def say_once(note: str) -> None:
+        if note not in said:
+            said.add(note)
+            say(note)
+
+    def bag_conditions(camera, text: str | None) -> dict | None:
         """The metadata recorded beside the bag's camera_info (camera_info/metadata) if it is that camera's."""
         if text is None:
             return None
         try:
             recorded = metadata_for(camera, text)
         except ValueError as exc:
-            note = f"the bag's camera_info/metadata is not used: {exc}"
-        else:
-            if recorded is None:
-                return None
-            curve = job.settings.tone_curve_for(recorded) if job.settings.tone_curve == "auto" else None
-            note = (f"tone curve {curve}, as the bag's camera_info/metadata records it "
-                    f"({recorded.get('tone_curve_evidence', 'no evidence recorded')}); --tone-curve sets another"
-                    if curve and "tone_curve" in recorded else "")
-        if note and note not in said_metadata:
-            said_metadata.add(note)
-            say(note)
-        return None if note.startswith("the bag's") else recorded
+            say_once(f"the bag's camera_info/metadata is not used: {exc}")
+            return None
+        if recorded is not None and job.settings.tone_curve == "auto" and "tone_curve" in recorded:
+            say_once(tone_note(recorded, "the bag's camera_info/metadata"))
+        return recorded
 
     measurer = new_measurer(camera) if not from_bag else None
     recorded_metadata = None  # a bag's camera_info/metadata the measurer was made with
     if job.settings.tone_curve == "auto" and conditions and "tone_curve" in conditions:
-        curve = job.settings.tone_curve_for(conditions)
-        if curve != conditions["tone_curve"]:  # the excess-green index is no light to decode
-            say(f"tone curve {curve}: {job.calibration} records {conditions['tone_curve']}, which does not apply "
-                f"to --object {job.settings.object}")
-        else:
-            say(f"tone curve {curve}, as {job.calibration} records it "
-                f"({conditions.get('tone_curve_evidence', 'no evidence recorded')}); --tone-curve sets another")
+        say(tone_note(conditions, job.calibration))
     if job.idealized and camera is not None:
         folder = Path(job.idealized)
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
@@ -344,7 +345,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                     recorded = info_to_camera(frame.camera_info)
                     if recorded != camera or frame.camera_metadata != recorded_metadata or measurer is None:
                         camera, recorded_metadata = recorded, frame.camera_metadata
-                        measurer = new_measurer(camera, bag_conditions(camera, recorded_metadata, say))
+                        measurer = new_measurer(camera, bag_conditions(camera, recorded_metadata))
                 result = measurer.measure(frame.image, keep_images=bool(job.overlay or job.idealized),
                                           grey=frame.grey)
                 if frame.name.rsplit("#", 1)[0] in other_camera:
