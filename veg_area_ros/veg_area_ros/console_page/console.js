@@ -21,11 +21,13 @@ function setText(id, text) {
   $(id).textContent = text;
 }
 
-function setList(id, items) {
+function setList(id, items, tag = "li") {
   const key = JSON.stringify(items);
   if (shownText.get(id) === key) return;
   shownText.set(id, key);
-  $(id).replaceChildren(...items.map((item) => { const li = document.createElement("li"); li.textContent = item; return li; }));
+  $(id).replaceChildren(...items.map((item) => {
+    const element = document.createElement(tag); element.textContent = item; return element;
+  }));
 }
 
 function setClass(id, name) {
@@ -237,26 +239,23 @@ function drawChart(points) {
   ctx.fillText(t1.toFixed(1) + " s (run time; band: ± 1 std)", w - 190, h - 6);
 }
 
-// The points after those the page has (all of them when `complete`), kept to the server's window.
+// The points after those the page has (the whole series when `complete`: a new run, or the page fell
+// behind), kept to the server's window; whether anything changed.
 function mergeSeries(area) {
-  const changed = area.complete || area.points.length > 0 || area.run !== series.run;
-  const points = area.complete || area.run !== series.run ? area.points : series.points.concat(area.points);
+  const points = area.complete ? area.points : series.points.concat(area.points);
   series = { run: area.run, appended: area.appended, points: points.slice(-area.window) };
-  return changed;
+  return area.complete || area.points.length > 0;
 }
 
 function showArea(area) {
-  const points = series.points;
-  if (!mergeSeries(area)) return showAreaText(area);
-  if (series.points.length) {
-    const [, a, s] = series.points[series.points.length - 1];
-    setText("af-now", `${(a * 1e4).toFixed(3)} ± ${(s * 1e4).toFixed(3)} cm²  (${a.toExponential(4)} m²)`);
+  if (mergeSeries(area)) {
+    const points = series.points;
+    if (points.length) {
+      const [, a, s] = points[points.length - 1];
+      setText("af-now", `${(a * 1e4).toFixed(3)} ± ${(s * 1e4).toFixed(3)} cm²  (${a.toExponential(4)} m²)`);
+    }
+    drawChart(points);
   }
-  if (series.points.length || points.length) drawChart(series.points);
-  showAreaText(area);
-}
-
-function showAreaText(area) {
   const f = area.frames;
   const count = (v) => (v === null || v === undefined ? "–" : v);
   setText("frames", `frames measured ${count(f.measured)}, skipped ${count(f.skipped)}, lost ${count(f.lost)}` +
@@ -277,13 +276,7 @@ function showCalibration(calibration) {
     `fit: ${p.fitted ? "yes" : "no"}${p.rms_px ? ", RMS " + p.rms_px.toFixed(4) + " px" : ""}`,
     served ? `served: ${served.model} ${served.width}x${served.height}, fx ${served.fx.toFixed(2)}, fy ${served.fy.toFixed(2)}, cx ${served.cx.toFixed(2)}, cy ${served.cy.toFixed(2)}` : "served: no calibration yet",
   ];
-  const key = JSON.stringify(lines);
-  if (shownText.get("calibration-figures") !== key) {
-    shownText.set("calibration-figures", key);
-    $("calibration-figures").replaceChildren(...lines.map((line) => {
-      const div = document.createElement("div"); div.textContent = line; return div;
-    }));
-  }
+  setList("calibration-figures", lines, "div");
   setText("still-needed", p.still_needed ? "still needed: " + p.still_needed : "");
   setList("calibration-messages", calibration.messages.slice().reverse());
 }
@@ -308,7 +301,8 @@ function showNodes(nodes, access) {
     const panel = c.closest("section").id;
     const needs = panel === "calibration-panel" ? nodes.calibration.present :
       (panel === "record-panel" ? true : nodes.area.present);
-    if (c.disabled !== (!canChange || !needs)) c.disabled = !canChange || !needs;
+    const disabled = !canChange || !needs;
+    if (c.disabled !== disabled) c.disabled = disabled;
   });
   setText("parameters-note", nodes.area.present ? "" : `(${nodes.area.name} is not running)`);
 }
