@@ -4,7 +4,7 @@ it and makes small JPEGs, and two headless chromium pages show them), alternated
 to this machine like the tests. Two camera rates: a real camera's (the area node keeps up) and as fast as the
 camera node can (the area node saturated: any CPU the console takes shows).
 
-    .venv/bin/python bench/console_load.py [--seconds 10] [--rounds 3] [--rates 30,200]
+    .venv/bin/python bench/console_load.py [--seconds 10] [--rounds 3] [--rates 30,200] [--console-nice N]
 """
 
 from __future__ import annotations
@@ -82,7 +82,7 @@ def chromium_pids() -> list[int]:
     return found
 
 
-def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path) -> dict:
+def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path, console_nice: int | None) -> dict:
     import rclpy
     from playwright.sync_api import sync_playwright
     from rclpy.node import Node
@@ -91,7 +91,8 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path)
     from veg_area_ros.ros.qos import RESULT_QOS
 
     processes = [start("camera_node", rate_hz=rate_hz, synthetic_scene="cube", camera_info_url=f"file://{calibration}"),
-                 start("area_node"), start("console_node")]
+                 start("area_node"),
+                 start("console_node", **({} if console_nice is None else {"cpu_nice": console_nice}))]
     stamps: list[float] = []
     rclpy.init()
     probe = Node("console_load_probe")
@@ -146,7 +147,7 @@ def inside(args: argparse.Namespace) -> int:
     write_calibration(calibration, SyntheticSource(scene="cube").camera, "synthetic")
     print(f"{'camera Hz':>9}  {'Af/s without pages':>24}  {'Af/s with two pages':>24}  ratio min / median / max")
     for rate in (float(r) for r in args.rates.split(",")):
-        result = measure_rate(rate, args.seconds, args.rounds, calibration)
+        result = measure_rate(rate, args.seconds, args.rounds, calibration, args.console_nice)
         ratios = result["ratios"]
         print(f"{rate:9.0f}  {' '.join(f'{v:7.1f}' for v in result['without_pages_hz']):>24}  "
               f"{' '.join(f'{v:7.1f}' for v in result['with_two_pages_hz']):>24}  "
@@ -162,6 +163,8 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--rates", default="30,200")
+    parser.add_argument("--console-nice", type=int, default=None,
+                        help="the console node's cpu_nice (default: the node's own default)")
     parser.add_argument("--inside", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.inside:

@@ -29,6 +29,17 @@ def api_state(base: str = CONSOLE) -> dict:
         return json.load(answer)
 
 
+def thread_niceness(pid: int) -> list[int]:
+    """The niceness of each thread of a process (/proc/PID/task/*/stat, the 19th field)."""
+    values = []
+    for stat in Path(f"/proc/{pid}/task").glob("*/stat"):
+        try:
+            values.append(int(stat.read_text().rsplit(")", 1)[1].split()[16]))
+        except (OSError, IndexError, ValueError):  # a thread that ended meanwhile
+            continue
+    return values
+
+
 def post(base: str, path: str, body: dict, token: str | None = None) -> tuple[int, dict]:
     headers = {"Content-Type": "application/json"} | ({"X-Console-Token": token} if token else {})
     request = urllib.request.Request(base + path, data=json.dumps(body).encode(), headers=headers, method="POST")
@@ -62,8 +73,9 @@ def scenario_console(options: dict, nodes) -> dict:
     nodes.start("calibration_node", remap={"image_raw": "board/image_raw"}, camera_info_url=f"file://{served}",
                 min_views=40, auto_calibrate=False)
     area = nodes.start("area_node")
-    nodes.start("console_node", record_folder=str(bags))
-    nodes.start("console_node", name="open_console", host="0.0.0.0", port=8081, token=OPEN_TOKEN)
+    console = nodes.start("console_node", record_folder=str(bags))
+    open_console = nodes.start("console_node", name="open_console", host="0.0.0.0", port=8081, token=OPEN_TOKEN,
+                               cpu_nice=0)
     rclpy.init()
     probe = Node("console_probe")
     infos: list[dict] = []
@@ -125,6 +137,8 @@ def scenario_console(options: dict, nodes) -> dict:
 
     try:
         out["consoles_up"] = spin_until(lambda: console_up(CONSOLE) and console_up(OPEN_CONSOLE), 60)
+        out["niceness"] = {"console": thread_niceness(console.pid), "open_console": thread_niceness(open_console.pid),
+                           "area": thread_niceness(area.pid)}
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             page = browser.new_page(viewport={"width": 1360, "height": 960})
@@ -162,6 +176,9 @@ def scenario_console(options: dict, nodes) -> dict:
                                    "'640x480'", timeout=60000)
             page.wait_for_function("document.getElementById('af-now').textContent.includes('cm²')", timeout=30000)
             out["af_text"] = page.inner_text("#af-now")
+            # what the page was last told about the machine's load, and the note it shows, read together
+            out["page_load"], out["load_note"] = page.evaluate(
+                "[state.load, document.getElementById('load-note').textContent]")
             out["frames_text"] = page.inner_text("#frames")
             # the page asks for the points it does not have: its copy is the server's window, in order
             page.wait_for_timeout(3000)

@@ -18,6 +18,7 @@ from ros_harness import run_scenario
 
 from veg_area_ros.console_server import ConsoleServer
 from veg_area_ros.console_state import (
+    BUSY_RATE_HZ,
     MAX_RATE_HZ,
     MAX_WIDTH_PX,
     SERIES_POINTS,
@@ -25,7 +26,9 @@ from veg_area_ros.console_state import (
     AreaSeries,
     ConsoleInputError,
     ImageFeed,
+    LoadGovernor,
     checked_parameters,
+    cpu_pressure,
     host_allowed,
     roi_from_drag,
 )
@@ -56,6 +59,34 @@ def test_images_to_the_page_are_bounded_in_size_and_rate():
     encodings = feed.encodings
     again, m = feed.jpeg(300.0)
     assert n == 201 and again is same and m == n and feed.encodings == encodings
+
+
+def test_the_cpu_pressure_is_read_from_the_kernel_or_said_unknown(tmp_path):
+    psi = tmp_path / "cpu"
+    psi.write_text("some avg10=46.29 avg60=34.02 avg300=40.69 total=6970331201\n"
+                   "full avg10=0.00 avg60=0.00 avg300=0.00 total=0\n")
+    assert cpu_pressure(str(psi)) == pytest.approx(0.4629)
+    assert cpu_pressure(str(tmp_path / "absent")) is None  # a kernel without pressure stall information
+    psi.write_text("some avg10=lots\n")
+    assert cpu_pressure(str(psi)) is None
+
+
+def test_the_console_gives_way_while_the_cores_are_busy_and_comes_back_once_they_calm():
+    load, feed = LoadGovernor(), ImageFeed()
+    frame = np.zeros((480, 640, 3), np.uint8)
+    steps = [(0.10, False), (0.35, True), (0.25, True), (0.15, False), (0.25, False), (None, False)]
+    for pressure, slowed in steps:
+        assert load.update(pressure) is slowed, (pressure, slowed)
+        said = load.as_dict()
+        assert said["slowed"] is slowed
+        assert said["images_per_s"] == (BUSY_RATE_HZ if slowed else MAX_RATE_HZ)
+        assert said["poll_s"] == (1.0 if slowed else 0.5)
+    load.update(0.9)
+    feed.max_rate_hz = load.image_rate_hz  # as the node sets it
+    for k in range(200):  # asked at 100 Hz for 2 s, a new frame each time
+        feed.offer(frame)
+        feed.jpeg(10.0 + k / 100)
+    assert feed.encodings <= 2 * BUSY_RATE_HZ + 1 < 2 * MAX_RATE_HZ - 1
 
 
 def test_a_view_nobody_looks_at_is_let_go():
@@ -252,9 +283,31 @@ def test_the_page_shows_the_calibration_and_its_buttons_fit_discard_and_commit(c
 
 
 @needs_browser
+def test_the_console_yields_the_cpu_to_the_measurement_unless_told_not_to(console):
+    """Every thread of the console's process, its server's and DDS's too, runs at niceness 10 (cpu_nice's
+    default), the area node's at 0; cpu_nice:=0 leaves the console as the other nodes."""
+    niceness = console["niceness"]
+    assert len(niceness["console"]) >= 3 and set(niceness["console"]) == {10}, niceness
+    assert niceness["open_console"] and set(niceness["open_console"]) == {0}, niceness
+    assert niceness["area"] and set(niceness["area"]) == {0}, niceness
+
+
+@needs_browser
 def test_the_page_shows_the_overlay_and_af(console):
     assert console["overlay_natural_width"] == 640
     assert "cm²" in console["af_text"] and "frames measured" in console["frames_text"]
+
+
+@needs_browser
+def test_the_page_says_when_the_console_gives_way_to_a_busy_machine(console):
+    """Whether the machine was busy during the test is not ours to choose: the note must match what the page
+    was told, either way, and the state must carry the figures the note quotes."""
+    load, note = console["page_load"], console["load_note"]
+    assert set(load) == {"cpu_pressure", "slowed", "images_per_s", "poll_s"}
+    if load["slowed"]:
+        assert f"slowed to {load['images_per_s']:g} a second" in note and "busy" in note
+    else:
+        assert note == ""
 
 
 @needs_browser

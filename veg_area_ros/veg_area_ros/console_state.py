@@ -26,6 +26,11 @@ VIEWS = ("area", "calibration", "camera")  # the overlay, the calibration node's
 MAX_WIDTH_PX = 800  # images to the page: never wider (a 10 MP frame is not sent whole)
 MAX_RATE_HZ = 5.0  # and never more often, whatever the camera's rate
 JPEG_QUALITY = 80
+# a machine whose cores are busy (some runnable task waited for a CPU this share of the last 10 s, Linux's
+# pressure stall information): the pages get fewer images and poll less, until it has calmed below CALM
+BUSY_PRESSURE, CALM_PRESSURE = 0.30, 0.20
+BUSY_RATE_HZ = 2.0
+POLL_S, BUSY_POLL_S = 0.5, 1.0
 VIEW_KEPT_S = 5.0  # a view nobody asked for in this long is unsubscribed (its node stops drawing it)
 SERIES_POINTS = 1200
 MESSAGES_KEPT = 12
@@ -90,6 +95,49 @@ class ImageFeed:
                 self.frame_size = (frame.shape[1], frame.shape[0])
                 self.encodings += 1
             return self._jpeg, self._jpeg_number
+
+
+def cpu_pressure(path: str = "/proc/pressure/cpu") -> float | None:
+    """The share of the last 10 s in which some runnable task waited for a CPU (Linux's pressure stall
+    information, `some avg10`), or None where the kernel does not say."""
+    try:
+        with open(path, encoding="ascii") as file:
+            for line in file:
+                if line.startswith("some "):
+                    fields = dict(field.split("=", 1) for field in line.split()[1:])
+                    return float(fields["avg10"]) / 100.0
+    except (OSError, ValueError, KeyError):
+        return None
+    return None
+
+
+@dataclass
+class LoadGovernor:
+    """Whether the console gives way: where the machine's cores are busy the camera and area nodes need them,
+    so the pages are sent BUSY_RATE_HZ images a second and poll every BUSY_POLL_S; back to the full rate once
+    the pressure is below CALM_PRESSURE (a gap between the two, so that the pages' own load, gone once
+    slowed, does not make it swing)."""
+
+    pressure: float | None = None
+    slowed: bool = False
+
+    def update(self, pressure: float | None) -> bool:
+        self.pressure = pressure
+        if pressure is None:
+            self.slowed = False
+        elif pressure >= BUSY_PRESSURE:
+            self.slowed = True
+        elif pressure < CALM_PRESSURE:
+            self.slowed = False
+        return self.slowed
+
+    @property
+    def image_rate_hz(self) -> float:
+        return BUSY_RATE_HZ if self.slowed else MAX_RATE_HZ
+
+    def as_dict(self) -> dict:
+        return {"cpu_pressure": None if self.pressure is None else round(self.pressure, 3), "slowed": self.slowed,
+                "images_per_s": self.image_rate_hz, "poll_s": BUSY_POLL_S if self.slowed else POLL_S}
 
 
 def encode_small(frame: np.ndarray, max_width: int) -> tuple[bytes, tuple[int, int]]:

@@ -318,12 +318,21 @@ async function stateLoop() {
       showSettings(state.parameters, state.choices);
       showCalibration(state.calibration);
       showRecording(state.recording);
+      showLoad(state.load);
       document.body.dataset.polls = String(Number(document.body.dataset.polls || 0) + 1);
     } catch (error) {
       say("the console does not answer: " + error, true);
     }
-    await new Promise((done) => setTimeout(done, 500));
+    await new Promise((done) => setTimeout(done, 1000 * ((state && state.load && state.load.poll_s) || 0.5)));
   }
+}
+
+// The console gives way when the measuring machine's cores are busy: fewer images, fewer polls, said here.
+function showLoad(load) {
+  setText("load-note", load && load.slowed
+    ? `images slowed to ${load.images_per_s} a second: the measuring machine's cores are busy ` +
+      `(a task waited for a CPU ${Math.round(100 * load.cpu_pressure)} % of the last 10 s)`
+    : "");
 }
 
 setupSettings();

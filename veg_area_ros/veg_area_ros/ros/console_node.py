@@ -4,7 +4,8 @@ warnings and frame counts, the calibration's progress with its fit / commit / di
 node's tuned parameters (set through its parameter services, so `ros2 param get` sees the same values), a ROI
 drawn on the image, and the package's recorder started and stopped.
 
-Images reach the page at most MAX_RATE_HZ times a second, no wider than MAX_WIDTH_PX; a view's topic is
+Images reach the page at most MAX_RATE_HZ times a second (BUSY_RATE_HZ while the machine's cores are busy, said
+on the page), no wider than MAX_WIDTH_PX; a view's topic is
 subscribed only while a page shows it (the area node draws its overlay only for subscribers). Bound to
 127.0.0.1 by default; with host:=0.0.0.0 the page changes nothing without the token printed at start."""
 
@@ -36,14 +37,16 @@ from ..console_state import (
     AreaSeries,
     CalibrationLog,
     ImageFeed,
+    LoadGovernor,
     checked_parameters,
+    cpu_pressure,
     folder_size,
     now,
 )
 from .messages import progress_as_dict
 from .params import declare
 from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
-from .run import run_nodes
+from .run import lower_priority, run_nodes
 
 SERVICE_WAIT_S = 1.0  # a node whose service is not there within this long is said to be missing
 FIT_TIMEOUT_S = 600.0  # a fit of many views with model auto takes minutes on a slow machine
@@ -53,8 +56,16 @@ CALIBRATION_SERVICES = {"fit": "calibrate", "commit": "commit", "discard": "disc
 
 
 class ConsoleNode(Node):
-    def __init__(self, name: str = "console_node", **kwargs):
+    def __init__(self, name: str = "console_node", own_process: bool = False, **kwargs):
         super().__init__(name, **kwargs)
+        nice = declare(self, "cpu_nice", 10, "How far the console yields the CPU to the measurement: its "
+                       "niceness is raised by this much at start when it runs in its own process (0 = as the "
+                       "other nodes). Where the camera and area nodes keep every core busy, the console and so "
+                       "the pages' images then get what they leave; with a core to spare nothing changes.",
+                       low=0, high=19, read_only=True)
+        if own_process and nice > 0:  # before the server's threads start: they inherit it
+            self.get_logger().info(f"console at niceness {lower_priority(nice)} (cpu_nice): the measurement "
+                                   "comes first")
         host = declare(self, "host", "127.0.0.1", "Address the page is served on; beyond loopback (0.0.0.0, a "
                        "lab address) the page changes nothing without the token printed at start.", read_only=True)
         port = declare(self, "port", 8080, "TCP port of the page.", low=1, high=65535, read_only=True)
@@ -71,6 +82,7 @@ class ConsoleNode(Node):
         self.feeds = {view: ImageFeed() for view in VIEWS}
         self.series = AreaSeries()
         self.calibration_log = CalibrationLog()
+        self.load = LoadGovernor()
         self.parameters: dict = {}
         self.present: dict[str, bool] = {self.area_name: False, self.calibration_name: False}
         self.recorder: subprocess.Popen | None = None
@@ -135,7 +147,9 @@ class ConsoleNode(Node):
             self._parameters_asked_at = moment  # an answer lost with a node that went: asked again after a while
             future = self.get_client.call_async(GetParameters.Request(names=list(TUNED)))
             future.add_done_callback(self._got_parameters)
+        self.load.update(cpu_pressure())
         for view, feed in self.feeds.items():
+            feed.max_rate_hz = self.load.image_rate_hz
             subscribed = view in self.view_subscriptions
             if feed.wanted(moment) and not subscribed:
                 self.view_subscriptions[view] = self.create_subscription(
@@ -167,7 +181,7 @@ class ConsoleNode(Node):
                           "calibration": {"name": self.calibration_name,
                                           "present": self.present[self.calibration_name]}},
                 "area": self.series.as_dict(shown), "calibration": self.calibration_log.as_dict(),
-                "parameters": self.parameters, "recording": recording}
+                "parameters": self.parameters, "recording": recording, "load": self.load.as_dict()}
 
     # --- what the page asks for (from the server's worker threads) --------------------------------------------
     def _call(self, client, request, timeout: float, missing: str):
@@ -267,7 +281,7 @@ def _die_with_parent() -> None:
 
 
 def main(args: list[str] | None = None) -> int:
-    return run_nodes([ConsoleNode], args)
+    return run_nodes([lambda: ConsoleNode(own_process=True)], args)
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ import signal
 import sys
 import traceback
 from collections.abc import Callable
+from pathlib import Path
 
 import rclpy
 from rclpy.node import Node
@@ -64,6 +65,23 @@ class StopOnSignal:
 
 
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+def lower_priority(increment: int) -> int:
+    """Raise the niceness of every thread of this process by `increment` (threads started later inherit it):
+    on Linux a thread's niceness is its own, and DDS has started its threads before a node reads its
+    parameters. Returns the niceness of the calling thread afterwards."""
+    if increment <= 0:
+        return os.getpriority(os.PRIO_PROCESS, 0)
+    tasks = Path("/proc/self/task")
+    threads = [int(t.name) for t in tasks.iterdir()] if tasks.is_dir() else [0]
+    for thread in threads:
+        try:
+            now = os.getpriority(os.PRIO_PROCESS, thread)
+            os.setpriority(os.PRIO_PROCESS, thread, min(now + increment, 19))
+        except (ProcessLookupError, PermissionError):  # a thread that ended meanwhile
+            continue
+    return os.getpriority(os.PRIO_PROCESS, 0)
 
 
 def warn_unknown_parameters(node: Node) -> None:
