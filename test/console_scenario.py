@@ -6,6 +6,7 @@ screenshots are written to the working folder."""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import time
 import urllib.error
@@ -22,6 +23,16 @@ OPEN_TOKEN = "lab-token-for-the-test"
 # the page has drawn an image of this view (the image is a canvas: drawn once its JPEG is decoded)
 SHOWN = ("(() => { const f = document.getElementById('frame');"
          " return f.dataset.shown === '1' && f.dataset.view === '%s'; })()")
+
+# the standard page visibility a background tab or a minimised window gives a page, set by hand: headless pages
+# are always visible
+SET_VISIBILITY = ("""(() => {
+    const hidden = '%s' === 'hidden';
+    Object.defineProperty(document, 'hidden', { configurable: true, get: () => hidden });
+    const visibility = hidden ? 'hidden' : 'visible';
+    Object.defineProperty(document, 'visibilityState', { configurable: true, get: () => visibility });
+    document.dispatchEvent(new Event('visibilitychange'));
+})()""")
 
 
 def api_state(base: str = CONSOLE) -> dict:
@@ -138,7 +149,7 @@ def scenario_console(options: dict, nodes) -> dict:
     try:
         out["consoles_up"] = spin_until(lambda: console_up(CONSOLE) and console_up(OPEN_CONSOLE), 60)
         out["niceness"] = {"console": thread_niceness(console.pid), "open_console": thread_niceness(open_console.pid),
-                           "area": thread_niceness(area.pid)}
+                           "area": thread_niceness(area.pid), "started_at": os.getpriority(os.PRIO_PROCESS, 0)}
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             page = browser.new_page(viewport={"width": 1360, "height": 960})
@@ -187,6 +198,25 @@ def scenario_console(options: dict, nodes) -> dict:
             out["series_on_page"], out["series_on_server"] = on_page, on_server
             out["overlay_natural_width"] = page.evaluate("document.getElementById('frame').width")
             shot(page, "console-measurement")
+
+            # --- a page nobody sees asks for nothing, and catches up once shown -------------------------------
+            page.evaluate("""() => {
+                window.fetchesSeen = [];
+                const plain = window.fetch.bind(window);
+                window.fetch = (url, options) => { window.fetchesSeen.push(String(url)); return plain(url, options); };
+            }""")
+            page.wait_for_timeout(2000)
+            out["fetches_while_seen"] = page.evaluate("window.fetchesSeen")
+            page.evaluate(SET_VISIBILITY % "hidden")
+            page.wait_for_timeout(2000)  # what was in flight when it went hidden has ended
+            hidden_at = page.evaluate("Number(document.getElementById('frame').dataset.frameNumber)")
+            page.evaluate("window.fetchesSeen = []")
+            page.wait_for_timeout(4000)
+            out["fetches_while_hidden"] = page.evaluate("window.fetchesSeen")
+            page.evaluate(SET_VISIBILITY % "visible")
+            page.wait_for_function(f"Number(document.getElementById('frame').dataset.frameNumber) > {hidden_at}",
+                                   timeout=30000)
+            out["fetches_once_shown"] = page.evaluate("window.fetchesSeen")
 
             # --- the threshold slider: the node's parameter, then the next Af --------------------------------
             before = infos[-1]

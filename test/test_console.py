@@ -284,18 +284,29 @@ def test_the_page_shows_the_calibration_and_its_buttons_fit_discard_and_commit(c
 
 @needs_browser
 def test_the_console_yields_the_cpu_to_the_measurement_unless_told_not_to(console):
-    """Every thread of the console's process, its server's and DDS's too, runs at niceness 10 (cpu_nice's
-    default), the area node's at 0; cpu_nice:=0 leaves the console as the other nodes."""
+    """Every thread of the console's process, its server's and DDS's too, runs 10 nicer (cpu_nice's default)
+    than the nodes were started at, the area node's as started; cpu_nice:=0 leaves the console as the others."""
     niceness = console["niceness"]
-    assert len(niceness["console"]) >= 3 and set(niceness["console"]) == {10}, niceness
-    assert niceness["open_console"] and set(niceness["open_console"]) == {0}, niceness
-    assert niceness["area"] and set(niceness["area"]) == {0}, niceness
+    started = niceness["started_at"]  # 0 in a plain shell; a suite run under `nice` starts every node nicer
+    assert len(niceness["console"]) >= 3 and set(niceness["console"]) == {min(started + 10, 19)}, niceness
+    assert niceness["open_console"] and set(niceness["open_console"]) == {started}, niceness
+    assert niceness["area"] and set(niceness["area"]) == {started}, niceness
 
 
 @needs_browser
 def test_the_page_shows_the_overlay_and_af(console):
     assert console["overlay_natural_width"] == 640
     assert "cm²" in console["af_text"] and "frames measured" in console["frames_text"]
+
+
+@needs_browser
+def test_a_page_nobody_sees_asks_for_nothing_and_catches_up_once_shown(console):
+    """A tab in the background or a minimised window: no image and no state is fetched while the page is
+    hidden (the standard visibility API says so); shown again, both loops resume and a newer image is drawn."""
+    seen, hidden, shown = console["fetches_while_seen"], console["fetches_while_hidden"], console["fetches_once_shown"]
+    assert any("/api/frame/" in url for url in seen) and any("/api/state" in url for url in seen), seen
+    assert hidden == [], hidden
+    assert any("/api/frame/" in url for url in shown) and any("/api/state" in url for url in shown), shown
 
 
 @needs_browser

@@ -14,12 +14,12 @@ No ROS here.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
 
-from .classify import Classifier, Levels
+from .classify import Classifier, Levels, to_light
 from .light_levels import LitFrame
 from .weights import Weights
 
@@ -78,14 +78,16 @@ def area_terms(lit: LitFrame, weights: Weights, factor: float, carried: float, c
             outcomes[level] = outcome(level)
         return outcomes[level]
 
+    def counted_at(level: float) -> tuple[float, int]:
+        """Af counted at a threshold (m²) and its pixels, from the histogram when no mask needs cleaning."""
+        index = int(np.floor(level))
+        if classifier.object == "dark":  # band <= level
+            return float(cumulative_area[index]), int(cumulative_count[index])
+        return float(cumulative_area[-1] - cumulative_area[index]), int(cumulative_count[-1] - cumulative_count[index])
+
     def outcome(level: float) -> tuple[float, float, int, Levels | None]:
         if not morphology:
-            index = int(np.floor(level))
-            if classifier.object == "dark":  # band <= level
-                counted, count = float(cumulative_area[index]), int(cumulative_count[index])
-            else:
-                counted = float(cumulative_area[-1] - cumulative_area[index])
-                count = int(cumulative_count[-1] - cumulative_count[index])
+            counted, count = counted_at(level)
             if not subpixel:  # levels only for the uncertainty, at the chosen threshold
                 return counted, counted, count, None
             levels = levels_at(level)
@@ -119,6 +121,12 @@ def area_terms(lit: LitFrame, weights: Weights, factor: float, carried: float, c
 
     applied = subpixel and levels is not None
     edge = edge_terms(applied)
+    if levels is None:  # counted without levels to read shares from (count mode leaves the light uneven)
+        halfway = _halfway(lit.estimator.at(threshold))
+        if halfway is not None:  # the count where the two levels the histogram shows meet stands in for them
+            there = (counted_at(halfway)[0] if not morphology
+                     else weights.mask_area(classifier.mask(lit.band, weights.roi, halfway), factor)[0])
+            edge = replace(edge, discretisation=max(edge.discretisation, abs(counted - there)))
     threshold_std = threshold_term(0 if applied else 1)
     if applied:  # shares less certain than whole pixels (uneven levels): the count is the better estimate
         counting, counting_threshold_std = edge_terms(False), threshold_term(1)
@@ -129,6 +137,16 @@ def area_terms(lit: LitFrame, weights: Weights, factor: float, carried: float, c
     offset_std = area * weights.relative_offset_std
     std = float(np.sqrt(scale_std**2 + threshold_std**2 + edge.discretisation**2 + edge.levels**2 + offset_std**2))
     return AreaTerms(area, counted, count, levels, applied, edge, threshold_std, scale_std, offset_std, std, sweep)
+
+
+def _halfway(levels: Levels | None) -> float | None:
+    """The band value halfway in light between the two levels: where a blurred edge's pixel is half covered,
+    so the threshold that puts a symmetric edge where it is. None without levels."""
+    if levels is None:
+        return None
+    light = to_light(np.arange(256.0), levels.tone_curve)
+    middle = (to_light(levels.object, levels.tone_curve) + to_light(levels.background, levels.tone_curve)) / 2
+    return float(np.interp(middle, light, np.arange(256.0)))
 
 
 def _edge_terms(roi_area: np.ndarray, roi_count: np.ndarray, levels: Levels | None, counted_area: float,

@@ -13,6 +13,20 @@ let dragStart = null;
 let series = { run: null, appended: 0, points: [] }; // the Af series as far as this page has it
 const shownText = new Map(); // what each element shows: a poll that changes nothing touches no element
 
+// A page nobody sees (a tab in the background, a minimised window) asks for nothing: its images and polls
+// would cost the measuring machine CPU for no one. It catches up when shown again.
+function whileHidden() {
+  if (!document.hidden) return Promise.resolve();
+  return new Promise((shown) => {
+    const back = () => {
+      if (document.hidden) return;
+      document.removeEventListener("visibilitychange", back);
+      shown();
+    };
+    document.addEventListener("visibilitychange", back);
+  });
+}
+
 // An element's text or children only when they differ from what it shows: every change costs the browser
 // a layout and a paint, twice a second per page, on the machine that measures.
 function setText(id, text) {
@@ -60,6 +74,7 @@ async function post(path, body) {
 // browser about twice the CPU per frame (bench/console_load.py).
 async function imageLoop() {
   for (;;) {
+    await whileHidden();
     const asked = view;
     const img = $("frame");
     const after = img.dataset.view === asked && img.dataset.frameNumber ? img.dataset.frameNumber : "-1";
@@ -309,6 +324,7 @@ function showNodes(nodes, access) {
 
 async function stateLoop() {
   for (;;) {
+    await whileHidden();
     try {
       const since = series.run === null ? "" : `?run=${series.run}&appended=${series.appended}`;
       const answer = await fetch("/api/state" + since, { headers: HEADERS });
