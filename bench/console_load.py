@@ -99,7 +99,7 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path,
     probe.create_subscription(ProjectedArea, "projected_area",
                               lambda m: stamps.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), RESULT_QOS)
     roles = {"camera": [processes[0].pid], "area": [processes[1].pid], "console": [processes[2].pid]}
-    without, with_pages, cpu = [], [], []
+    without, with_pages, cpu, loads = [], [], [], []
     try:
         spin(probe, 15.0)  # discovery, the first frames' weights
         with sync_playwright() as playwright:
@@ -119,6 +119,7 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path,
                 cpu.append({role: (after[role] - before[role]) / os.sysconf("SC_CLK_TCK") / elapsed for role in roles})
                 shown = [page.evaluate("Number(document.getElementById('frame').dataset.frameNumber)")
                          for page in pages]
+                loads.append(pages[0].evaluate("state.load"))  # whether the console was giving way
                 for page in pages:
                     page.close()
                 spin(probe, 6.0)  # the console lets the preview go after 5 s unasked
@@ -135,7 +136,7 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path,
                 process.kill()
     ratios = [w / n for w, n in zip(with_pages, without, strict=True)]
     return {"camera_hz": rate_hz, "without_pages_hz": without, "with_two_pages_hz": with_pages, "ratios": ratios,
-            "last_frame_numbers_shown": shown,
+            "last_frame_numbers_shown": shown, "console_load_per_round": loads,
             "cpu_cores_with_pages": {role: statistics.median(c[role] for c in cpu) for role in cpu[0]}}
 
 
@@ -154,6 +155,11 @@ def inside(args: argparse.Namespace) -> int:
               f"{min(ratios):.3f} / {statistics.median(ratios):.3f} / {max(ratios):.3f}", flush=True)
         print("           CPU (cores) with the pages open: " + ", ".join(
             f"{role} {value:.2f}" for role, value in result["cpu_cores_with_pages"].items()), flush=True)
+        loads = result["console_load_per_round"]
+        print(f"           the console gave way in {sum(bool(load and load['slowed']) for load in loads)} of "
+              f"{len(loads)} rounds (CPU pressure at each round's end: "
+              + ", ".join("-" if not load or load["cpu_pressure"] is None else f"{100 * load['cpu_pressure']:.0f} %"
+                          for load in loads) + ")", flush=True)
         print("RESULT " + json.dumps(result), flush=True)
     return 0
 
