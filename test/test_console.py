@@ -89,6 +89,36 @@ def test_the_console_gives_way_while_the_cores_are_busy_and_comes_back_once_they
     assert feed.encodings <= 2 * BUSY_RATE_HZ + 1 < 2 * MAX_RATE_HZ - 1
 
 
+def test_lowering_the_priority_reaches_the_threads_already_running_and_those_started_after():
+    """Run in a process of its own (it cannot be undone): a thread started before, the main thread and a
+    thread started after all end `increment` nicer than they began, capped at 19."""
+    import subprocess
+    import sys
+
+    script = """
+import os, threading, time
+from veg_area_ros.ros.run import lower_priority
+def niceness(): return os.getpriority(os.PRIO_PROCESS, 0)
+seen = {}
+before_started = threading.Event(); go = threading.Event()
+def before():
+    before_started.set(); go.wait(); seen["before"] = niceness()
+early = threading.Thread(target=before); early.start(); before_started.wait()
+start = niceness()
+main = lower_priority(3)
+late = threading.Thread(target=lambda: seen.__setitem__("after", niceness())); late.start(); late.join()
+go.set(); early.join()
+print(start, main, seen["before"], seen["after"], lower_priority(40))
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "PYTHONPATH": str(REPO / "veg_area_ros")})
+    assert done.returncode == 0, done.stderr
+    start, main, before, after, capped = map(int, done.stdout.split())
+    expected = min(start + 3, 19)
+    assert (main, before, after) == (expected, expected, expected), done.stdout
+    assert capped == 19
+
+
 def test_a_view_nobody_looks_at_is_let_go():
     feed = ImageFeed()
     assert not feed.wanted(10.0)

@@ -64,8 +64,11 @@ class ConsoleNode(Node):
                        "the pages' images then get what they leave; with a core to spare nothing changes.",
                        low=0, high=19, read_only=True)
         if own_process and nice > 0:  # before the server's threads start: they inherit it
-            self.get_logger().info(f"console at niceness {lower_priority(nice)} (cpu_nice): the measurement "
-                                   "comes first")
+            niceness = lower_priority(nice)
+            if niceness is None:
+                self.get_logger().warning("cpu_nice: this OS has no niceness; the console runs as the other nodes")
+            else:
+                self.get_logger().info(f"console at niceness {niceness} (cpu_nice): the measurement comes first")
         host = declare(self, "host", "127.0.0.1", "Address the page is served on; beyond loopback (0.0.0.0, a "
                        "lab address) the page changes nothing without the token printed at start.", read_only=True)
         port = declare(self, "port", 8080, "TCP port of the page.", low=1, high=65535, read_only=True)

@@ -67,12 +67,23 @@ class StopOnSignal:
 EXIT_OK, EXIT_FAILED, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
 
 
-def lower_priority(increment: int) -> int:
+def lower_priority(increment: int) -> int | None:
     """Raise the niceness of every thread of this process by `increment` (threads started later inherit it):
     on Linux a thread's niceness is its own, and DDS has started its threads before a node reads its
-    parameters. Returns the niceness of the calling thread afterwards."""
+    parameters. Returns the niceness of the calling thread afterwards, None where the OS has none."""
+    if not hasattr(os, "setpriority"):  # Windows
+        return None
     if increment <= 0:
         return os.getpriority(os.PRIO_PROCESS, 0)
+    tasks = Path("/proc/self/task")
+    threads = [int(t.name) for t in tasks.iterdir()] if tasks.is_dir() else [0]
+    for thread in threads:
+        try:
+            now = os.getpriority(os.PRIO_PROCESS, thread)
+            os.setpriority(os.PRIO_PROCESS, thread, min(now + increment, 19))
+        except ProcessLookupError:  # a thread that ended meanwhile
+            continue
+    return os.getpriority(os.PRIO_PROCESS, 0)
     tasks = Path("/proc/self/task")
     threads = [int(t.name) for t in tasks.iterdir()] if tasks.is_dir() else [0]
     for thread in threads:
