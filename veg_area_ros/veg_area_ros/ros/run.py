@@ -84,15 +84,6 @@ def lower_priority(increment: int) -> int | None:
         except ProcessLookupError:  # a thread that ended meanwhile
             continue
     return os.getpriority(os.PRIO_PROCESS, 0)
-    tasks = Path("/proc/self/task")
-    threads = [int(t.name) for t in tasks.iterdir()] if tasks.is_dir() else [0]
-    for thread in threads:
-        try:
-            now = os.getpriority(os.PRIO_PROCESS, thread)
-            os.setpriority(os.PRIO_PROCESS, thread, min(now + increment, 19))
-        except (ProcessLookupError, PermissionError):  # a thread that ended meanwhile
-            continue
-    return os.getpriority(os.PRIO_PROCESS, 0)
 
 
 def warn_unknown_parameters(node: Node) -> None:
