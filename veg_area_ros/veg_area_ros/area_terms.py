@@ -79,7 +79,9 @@ def area_terms(lit: LitFrame, weights: Weights, factor: float, carried: float, c
         return outcomes[level]
 
     def counted_at(level: float) -> tuple[float, int]:
-        """Af counted at a threshold (m²) and its pixels, from the histogram when no mask needs cleaning."""
+        """Af counted at a threshold (m²) and its pixels: from the histogram, or the cleaned mask's."""
+        if morphology:
+            return weights.mask_area(classifier.mask(lit.band, weights.roi, level), factor)
         index = int(np.floor(level))
         if classifier.object == "dark":  # band <= level
             return float(cumulative_area[index]), int(cumulative_count[index])
@@ -124,9 +126,7 @@ def area_terms(lit: LitFrame, weights: Weights, factor: float, carried: float, c
     if levels is None:  # counted without levels to read shares from (count mode leaves the light uneven)
         halfway = _halfway(lit.estimator.at(threshold))
         if halfway is not None:  # the count where the two levels the histogram shows meet stands in for them
-            there = (counted_at(halfway)[0] if not morphology
-                     else weights.mask_area(classifier.mask(lit.band, weights.roi, halfway), factor)[0])
-            edge = replace(edge, discretisation=max(edge.discretisation, abs(counted - there)))
+            edge = replace(edge, discretisation=max(edge.discretisation, abs(counted - counted_at(halfway)[0])))
     threshold_std = threshold_term(0 if applied else 1)
     if applied:  # shares less certain than whole pixels (uneven levels): the count is the better estimate
         counting, counting_threshold_std = edge_terms(False), threshold_term(1)
