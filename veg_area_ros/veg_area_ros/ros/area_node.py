@@ -124,6 +124,7 @@ class AreaNode(Node):
         self.file_camera = None
         self.file_conditions = None  # calibration_file's medium and distance, said when frames leave them
         self.info_metadata = None  # the text last heard on camera_info/metadata (calib_io.metadata_message)
+        self._info_checked: tuple = (None, None, None)  # (that text, the camera it was matched to, the result)
         self.port_camera = None  # a flat port's exact model from calibration_file, for frames of its camera
         calibration = read_start_file(self, "calibration_file", lambda: read_calibration(calibration_file),
                                       "waiting for camera_info instead") if calibration_file else None
@@ -210,11 +211,16 @@ class AreaNode(Node):
         """The metadata heard on camera_info/metadata if it belongs to `camera` (a camera_info's), else None."""
         if camera is None or self.info_metadata is None:
             return None
+        text, checked, conditions = self._info_checked
+        if text is self.info_metadata and checked is camera:  # a build and its log line read it once
+            return conditions
         try:
-            return metadata_for(camera, self.info_metadata)
+            conditions = metadata_for(camera, self.info_metadata)
         except ValueError as exc:
             self.warn("camera_info/metadata ignored", str(exc))
-            return None
+            conditions = None
+        self._info_checked = (self.info_metadata, camera, conditions)
+        return conditions
 
     def _on_info_metadata(self, msg: String) -> None:
         if msg.data == self.info_metadata:
