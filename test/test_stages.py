@@ -66,6 +66,30 @@ def test_what_a_stage_carries_is_its_own_object_and_start_segment_forgets_it():
     assert measurer.measure(frame).summary() == first.summary()  # a first frame again: the same row
 
 
+def test_a_measurer_rebuilt_for_its_conditions_carries_on_and_one_built_otherwise_starts_afresh():
+    """The area node rebuilds its measurer when a calibration's conditions arrive after the first frames: the
+    sequence goes on (markers tracked, not found again), so the live node's rows equal an offline run's."""
+    frames = [render_scene(ENDOSCOPE, cube_scene(), 0.7, seed=seed, noise_sigma=3.0) for seed in range(3)]
+    one = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120))
+    straight = [one.measure(frame).summary() for frame in frames]
+    targets = scene_targets()
+    first = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120))
+    assert first.measure(frames[0]).summary() == straight[0]
+    conditions = {"medium": "water", "calibration_distance_m": 0.7}
+    rebuilt = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), calibration_conditions=conditions)
+    assert rebuilt.carry_on_from(first) and rebuilt.carried is first.carried
+    assert [rebuilt.measure(frame).summary() for frame in frames[1:]] == straight[1:]
+    # what carrying changes: a measurer starting afresh at the second frame finds the markers again
+    fresh = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), calibration_conditions=conditions)
+    assert fresh.measure(frames[1]).summary() != straight[1]
+    # built otherwise (another threshold, other targets, another ROI): nothing carried over
+    for other in (AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=100)),
+                  AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)),
+                  AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120),
+                               roi=[[100, 100], [500, 100], [500, 400], [100, 400]])):
+        assert not other.carry_on_from(first) and other.carried is not first.carried
+
+
 def _class_lines(path, name: str) -> int:
     tree = ast.parse(path.read_text())
     node = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == name)

@@ -76,6 +76,26 @@ class AreaMeasurer:
         """How often the flat field and levels were found: every LIGHT_REFRESH_FRAMES, or on a drift."""
         return self.carried.light.fits
 
+    def carry_on_from(self, previous: object) -> bool:
+        """Takes over what `previous` carried from frame to frame (tracked markers, weights, light) when both were
+        built alike: the same camera, the same targets and background objects, and equal classifier, ROI, area
+        mode and levels. A measurer rebuilt for what changes only its warnings (a calibration's conditions heard
+        after the first frames) then measures the next frame as `previous` would have, not as a first frame, so
+        a live run and the same frames measured offline give the same numbers. Returns whether it did."""
+        if not isinstance(previous, AreaMeasurer):
+            return False
+        mine, theirs = self.light_settings, previous.light_settings
+        ours, others = self.region.user_polygon, previous.region.user_polygon
+        alike = (previous.camera == self.camera and previous.targets is self.targets
+                 and previous.classifier == self.classifier and previous.area_mode == self.area_mode
+                 and previous.threshold_delta == self.threshold_delta
+                 and theirs.background_band is mine.background_band and theirs.even_light == mine.even_light
+                 and theirs.given_levels == mine.given_levels
+                 and (ours is None) == (others is None) and (ours is None or np.array_equal(ours, others)))
+        if alike:
+            self.carried = previous.carried
+        return alike
+
     def start_segment(self) -> None:
         """Forget what is carried from frame to frame (tracked markers, weights, light): the next frame is
         measured as a first frame. A long input measured in segments gives the same rows whether its segments

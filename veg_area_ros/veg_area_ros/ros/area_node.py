@@ -232,10 +232,13 @@ class AreaNode(Node):
         if conditions is None:
             return
         try:
-            self.measurer = self._build(self.settings, self.camera, self.targets, self.background)
+            measurer = self._build(self.settings, self.camera, self.targets, self.background)
         except Exception as exc:  # e.g. a tone curve this version does not know: measured as before
             self.get_logger().error(f"camera_info/metadata not applied ({exc.__class__.__name__}: {exc})")
             return
+        if measurer is not None:  # the frames' sequence goes on where only the warnings change
+            measurer.carry_on_from(self.measurer)
+        self.measurer = measurer
         self._say_metadata(conditions)
 
     def _say_metadata(self, conditions: dict) -> None:
