@@ -121,7 +121,7 @@ def test_a_frames_result_fills_every_field_and_rosbags_reads_the_bytes_alike(pre
     assert (msg.area_m2, msg.area_std_m2, msg.pixel_count) == (result.area_m2, result.area_std_m2,
                                                               result.pixel_count)
     terms = [msg.scale_std_m2, msg.threshold_std_m2, msg.discretisation_std_m2, msg.levels_std_m2,
-             msg.plane_offset_std_m2, msg.exposure_std_m2]
+             msg.plane_offset_std_m2, msg.exposure_std_m2, msg.edge_trend_std_m2]
     assert msg.area_std_m2 == pytest.approx(float(np.hypot.reduce(terms)), rel=1e-9)
     assert (msg.area_mode, msg.subpixel_applied, msg.threshold, msg.tone_curve) == (
         result.area_mode, result.subpixel_applied, result.threshold, result.tone_curve)

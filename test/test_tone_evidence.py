@@ -179,16 +179,42 @@ def test_a_real_gopros_calibration_records_srgb_and_measure_reads_its_photos_wit
     assert "tone curve linear: " in green.stderr and "does not apply to --object green" in green.stderr
 
 
-def test_webcam_photos_at_one_distance_record_no_curve_and_say_why(tmp_path):
+def test_webcam_photos_at_one_distance_record_no_curve_and_say_why_and_their_edge_trend(tmp_path):
     """OpenCV's 13 webcam photos (test/data/opencv-left), all at one distance (35-43 px a square): the
-    calibration records no tone curve, and says why in the output and the file."""
+    calibration records no tone curve, and says why in the output and the file. Their exposures differ (whites
+    195-238 DN) and their edges follow it: the file records the trend, and `measure` of a photo with that file
+    moves its edges back by the trend at its own white level, said in the row (`edge_trend`)."""
+    from board_photos import board_photos
+
+    from veg_area_ros.calib_io import read_calibration
+
     webcam = tmp_path / "webcam.yaml"
     done = run_cli("calibrate", str(OPENCV_LEFT), "--board", "chessboard:9x6:0.025", "--medium", "air",
                    "-o", str(webcam), "-q")
     assert done.returncode == 0, done.stderr
     assert "tone curve linear (the default): not judged" in done.stdout
+    assert "edge trend with exposure: the edges follow exposure: -0.0" in done.stdout, done.stdout
     block = yaml.safe_load(webcam.read_text())["veg_area_ros"]
     assert "tone_curve" not in block and "too alike in distance" in block["tone_curve_evidence"]
+    trend = block["edge_trend"]
+    assert trend["views"] == 7 and trend["slope_px_per_dn"] < -3 * trend["slope_std"], trend
+    assert trend["tone_curve"] == "linear" and trend["range_dn"][1] - trend["range_dn"][0] > 30
+    camera = read_calibration(webcam).camera
+    photo = next(p for p in board_photos(OPENCV_LEFT, "chessboard:9x6:0.025", camera=camera)
+                 if p.name == "left11.jpg")  # the darkest: its black reaches farthest
+    targets = tmp_path / "targets.yaml"
+    points = [{"pixel": [float(c) for c in pixel], "plane": [float(c) for c in plane]}
+              for pixel, plane in photo.targets.points]
+    targets.write_text(yaml.safe_dump({"points": points}))
+    roi = ",".join(f"{c:.3f}" for corner in photo.roi for c in corner)
+    done = run_cli("measure", str(OPENCV_LEFT / photo.name), "--calibration", str(webcam), "--targets",
+                   str(targets), "--roi", roi, "--json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    row = json.loads(done.stdout.splitlines()[-1])
+    shift = row["edge_trend"]
+    assert shift["applied"] and shift["offset_px"] > 0.03 and shift["area_m2"] < 0, shift
+    assert row["edge_trend_std_m2"] > 0 and not shift["outside"]
+    assert abs(row["area_m2"] / photo.true_area_m2 - 1) < abs(row["count_area_m2"] / photo.true_area_m2 - 1)
 
 
 def test_a_live_calibration_keeps_its_views_frames_and_judges_the_curve_on_them(monkeypatch):

@@ -9,6 +9,7 @@ every threshold at once. A frame passes through the stages in order, each its ow
     weights       each raw pixel's footprint, quantized     (carries `WeightsMemory`)
     light_levels  the band evened, its histogram, levels    (carries `LightMemory`)
     area_terms    Af and each term of its std
+    edge_trend    the edges moved back by the calibration's trend with exposure, where it records one
     checks        exposure, blur, border, conditions: the warnings
 
 `AreaMeasurer` holds each stage's settings and what each carries from frame to frame (`Carried`), and calls
@@ -28,6 +29,7 @@ from .area_terms import area_terms, thresholds_read
 from .camera_model import BrownCamera
 from .checks import CheckSettings, check
 from .classify import AREA_MODES, Classifier, ClassifyError
+from .edge_trend import apply_correction, edge_correction, settings_from
 from .idealize import IdealView
 from .light import check_background_frame
 from .light_levels import LightMemory, LightSettings, levels_for, light_frame
@@ -64,6 +66,12 @@ class AreaMeasurer:
         self.region = Region(targets, self.view, roi)
         self.weighting = Weighting(targets, self.view, self.region)
         self.check_settings = CheckSettings(classifier, area_mode, threshold_delta, self.view, calibration_conditions)
+        try:  # how the calibration's views moved their edges with exposure, where it applies (edge_trend)
+            self.edge_trend, self.edge_trend_reason = settings_from(
+                calibration_conditions if camera is not None else None, classifier.tone_curve, classifier.object,
+                classifier.channel, area_mode)
+        except ValueError as exc:
+            raise ClassifyError(f"the calibration's {exc}") from None
         self.carried = Carried()
 
     @property
@@ -136,6 +144,13 @@ class AreaMeasurer:
             plane_offset_std_m2=terms.offset_std, edge_length_px=terms.edge.length_px, count_area_m2=terms.counted,
             flat_field=lit.flat)
         mask = self.classifier.mask(lit.band, weights.roi, lit.threshold)
+        if self.edge_trend is not None and terms.applied and terms.count:
+            white = max(terms.levels.object, terms.levels.background)
+            correction = edge_correction(self.edge_trend, white, self.classifier.object, mask, weights.roi,
+                                         float(np.sqrt(terms.counted / terms.count)))
+            apply_correction(result, correction)
+        elif self.edge_trend is not None or self.edge_trend_reason:  # recorded, not applied: said in the row
+            result.edge_trend = {"applied": False, "reason": self.edge_trend_reason or "the shares were not used"}
         mask = check(result, self.check_settings, raw_band, mask, looked_at, lit.roi_count, weights, factor,
                      located, carried.tracking.markers, lit.estimator)
         if keep_images:

@@ -47,6 +47,8 @@ class AreaResult:
     exposure: dict | None = None  # clipped highlights or crushed shadows near the object's edges, when there are
     exposure_std_m2: float = 0.0  # what clipping may do to Af, where it matters (in area_std_m2)
     edge_widths: dict | None = None  # the object's and the printed markers' edge width, px (blur)
+    edge_trend: dict | None = None  # the edges moved back by the calibration's trend with exposure (edge_trend)
+    edge_trend_std_m2: float = 0.0  # that trend's slope uncertainty at this frame's white level (in area_std_m2)
     warnings: list[str] = field(default_factory=list)  # everything that makes this number less trustworthy
 
     def summary(self) -> dict:
@@ -70,5 +72,6 @@ class AreaResult:
                 "evened_by": self.flat_field.source, "variation": self.flat_field.variation,
                 "misfit": self.flat_field.misfit},
             "exposure": self.exposure, "exposure_std_m2": self.exposure_std_m2, "edge_widths": self.edge_widths,
+            "edge_trend": self.edge_trend, "edge_trend_std_m2": self.edge_trend_std_m2,
             "warnings": list(self.warnings),
         }

@@ -212,6 +212,12 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
                     f"the printed markers' {widths['markers_px']:.1f} px (a plant moving in the current, or "
                     "out of focus): its edge shares are blurred together and Af is less certain")
     said.extend(_condition_warnings(located, settings))
+    trend = result.edge_trend
+    if trend and trend.get("outside"):
+        low, high = trend["range_dn"]
+        said.append(f"exposure outside the calibration's: whites at {trend['white_dn']:.0f} DN, its views' "
+                    f"{low:.0f}-{high:.0f} DN; the edges' trend with exposure taken at the nearer end, its std for "
+                    "the whole distance")
     return said
 
 

@@ -22,6 +22,7 @@ from .area import AreaMeasurer
 from .board import BoardSpec, Detection, to_grey
 from .camera_model import BrownCamera
 from .classify import TONE_CURVES, Classifier
+from .edge_trend import TrendChoice, fit_edge_trend
 from .targets import TargetsSpec
 
 MAX_VIEWS = 24  # views measured, evenly over the board's sizes: about 1.5 s each at 10 MP (both curves)
@@ -124,12 +125,30 @@ class ToneChoice:
     left_out: dict[str, str] = field(default_factory=dict)  # view name -> why it was not measured
     sizes: list[float] = field(default_factory=list)  # each measured view's px per square
     errors: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's relative error
+    offsets: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's edge offset (px)
+    whites: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's white level (DN)
+    offset_views: dict[str, list[str]] = field(default_factory=dict)  # per curve, the views of `offsets`
+    edge_trend: TrendChoice | None = None  # how the edges follow exposure under the curve taken (edge_trend)
+
+    def metadata(self) -> dict:
+        """What a calibration file records of this judgement: the curve where decided (what measuring with
+        tone curve auto, the default, reads frames with), the edges' trend with exposure where learned, and why."""
+        recorded: dict = {"tone_curve_evidence": self.reason}
+        if self.decided:
+            recorded["tone_curve"] = self.curve
+        if self.edge_trend is not None:
+            recorded["edge_trend_evidence"] = self.edge_trend.reason
+            if self.edge_trend.trend is not None:
+                recorded["edge_trend"] = self.edge_trend.trend.as_dict()
+        return recorded
 
     def as_dict(self) -> dict:
         return {"curve": self.curve, "decided": self.decided, "reason": self.reason, "views": self.views,
                 "square_px": [round(float(s), 1) for s in self.square_px],
                 "slopes": {c: {k: round(float(v), 4) for k, v in s.items()} for c, s in self.slopes.items()},
-                "left_out": len(self.left_out)}
+                "left_out": len(self.left_out),
+                "edge_trend": (None if self.edge_trend is None else
+                               {"learned": self.edge_trend.trend is not None, "reason": self.edge_trend.reason})}
 
 
 def spread_by_size(cases: list[BoardCase], count: int = MAX_VIEWS) -> list[BoardCase]:
@@ -190,6 +209,24 @@ def _slope(errors: np.ndarray, inverse_size: np.ndarray) -> tuple[float, float]:
 
 def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: BoardSpec, camera: BrownCamera
                       ) -> ToneChoice:
+    """The tone curve judged on the views (`judged_tone_curve`), and how the edges follow exposure under it
+    (edge_trend): each view's error over the board's edge length inside the rectangle is how far it moved its
+    edges."""
+    choice = judged_tone_curve(cases, board, camera)
+    if board.kind == "chessboard":
+        choice.edge_trend = fit_edge_trend(choice.offsets.get(choice.curve, []),
+                                           choice.whites.get(choice.curve, []), choice.curve)
+    return choice
+
+
+def edge_length_m(board: BoardSpec) -> float:
+    """The black squares' edges inside the rectangle through the outer squares' centres: every inner grid line,
+    whole (m)."""
+    return 2.0 * board.cols * board.rows * board.square
+
+
+def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: BoardSpec, camera: BrownCamera
+                      ) -> ToneChoice:
     """Measure each (case, grey image) under every tone curve (taken one at a time: a reader's generator keeps
     one frame in memory), in the default sub-pixel mode at Otsu's threshold (what frames are measured with; the
     count in light scatters more on some webcams' photos: 1.3 % against 0.5 %), and take the curve under which
@@ -199,6 +236,9 @@ def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
         return ToneChoice("linear", False, f"not judged: the tone curve is read from a chessboard's squares, "
                                            f"the views show a {board.kind} board")
     errors: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
+    offsets: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
+    whites: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
+    offset_views: dict[str, list[str]] = {curve: [] for curve in TONE_CURVES}
     sizes: list[float] = []
     left_out: dict[str, str] = {}
     for case, grey in cases:
@@ -215,14 +255,24 @@ def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
             if spoiled:
                 left_out[case.name] = f"{curve}: {spoiled[0]}"
                 break
-            measured[curve] = result.area_m2 / truth - 1
+            levels = result.levels
+            # the white level of the views whose shares were applied: the trend is applied to such frames
+            white = None if levels is None or not result.subpixel_applied else max(levels.object, levels.background)
+            # the error over the edges' length is how far they moved (m), in the view's idealized px
+            offset_px = (result.area_m2 - truth) / edge_length_m(board) * case.square_px / board.square
+            measured[curve] = (result.area_m2 / truth - 1, offset_px, white)
         else:
-            for curve, error in measured.items():
+            for curve, (error, offset, white) in measured.items():
                 errors[curve].append(error)
+                if white is not None:
+                    offsets[curve].append(offset)
+                    whites[curve].append(white)
+                    offset_views[curve].append(case.name)
             sizes.append(case.square_px)
     n = len(sizes)
     span = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
-    choice = ToneChoice("linear", False, "", n, span, left_out=left_out, sizes=sizes, errors=errors)
+    choice = ToneChoice("linear", False, "", n, span, left_out=left_out, sizes=sizes, errors=errors,
+                        offsets=offsets, whites=whites, offset_views=offset_views)
     if n < MIN_VIEWS:
         choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard well inside the image, "
                          f"whites not clipped, near and far, tell the curves apart; {n} could be measured")

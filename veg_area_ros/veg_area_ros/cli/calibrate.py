@@ -248,9 +248,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                            "one anyway, or write elsewhere with -o", EXIT_REFUSED)
         say(f"{output}: replaced: {verdict.reason}")
     metadata = fit_metadata(summary, args.medium, args.distance, str(board), "veg-area calibrate")
-    metadata["tone_curve_evidence"] = tone.reason
-    if tone.decided:  # what `measure --tone-curve auto` (the default) reads this camera's frames with
-        metadata["tone_curve"] = tone.curve
+    metadata.update(tone.metadata())  # the tone curve and edge trend measuring reads, and why
     write_calibration(output, result.camera, args.camera_name, metadata)
     if args.report:
         from ..report import write_calibration_report
@@ -264,6 +262,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     else:
         print(format_calibration(result, output))
         print(f"tone curve {tone.curve}" + ("" if tone.decided else " (the default)") + f": {tone.reason}")
+        if tone.edge_trend is not None:
+            print(f"edge trend with exposure: {tone.edge_trend.reason}")
     return 0
 
 

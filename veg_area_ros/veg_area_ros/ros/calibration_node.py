@@ -214,9 +214,7 @@ class CalibrationNode(Node):
         warnings = list(result.warnings)
         metadata = fit_metadata(result.summary(), self.medium, self.distance, str(self.board), "calibration_node")
         tone = self.kept_frames.judge(self.views, result.camera)
-        metadata["tone_curve_evidence"] = tone.reason
-        if tone.decided:  # what an area node or `veg-area measure` given this file reads frames with
-            metadata["tone_curve"] = tone.curve
+        metadata.update(tone.metadata())  # the tone curve and edge trend measuring reads, and why
         described = (f"{result.views_used} views ({result.camera.model}"
                      + (f"; {result.model_choice['reason']}" if result.model_choice else "")
                      + f"): RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} fy {result.camera.fy:.2f} "

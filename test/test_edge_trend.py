@@ -1,0 +1,128 @@
+"""How a camera's edges follow its exposure (edge_trend): learned from a chessboard's views where the evidence is
+clear, nowhere else; applied to a frame as its edges moved back over the object's boundary, with the slope's
+uncertainty in the std. The real photos' case is in test_real_photos.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from veg_area_ros.area import AreaMeasurer
+from veg_area_ros.board import BoardSpec
+from veg_area_ros.classify import Classifier, ClassifyError
+from veg_area_ros.edge_trend import EdgeTrend, boundary_length_px, fit_edge_trend
+from veg_area_ros.sim.synthetic import (
+    ENDOSCOPE,
+    board_views,
+    cube_scene,
+    render_board_views,
+    render_scene,
+    scene_targets,
+)
+from veg_area_ros.tone_evidence import board_case, choose_tone_curve
+
+
+def test_a_clear_trend_is_learned_with_its_error_and_a_weak_or_narrow_one_is_not():
+    rng = np.random.default_rng(0)
+    whites = np.linspace(190, 240, 9)
+    offsets = 0.05 - 0.003 * (whites - 215) + rng.normal(0, 0.01, whites.size)
+    learned = fit_edge_trend(list(offsets), list(whites), "linear")
+    assert learned.trend is not None and "follow exposure" in learned.reason
+    trend = learned.trend
+    assert abs(trend.slope_px_per_dn + 0.003) < 3 * trend.slope_std and trend.slope_std < 0.001
+    assert trend.reference_dn == pytest.approx(whites.mean()) and trend.range_dn == (190.0, 240.0)
+    assert EdgeTrend.from_dict(trend.as_dict()) == EdgeTrend.from_dict(trend.as_dict())
+    flat = fit_edge_trend(list(0.05 + rng.normal(0, 0.01, whites.size)), list(whites), "linear")
+    assert flat.trend is None and "do not clearly follow" in flat.reason
+    narrow = fit_edge_trend(list(offsets), list(215 + 0.1 * (whites - 215)), "linear")
+    assert narrow.trend is None and "too alike in exposure" in narrow.reason
+    few = fit_edge_trend(list(offsets[:5]), list(whites[:5]), "linear")
+    assert few.trend is None and "5 could be measured" in few.reason
+
+
+def test_the_trend_is_taken_at_the_nearer_end_outside_its_views_and_its_std_grows_with_the_distance():
+    trend = EdgeTrend(-0.003, 0.0005, 215.0, (195.0, 235.0), 7, 0.02, "linear")
+    assert trend.offset_px(215.0) == (0.0, 0.0, False)
+    inside, inside_std, outside_flag = trend.offset_px(225.0)
+    assert inside == pytest.approx(-0.03) and inside_std == pytest.approx(0.005) and not outside_flag
+    beyond, beyond_std, flag = trend.offset_px(255.0)
+    assert beyond == pytest.approx(-0.06) and flag  # at 235, not extrapolated to 255
+    assert beyond_std == pytest.approx(0.0005 * 40 + 0.003 * 20)
+
+
+@pytest.mark.parametrize("value", [[], {"slope_px_per_dn": "x"}, {"slope_px_per_dn": 0.1, "slope_std": -1,
+                                   "reference_dn": 200, "range_dn": [190, 210], "views": 7},
+                                   {"slope_px_per_dn": 0.1, "slope_std": 0.01, "reference_dn": 250,
+                                    "range_dn": [190, 210], "views": 7}])
+def test_a_calibrations_unreadable_trend_is_refused_by_the_measurement(value):
+    with pytest.raises(ClassifyError, match="edge_trend"):
+        AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120),
+                     calibration_conditions={"edge_trend": value})
+
+
+def test_the_boundary_leaves_out_where_the_roi_cuts_the_object():
+    roi = np.zeros((100, 100), np.uint8)
+    roi[10:90, 10:90] = 255
+    mask = np.zeros_like(roi)
+    mask[30:60, 30:60] = 255  # a 30 px square inside: its boundary through the outer pixels' centres
+    assert boundary_length_px(mask, roi) == pytest.approx(4 * 29)
+    mask[:] = 0
+    mask[10:40, 10:90] = 255  # a band along the ROI's top: only its lower side is the object's edge
+    assert boundary_length_px(mask, roi) == pytest.approx(79, abs=2)
+
+
+def test_the_correction_moves_af_by_the_offset_over_the_boundary_and_only_where_it_applies():
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=2.0)
+    plain = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
+    white = max(plain.levels.object, plain.levels.background)
+    trend = EdgeTrend(-0.004, 0.0005, white - 10, (white - 30, white + 30), 8, 0.02, "linear")
+    conditions = {"edge_trend": trend.as_dict()}
+    corrected = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120),
+                             calibration_conditions=conditions).measure(frame)
+    shift = corrected.edge_trend
+    assert shift["applied"] and shift["offset_px"] == pytest.approx(-0.04, abs=1e-4)
+    # the cube's square, about 4 x 76 px at 0.7 m: the black reaches 0.04 px less far, Af grows by that band
+    assert 280 < shift["boundary_px"] < 320
+    metres_per_px2 = plain.count_area_m2 / plain.pixel_count
+    moved = -shift["offset_px"] * shift["boundary_px"] * metres_per_px2
+    assert corrected.area_m2 - plain.area_m2 == pytest.approx(moved, rel=1e-6)
+    assert corrected.edge_trend_std_m2 == pytest.approx(0.0005 * 10 * shift["boundary_px"] * metres_per_px2, rel=1e-3)
+    assert corrected.area_std_m2 == pytest.approx(np.hypot(plain.area_std_m2, corrected.edge_trend_std_m2))
+    assert not corrected.warnings
+    # another tone curve, another channel, count mode, or no calibration: not applied
+    for measurer in (AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120, tone_curve="srgb"),
+                                  calibration_conditions=conditions),
+                     AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120, channel="red"),
+                                  calibration_conditions=conditions),
+                     AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120), area_mode="count",
+                                  calibration_conditions=conditions),
+                     AreaMeasurer(None, scene_targets(), Classifier(threshold=120), calibration_conditions=conditions)):
+        said = measurer.measure(frame).edge_trend
+        assert said is None if measurer.camera is None else (not said["applied"] and said["reason"]), said
+    # a frame whiter than every view: taken at the views' end and said
+    far = EdgeTrend(-0.004, 0.0005, white - 50, (white - 60, white - 40), 8, 0.02, "linear")
+    outside = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120),
+                           calibration_conditions={"edge_trend": far.as_dict()}).measure(frame)
+    assert outside.edge_trend["offset_px"] == pytest.approx(-0.04, abs=1e-4)
+    assert any(w.startswith("exposure outside the calibration's") for w in outside.warnings), outside.warnings
+
+
+def test_a_linear_cameras_views_at_many_exposures_teach_no_trend():
+    """Rendered boards (blur 0.7 px, 2 DN of noise) of a camera whose grey levels are light, whites from 164 to
+    239 DN: their edges stay put (offsets within 0.02 px), so nothing is learned and nothing is corrected."""
+    board = BoardSpec.parse("chessboard:9x6:0.02")
+    poses = board_views(ENDOSCOPE, board, 12, 0.4, np.random.default_rng(3), max_tilt_deg=8)
+    cases = []
+    for k, (pose, gain) in enumerate(zip(poses, np.linspace(0.7, 1.05, 12), strict=True)):
+        image = render_board_views(ENDOSCOPE, board, [pose], noise_sigma=2.0, rng=np.random.default_rng(k),
+                                   blur_sigma_px=0.7, gain=gain)[0]
+        detection = board.detect(image)
+        case = None if detection is None else board_case(f"view{k}", detection, board, ENDOSCOPE)
+        if case is not None:
+            cases.append((case, image))
+    choice = choose_tone_curve(cases, board, ENDOSCOPE)
+    whites = choice.whites[choice.curve]
+    assert len(whites) >= 8 and max(whites) - min(whites) > 50, whites
+    assert np.max(np.abs(choice.offsets[choice.curve])) < 0.03, choice.offsets
+    assert choice.edge_trend.trend is None and "do not clearly follow" in choice.edge_trend.reason
+    assert "edge_trend" not in choice.metadata() and "edge_trend_evidence" in choice.metadata()

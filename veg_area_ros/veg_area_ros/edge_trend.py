@@ -1,0 +1,182 @@
+"""Where a camera puts an edge as its exposure changes, learned from its calibration views. No ROS here.
+
+This stage exists apart because it joins the calibration and the measurement: `veg-area calibrate` (and the
+calibration node) learn it from the board's views, the measurement applies it to each frame.
+
+Real JPEG photos of one print do not agree on where its edges are: the half-way point of an edge lies off the
+printed side by -0.08 to +0.08 px between OpenCV's webcam photos, and it follows each photo's exposure (the
+whiter the paper, the smaller the black squares: a tone curve's shoulder presses a blurred edge's tail towards
+white). Neither area mode can see that in one frame. A chessboard's views can: each is a measurement with a
+known answer, its error over the board's edge length is how far that view moved its edges, and the views'
+white levels say how that follows exposure. Where the views show a trend clearly (its slope over three
+standard errors, over a span of white levels), each frame's edges are moved back by the trend at its own
+white level, relative to the views' mean: the print's own ink gain, common to all views, is left as it is.
+The slope's standard error, over the frame's distance from the views' mean, is a term of Af's std.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+MIN_VIEWS = 6  # a slope and its scatter need a few more views than its two parameters
+DECISIVE_SIGMA = 3.0  # the slope this many standard errors from zero
+MIN_SPAN_DN = 10.0  # white levels this far apart: below it the views cannot show a trend
+
+
+@dataclass(frozen=True)
+class EdgeTrend:
+    """How far the black side of an edge reaches (px, positive: the black grows) per DN of the white level,
+    around `reference_dn` (the views' mean white level), learned in the `tone_curve` the views were read with."""
+
+    slope_px_per_dn: float
+    slope_std: float
+    reference_dn: float
+    range_dn: tuple[float, float]
+    views: int
+    residual_px: float  # the views' scatter about the line
+    tone_curve: str
+
+    def as_dict(self) -> dict:
+        return {"slope_px_per_dn": round(self.slope_px_per_dn, 6), "slope_std": round(self.slope_std, 6),
+                "reference_dn": round(self.reference_dn, 2), "range_dn": [round(v, 1) for v in self.range_dn],
+                "views": self.views, "residual_px": round(self.residual_px, 4), "tone_curve": self.tone_curve}
+
+    @classmethod
+    def from_dict(cls, value: object) -> EdgeTrend:
+        """The trend a calibration file's metadata records; ValueError where it is not one."""
+        if not isinstance(value, dict):
+            raise ValueError(f"edge_trend must be a mapping, got {value!r}")
+        try:
+            low, high = (float(v) for v in value["range_dn"])
+            trend = cls(float(value["slope_px_per_dn"]), float(value["slope_std"]), float(value["reference_dn"]),
+                        (low, high), int(value["views"]), float(value.get("residual_px", 0.0)),
+                        str(value.get("tone_curve", "linear")))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"edge_trend is not readable ({exc.__class__.__name__}: {exc})") from None
+        numbers = (trend.slope_px_per_dn, trend.slope_std, trend.reference_dn, low, high)
+        if not all(math.isfinite(v) for v in numbers) or trend.slope_std < 0 or not low <= trend.reference_dn <= high:
+            raise ValueError(f"edge_trend holds no trend: {value!r}")
+        return trend
+
+    def offset_px(self, white_dn: float) -> tuple[float, float, bool]:
+        """(how far the frame's black reaches beyond the views' mean, its std, whether `white_dn` lies outside
+        the views' range: the trend is then taken at the nearer end, its std at the frame's own level)."""
+        low, high = self.range_dn
+        inside = low <= white_dn <= high
+        taken = min(max(white_dn, low), high)
+        return (self.slope_px_per_dn * (taken - self.reference_dn),
+                self.slope_std * abs(white_dn - self.reference_dn) + abs(self.slope_px_per_dn) * abs(white_dn - taken),
+                not inside)
+
+
+@dataclass
+class TrendChoice:
+    """The trend learned from the views, or None, and why."""
+
+    trend: EdgeTrend | None
+    reason: str
+
+
+def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: str) -> TrendChoice:
+    """The line through each view's edge offset (px) against its white level (DN), taken where it is clear."""
+    n = len(offsets_px)
+    if n < MIN_VIEWS:
+        return TrendChoice(None, f"not learned: {MIN_VIEWS} or more views of the whole chessboard, whites not "
+                                 f"clipped, show how the edges follow exposure; {n} could be measured")
+    offsets, whites = np.asarray(offsets_px, float), np.asarray(whites_dn, float)
+    span = float(whites.max() - whites.min())
+    if span < MIN_SPAN_DN:
+        return TrendChoice(None, f"not learned: the views' whites span {span:.1f} DN, too alike in exposure to show "
+                                 f"a trend (under {MIN_SPAN_DN:g} DN)")
+    centre = float(whites.mean())
+    design = np.column_stack([np.ones(n), whites - centre])
+    coef, *_ = np.linalg.lstsq(design, offsets, rcond=None)
+    residual = offsets - design @ coef
+    variance = float(residual @ residual) / (n - 2)
+    slope, slope_std = float(coef[1]), math.sqrt(variance / float(np.sum((whites - centre) ** 2)))
+    trend = EdgeTrend(slope, slope_std, centre, (float(whites.min()), float(whites.max())), n,
+                      math.sqrt(variance), tone_curve)
+    described = (f"{slope * 10:+.3f} +/- {slope_std * 10:.3f} px per 10 DN of white over {n} views "
+                 f"({trend.range_dn[0]:.0f}-{trend.range_dn[1]:.0f} DN)")
+    if abs(slope) <= DECISIVE_SIGMA * slope_std:
+        return TrendChoice(None, f"not learned: the edges do not clearly follow exposure ({described})")
+    return TrendChoice(trend, f"the edges follow exposure: {described}")
+
+
+def boundary_length_px(mask: np.ndarray, roi: np.ndarray) -> float:
+    """The object's boundary in a mask (raw px, through its outer pixels' centres), without where the mask meets
+    the ROI's own edge (the object cut by the ROI has no edge there)."""
+    contours, _ = cv2.findContours(mask, cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
+    if not contours:
+        return 0.0
+    inner = cv2.erode(roi, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    cut = (roi > 0) & (inner == 0)
+    total = 0.0
+    for contour in contours:
+        points = contour.reshape(-1, 2)
+        following = np.roll(points, -1, axis=0)
+        steps = np.hypot(*(following - points).T)
+        on_cut = cut[points[:, 1], points[:, 0]] & cut[following[:, 1], following[:, 0]]
+        total += float(steps[~on_cut].sum())
+    return total
+
+
+def settings_from(conditions: dict | None, tone_curve: str, object_kind: str, channel: str, area_mode: str
+                  ) -> tuple[EdgeTrend | None, str]:
+    """The trend a calibration's metadata records and whether it applies to frames read this way: (the trend,
+    '') where it does, (None, why not) where it does not, (None, '') where none is recorded. ValueError where the
+    metadata holds one that cannot be read."""
+    recorded = (conditions or {}).get("edge_trend")
+    if recorded is None:
+        return None, ""
+    trend = EdgeTrend.from_dict(recorded)
+    if area_mode != "subpixel":
+        return None, f"not applied in {area_mode} mode: whole pixels are counted as the paper counts them"
+    if object_kind not in ("dark", "bright") or channel != "grey":
+        return None, f"learned in grey levels, not applied to the {channel} channel's {object_kind} object"
+    if tone_curve != trend.tone_curve:
+        return None, f"learned under the {trend.tone_curve} tone curve, the frames are read under {tone_curve}"
+    return trend, ""
+
+
+@dataclass(frozen=True)
+class EdgeCorrection:
+    """What the trend does to one frame's Af (m²) and its std, and what it rests on."""
+
+    area_m2: float  # added to Af
+    std_m2: float
+    offset_px: float  # how far the frame's black reaches beyond the views' mean
+    white_dn: float
+    boundary_px: float
+    outside: bool  # the frame's white level lies outside the views'
+    range_dn: tuple[float, float]  # the views' white levels
+
+    def summary(self) -> dict:
+        return {"applied": True, "area_m2": self.area_m2, "std_m2": self.std_m2, "offset_px": self.offset_px,
+                "white_dn": self.white_dn, "boundary_px": self.boundary_px, "outside": self.outside,
+                "range_dn": list(self.range_dn)}
+
+
+def edge_correction(trend: EdgeTrend, white_dn: float, object_kind: str, mask: np.ndarray, roi: np.ndarray,
+                    metres_per_px: float) -> EdgeCorrection:
+    """The frame's edges moved back by the trend at its white level: Af changes by the offset over the object's
+    boundary (the mask's, in raw px, at `metres_per_px` on the object: its counted pixels' mean footprint)."""
+    offset, offset_std, outside = trend.offset_px(white_dn)
+    boundary = boundary_length_px(mask, roi)
+    sign = -1.0 if object_kind == "dark" else 1.0  # the black reaching further makes a dark object larger
+    return EdgeCorrection(sign * offset * boundary * metres_per_px**2, offset_std * boundary * metres_per_px**2,
+                          offset, white_dn, boundary, outside, trend.range_dn)
+
+
+def apply_correction(result, correction: EdgeCorrection) -> None:
+    """The correction applied to an AreaResult: Af and its sweep moved, the std's term added (checks.py says a
+    white level outside the views')."""
+    result.area_m2 += correction.area_m2
+    result.sweep = [(level, area + correction.area_m2) for level, area in result.sweep]
+    result.edge_trend = correction.summary()
+    result.edge_trend_std_m2 = correction.std_m2
+    result.area_std_m2 = float(np.hypot(result.area_std_m2, correction.std_m2))
