@@ -18,6 +18,7 @@ SOURCE = REPO / "veg_area_ros"  # the ament_python package: the folder holding t
 TEST_DATA = REPO / "test" / "data"
 SHARED_DATA = REPO.parent / "shared" / "data"
 OPENCV_LEFT = TEST_DATA / "opencv-left"
+OPENCV_RIGHT = TEST_DATA / "opencv-right"  # the same stereo pair's other camera
 OPENCV_REFERENCE_RMS = 0.4087  # OpenCV 5.0 on the same 13 images (test/data/README.md)
 CHESSBOARD = "chessboard:9x6:0.03"
 

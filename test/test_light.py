@@ -156,6 +156,32 @@ def test_the_fitted_surface_recovers_a_known_light():
     assert fit_background_surface(band, np.zeros(band.shape, bool)) is None  # no background cell
 
 
+def test_a_chessboards_white_squares_pin_the_surface_with_finer_cells():
+    """The background as a real board shows it: white squares of 38 px, eroded 2 px off their edges, hold one
+    or two 12 px cells each, too few to pin the surface (a real photo's 25 % shading was left in the shares,
+    Af +5.9 %); 6 px cells hold the same pixels in whole cells, and the light is recovered. A single patch of
+    that many pixels in one place pins nothing over the window, at either size."""
+    height, width = 342, 342
+    y, x = np.mgrid[0:height, 0:width].astype(float)
+    light = 180 * (1 - 0.35 * (x / width - 0.5)) * (1 - 0.2 * (y / height - 0.5))
+    band = np.clip(np.rint(light + np.random.default_rng(1).normal(0, 3, light.shape)), 0, 255).astype(np.uint8)
+    square, angle, margin = 38, np.deg2rad(20), 5  # the board rolled 20 degrees, its edges' blur eroded off
+    u = np.cos(angle) * (x - 171) + np.sin(angle) * (y - 171) + 3 * square
+    v = -np.sin(angle) * (x - 171) + np.cos(angle) * (y - 171) + 2.5 * square
+    inside = (u >= 0) & (u < 6 * square) & (v >= 0) & (v < 5 * square)
+    white = (inside & ((u // square + v // square) % 2 == 0) & (u % square >= margin) & (u % square < square - margin)
+             & (v % square >= margin) & (v % square < square - margin))
+    cells_12 = (white[:height // 12 * 12, :width // 12 * 12].reshape(height // 12, 12, width // 12, 12)
+                .all(axis=(1, 3)).sum())
+    assert cells_12 < 40, cells_12  # what the 12 px grid alone had
+    surface, misfit, _ = fit_background_surface(band, white)
+    left = np.abs(surface / light - 1)[inside]  # over the board: a 35 % gradient left within 2 %, mostly 0.5 %
+    assert left.max() < 0.02 and np.median(left) < 0.005 and misfit < 0.005
+    patch = np.zeros(band.shape, bool)
+    patch[150:190, 150:190] = True  # 1600 px in one place: under the 40 cells of 12 px the surface needs
+    assert fit_background_surface(band, patch) is None
+
+
 def test_a_background_frame_must_fit_the_frames_and_the_mode():
     scene = cube_scene()
     frame = render_scene(ENDOSCOPE, scene, 0.7, roll_deg=0.0)

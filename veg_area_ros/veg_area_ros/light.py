@@ -89,16 +89,22 @@ def fit_background_surface(band: np.ndarray, background: np.ndarray, degree: int
     only background pixels (`background`: bool, the window's shape), the relative RMS misfit on those cells,
     and the fitted surface's values at them; None when too few cells are background to pin the surface."""
     height, width = band.shape
-    rows, cols = height // cell, width // cell
-    if rows < 2 or cols < 2:
+    marks = background.astype(np.uint8) * np.uint8(255)
+    needed = MIN_CELLS * cell**2  # background pixels in whole cells that pin the surface
+    for cell in (cell, cell // 2):  # halved where the background's patches hold too few whole cells
+        rows, cols = height // cell, width // cell
+        if rows < 2 or cols < 2 or cell < 2:
+            return None
+        crop = (slice(0, rows * cell), slice(0, cols * cell))
+        # a cell is background when every one of its pixels is (255 on average: one pixel short makes it 253);
+        # a chessboard's white squares of 38 px, eroded off the edges, hold one or two 12 px cells each (32 in
+        # all on a real photo, too few: its 25 % shading was left in the shares, +5.9 %) and about ten 6 px ones
+        full = (cv2.resize(marks[crop], (cols, rows), interpolation=cv2.INTER_AREA) == 255).ravel()
+        if int(full.sum()) * cell**2 >= needed:
+            break
+    else:
         return None
-    crop = (slice(0, rows * cell), slice(0, cols * cell))
     values = cv2.resize(band[crop], (cols, rows), interpolation=cv2.INTER_AREA).astype(float).ravel()
-    # a cell is background when every one of its pixels is (255 on average: one pixel short makes it 253)
-    marks = background[crop].astype(np.uint8) * np.uint8(255)
-    full = (cv2.resize(marks, (cols, rows), interpolation=cv2.INTER_AREA) == 255).ravel()
-    if int(full.sum()) < MIN_CELLS:
-        return None
     terms, target = _grid_terms(height, width, cell, degree)[0][full], values[full]
     keep = np.ones(len(target), bool)
     for _ in range(2):  # once more without the cells the first fit calls outliers (a leaf, a bubble)
@@ -108,7 +114,7 @@ def fit_background_surface(band: np.ndarray, background: np.ndarray, degree: int
         residual = target - fitted
         spread = 1.4826 * float(np.median(np.abs(residual[keep]))) + 1e-6
         keep = np.abs(residual) <= 4 * spread
-        if keep.sum() < MIN_CELLS:
+        if int(keep.sum()) * cell**2 < needed:
             return None
     surface = _surface(coefficients, (height, width), degree, cell)
     misfit = float(np.sqrt(np.mean(residual[keep] ** 2))) / max(float(np.median(target[keep])), 1.0)
