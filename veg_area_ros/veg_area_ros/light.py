@@ -91,7 +91,8 @@ def fit_background_surface(band: np.ndarray, background: np.ndarray, degree: int
     height, width = band.shape
     marks = background.astype(np.uint8) * np.uint8(255)
     needed = MIN_CELLS * cell**2  # background pixels in whole cells that pin the surface
-    for cell in (cell, cell // 2):  # halved where the background's patches hold too few whole cells
+    for size in (cell, cell // 2):  # halved where the background's patches hold too few whole cells
+        cell = size
         rows, cols = height // cell, width // cell
         if rows < 2 or cols < 2 or cell < 2:
             return None
