@@ -190,9 +190,10 @@ def test_webcam_photos_at_one_distance_record_no_curve_and_say_why_and_their_edg
 
     webcam = tmp_path / "webcam.yaml"
     done = run_cli("calibrate", str(OPENCV_LEFT), "--board", "chessboard:9x6:0.025", "--medium", "air",
-                   "-o", str(webcam), "-q")
+                   "-o", str(webcam), "-q", "--report", str(tmp_path / "report"))
     assert done.returncode == 0, done.stderr
     assert "tone curve linear (the default): not judged" in done.stdout
+    assert (tmp_path / "report" / "edge_trend.png").stat().st_size > 10_000  # the evidence drawn
     assert "edge trend with exposure: the edges follow exposure: -0.0" in done.stdout, done.stdout
     block = yaml.safe_load(webcam.read_text())["veg_area_ros"]
     assert "tone_curve" not in block and "too alike in distance" in block["tone_curve_evidence"]

@@ -6,6 +6,7 @@ No ROS here.
 from __future__ import annotations
 
 import json
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -128,6 +129,8 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
         written.append(plot_variety(guide, folder / "variety.png", result.views_used))
     if tone is not None and tone.sizes:
         written.append(plot_tone_evidence(tone, folder / "tone_curve.png"))
+    if tone is not None and len(tone.offsets.get(tone.curve, [])) >= 2:
+        written.append(plot_edge_trend(tone, folder / "edge_trend.png"))
     written.append(folder / "calibration.json")
     written[-1].write_text(json.dumps(result.summary(), indent=2))
     return written
@@ -184,6 +187,36 @@ def plot_tone_evidence(tone, path: str | Path) -> Path:
     verdict = f"{tone.curve} taken" if tone.decided else "not told apart: linear kept"
     ax.set_title(f"Tone curve from {len(sizes)} views: {verdict}", fontsize=10)
     ax.legend(title="read as")
+    ax.grid(alpha=0.3)
+    path = Path(path)
+    save_figure(fig, path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot_edge_trend(tone, path: str | Path) -> Path:
+    """Each measured view's edge offset (its black area's error over the board's edge length, px) against its
+    white level, under the curve taken, with the trend the calibration records (or the line it did not take)."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    whites, offsets = np.asarray(tone.whites[tone.curve]), np.asarray(tone.offsets[tone.curve])
+    ax.plot(whites, offsets, "o", color="tab:blue", label="views")
+    for name, white, offset in zip(tone.offset_views[tone.curve], whites, offsets, strict=True):
+        ax.annotate(Path(name).stem, (white, offset), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    choice = tone.edge_trend
+    if choice is not None and choice.trend is not None:
+        trend = choice.trend
+        line = np.linspace(*trend.range_dn, 50)
+        middle = float(np.mean(offsets)) + trend.slope_px_per_dn * (line - trend.reference_dn)
+        spread = trend.slope_std * np.abs(line - trend.reference_dn)
+        ax.plot(line, middle, "-", color="tab:orange", label="trend recorded")
+        ax.fill_between(line, middle - spread, middle + spread, color="tab:orange", alpha=0.2, label="its ±1 std")
+    ax.axhline(0, color="grey", lw=0.8)
+    ax.set_xlabel("white level of the view [DN]")
+    ax.set_ylabel("edge offset: the black reaches further [px]")
+    reason = "" if choice is None else choice.reason
+    ax.set_title(textwrap.fill(f"Edges against exposure, read as {tone.curve}: {reason}", 90), fontsize=9)
+    ax.legend()
     ax.grid(alpha=0.3)
     path = Path(path)
     save_figure(fig, path, dpi=110, bbox_inches="tight")
