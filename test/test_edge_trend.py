@@ -32,8 +32,18 @@ def test_a_clear_trend_is_learned_with_its_error_and_a_weak_or_narrow_one_is_not
     assert abs(trend.slope_px_per_dn + 0.003) < 3 * trend.slope_std and trend.slope_std < 0.001
     assert trend.reference_dn == pytest.approx(whites.mean()) and trend.range_dn == (190.0, 240.0)
     assert EdgeTrend.from_dict(trend.as_dict()) == EdgeTrend.from_dict(trend.as_dict())
-    flat = fit_edge_trend(list(0.05 + rng.normal(0, 0.01, whites.size)), list(whites), "linear")
+    flat_offsets = list(0.05 + rng.normal(0, 0.01, whites.size))
+    flat = fit_edge_trend(flat_offsets, list(whites), "linear")
     assert flat.trend is None and "do not clearly follow" in flat.reason
+    # their std covers their scatter: nothing recorded; it does not: the scatter beyond it, as a std term
+    assert fit_edge_trend(flat_offsets, list(whites), "linear", [0.02] * whites.size).trend is None
+    scattered = fit_edge_trend(flat_offsets, list(whites), "linear", [0.002] * whites.size)
+    kept = scattered.trend
+    assert kept is not None and not kept.learned and kept.slope_px_per_dn == 0
+    assert kept.scatter_px == pytest.approx(np.sqrt(np.var(flat_offsets, ddof=1) - 0.002**2))
+    assert "beyond their reported std" in scattered.reason
+    assert kept.offset_px(300.0) == (0.0, kept.scatter_px, False)  # no trend: nothing moved, nothing outside
+    assert EdgeTrend.from_dict(kept.as_dict()).scatter_px == pytest.approx(kept.scatter_px, abs=1e-4)
     narrow = fit_edge_trend(list(offsets), list(215 + 0.1 * (whites - 215)), "linear")
     assert narrow.trend is None and "too alike in exposure" in narrow.reason
     few = fit_edge_trend(list(offsets[:5]), list(whites[:5]), "linear")
@@ -99,6 +109,12 @@ def test_the_correction_moves_af_by_the_offset_over_the_boundary_and_only_where_
                      AreaMeasurer(None, scene_targets(), Classifier(threshold=120), calibration_conditions=conditions)):
         said = measurer.measure(frame).edge_trend
         assert said is None if measurer.camera is None else (not said["applied"] and said["reason"]), said
+    # a camera whose views' edges scatter beyond their std, with no trend: Af as it was, the scatter in its std
+    only_scatter = EdgeTrend(0.0, 0.0, white, (white - 30, white + 30), 8, 0.03, "linear", False, 0.03)
+    widened = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120),
+                           calibration_conditions={"edge_trend": only_scatter.as_dict()}).measure(frame)
+    assert widened.area_m2 == plain.area_m2 and not widened.edge_trend["applied"]
+    assert widened.edge_trend_std_m2 == pytest.approx(0.03 * shift["boundary_px"] * metres_per_px2, rel=1e-3)
     # a frame whiter than every view: taken at the views' end and said
     far = EdgeTrend(-0.004, 0.0005, white - 50, (white - 60, white - 40), 8, 0.02, "linear")
     outside = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120),

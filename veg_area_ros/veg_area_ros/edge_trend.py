@@ -11,7 +11,9 @@ known answer, its error over the board's edge length is how far that view moved 
 white levels say how that follows exposure. Where the views show a trend clearly (its slope over three
 standard errors, over a span of white levels), each frame's edges are moved back by the trend at its own
 white level, relative to the views' mean: the print's own ink gain, common to all views, is left as it is.
-The slope's standard error, over the frame's distance from the views' mean, is a term of Af's std.
+The slope's standard error, over the frame's distance from the views' mean, is a term of Af's std; so is how
+far the views' edges scatter about the trend (or about their mean, where none is learned) beyond what their own
+reported std says, measured on the views with a known answer rather than guessed.
 """
 
 from __future__ import annotations
@@ -30,7 +32,9 @@ MIN_SPAN_DN = 10.0  # white levels this far apart: below it the views cannot sho
 @dataclass(frozen=True)
 class EdgeTrend:
     """How far the black side of an edge reaches (px, positive: the black grows) per DN of the white level,
-    around `reference_dn` (the views' mean white level), learned in the `tone_curve` the views were read with."""
+    around `reference_dn` (the views' mean white level), learned in the `tone_curve` the views were read with;
+    where no trend was `learned`, the slope is 0. `scatter_px`: how far the views' edges scatter about it beyond
+    what their own reported std says (0 where their std covers it), a term of every frame's std."""
 
     slope_px_per_dn: float
     slope_std: float
@@ -39,11 +43,15 @@ class EdgeTrend:
     views: int
     residual_px: float  # the views' scatter about the line
     tone_curve: str
+    learned: bool = True
+    scatter_px: float = 0.0
 
     def as_dict(self) -> dict:
-        return {"slope_px_per_dn": round(self.slope_px_per_dn, 6), "slope_std": round(self.slope_std, 6),
-                "reference_dn": round(self.reference_dn, 2), "range_dn": [round(v, 1) for v in self.range_dn],
-                "views": self.views, "residual_px": round(self.residual_px, 4), "tone_curve": self.tone_curve}
+        return {"learned": self.learned, "slope_px_per_dn": round(self.slope_px_per_dn, 6),
+                "slope_std": round(self.slope_std, 6), "reference_dn": round(self.reference_dn, 2),
+                "range_dn": [round(v, 1) for v in self.range_dn], "views": self.views,
+                "residual_px": round(self.residual_px, 4), "scatter_px": round(self.scatter_px, 4),
+                "tone_curve": self.tone_curve}
 
     @classmethod
     def from_dict(cls, value: object) -> EdgeTrend:
@@ -54,57 +62,79 @@ class EdgeTrend:
             low, high = (float(v) for v in value["range_dn"])
             trend = cls(float(value["slope_px_per_dn"]), float(value["slope_std"]), float(value["reference_dn"]),
                         (low, high), int(value["views"]), float(value.get("residual_px", 0.0)),
-                        str(value.get("tone_curve", "linear")))
+                        str(value.get("tone_curve", "linear")), bool(value.get("learned", True)),
+                        float(value.get("scatter_px", 0.0)))
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"edge_trend is not readable ({exc.__class__.__name__}: {exc})") from None
-        numbers = (trend.slope_px_per_dn, trend.slope_std, trend.reference_dn, low, high)
-        if not all(math.isfinite(v) for v in numbers) or trend.slope_std < 0 or not low <= trend.reference_dn <= high:
+        numbers = (trend.slope_px_per_dn, trend.slope_std, trend.reference_dn, low, high, trend.scatter_px)
+        if (not all(math.isfinite(v) for v in numbers) or min(trend.slope_std, trend.scatter_px) < 0
+                or not low <= trend.reference_dn <= high):
             raise ValueError(f"edge_trend holds no trend: {value!r}")
         return trend
 
     def offset_px(self, white_dn: float) -> tuple[float, float, bool]:
         """(how far the frame's black reaches beyond the views' mean, its std, whether `white_dn` lies outside
-        the views' range: the trend is then taken at the nearer end, its std at the frame's own level)."""
+        the views' range: the trend is then taken at the nearer end, its std at the frame's own level). The
+        std holds the views' scatter beyond their own std too."""
+        if not self.learned:
+            return 0.0, self.scatter_px, False
         low, high = self.range_dn
         inside = low <= white_dn <= high
         taken = min(max(white_dn, low), high)
-        return (self.slope_px_per_dn * (taken - self.reference_dn),
-                self.slope_std * abs(white_dn - self.reference_dn) + abs(self.slope_px_per_dn) * abs(white_dn - taken),
-                not inside)
+        slope_part = (self.slope_std * abs(white_dn - self.reference_dn)
+                      + abs(self.slope_px_per_dn) * abs(white_dn - taken))
+        return self.slope_px_per_dn * (taken - self.reference_dn), math.hypot(slope_part, self.scatter_px), not inside
 
 
 @dataclass
 class TrendChoice:
-    """The trend learned from the views, or None, and why."""
+    """What the calibration records of its views' edges (a trend learned, or only their scatter), or None, and
+    why."""
 
     trend: EdgeTrend | None
     reason: str
 
 
-def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: str) -> TrendChoice:
-    """The line through each view's edge offset (px) against its white level (DN), taken where it is clear."""
+def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: str,
+                   stds_px: list[float] | None = None) -> TrendChoice:
+    """The line through each view's edge offset (px) against its white level (DN), taken where it is clear;
+    and how far the offsets scatter about it (or about their mean) beyond their reported std (`stds_px`)."""
     n = len(offsets_px)
     if n < MIN_VIEWS:
         return TrendChoice(None, f"not learned: {MIN_VIEWS} or more views of the whole chessboard, whites not "
                                  f"clipped, show how the edges follow exposure; {n} could be measured")
     offsets, whites = np.asarray(offsets_px, float), np.asarray(whites_dn, float)
     span = float(whites.max() - whites.min())
+    centre, reach = float(whites.mean()), (float(whites.min()), float(whites.max()))
+    slope = slope_std = 0.0
+    learned = False
     if span < MIN_SPAN_DN:
-        return TrendChoice(None, f"not learned: the views' whites span {span:.1f} DN, too alike in exposure to show "
-                                 f"a trend (under {MIN_SPAN_DN:g} DN)")
-    centre = float(whites.mean())
-    design = np.column_stack([np.ones(n), whites - centre])
-    coef, *_ = np.linalg.lstsq(design, offsets, rcond=None)
-    residual = offsets - design @ coef
-    variance = float(residual @ residual) / (n - 2)
-    slope, slope_std = float(coef[1]), math.sqrt(variance / float(np.sum((whites - centre) ** 2)))
-    trend = EdgeTrend(slope, slope_std, centre, (float(whites.min()), float(whites.max())), n,
-                      math.sqrt(variance), tone_curve)
-    described = (f"{slope * 10:+.3f} +/- {slope_std * 10:.3f} px per 10 DN of white over {n} views "
-                 f"({trend.range_dn[0]:.0f}-{trend.range_dn[1]:.0f} DN)")
-    if abs(slope) <= DECISIVE_SIGMA * slope_std:
-        return TrendChoice(None, f"not learned: the edges do not clearly follow exposure ({described})")
-    return TrendChoice(trend, f"the edges follow exposure: {described}")
+        reason = (f"not learned: the views' whites span {span:.1f} DN, too alike in exposure to show a trend "
+                  f"(under {MIN_SPAN_DN:g} DN)")
+    else:
+        design = np.column_stack([np.ones(n), whites - centre])
+        coef, *_ = np.linalg.lstsq(design, offsets, rcond=None)
+        residual = offsets - design @ coef
+        slope = float(coef[1])
+        slope_std = math.sqrt(float(residual @ residual) / (n - 2) / float(np.sum((whites - centre) ** 2)))
+        described = (f"{slope * 10:+.3f} +/- {slope_std * 10:.3f} px per 10 DN of white over {n} views "
+                     f"({reach[0]:.0f}-{reach[1]:.0f} DN)")
+        learned = abs(slope) > DECISIVE_SIGMA * slope_std
+        reason = (f"the edges follow exposure: {described}" if learned else
+                  f"not learned: the edges do not clearly follow exposure ({described})")
+    if not learned:
+        slope = slope_std = 0.0
+    residual = offsets - offsets.mean() - slope * (whites - centre)
+    variance = float(residual @ residual) / (n - (2 if learned else 1))
+    own = float(np.mean(np.square(stds_px))) if stds_px is not None and len(stds_px) == n else variance
+    scatter = math.sqrt(max(variance - own, 0.0))
+    if scatter > 0:
+        reason += (f"; the views' edges scatter {math.sqrt(variance):.3f} px about it, {scatter:.3f} px beyond "
+                   "their reported std: a term of every frame's std")
+    if not learned and scatter == 0:
+        return TrendChoice(None, reason)
+    return TrendChoice(EdgeTrend(slope, slope_std, centre, reach, n, math.sqrt(variance), tone_curve, learned,
+                                 scatter), reason)
 
 
 def boundary_length_px(mask: np.ndarray, roi: np.ndarray) -> float:
@@ -154,9 +184,10 @@ class EdgeCorrection:
     boundary_px: float
     outside: bool  # the frame's white level lies outside the views'
     range_dn: tuple[float, float]  # the views' white levels
+    moved: bool  # a trend was learned and moved the edges (else only the views' scatter is in the std)
 
     def summary(self) -> dict:
-        return {"applied": True, "area_m2": self.area_m2, "std_m2": self.std_m2, "offset_px": self.offset_px,
+        return {"applied": self.moved, "area_m2": self.area_m2, "std_m2": self.std_m2, "offset_px": self.offset_px,
                 "white_dn": self.white_dn, "boundary_px": self.boundary_px, "outside": self.outside,
                 "range_dn": list(self.range_dn)}
 
@@ -169,7 +200,7 @@ def edge_correction(trend: EdgeTrend, white_dn: float, object_kind: str, mask: n
     boundary = boundary_length_px(mask, roi)
     sign = -1.0 if object_kind == "dark" else 1.0  # the black reaching further makes a dark object larger
     return EdgeCorrection(sign * offset * boundary * metres_per_px**2, offset_std * boundary * metres_per_px**2,
-                          offset, white_dn, boundary, outside, trend.range_dn)
+                          offset, white_dn, boundary, outside, trend.range_dn, trend.learned)
 
 
 def apply_correction(result, correction: EdgeCorrection) -> None:

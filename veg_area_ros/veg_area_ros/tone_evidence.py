@@ -128,6 +128,7 @@ class ToneChoice:
     offsets: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's edge offset (px)
     whites: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's white level (DN)
     offset_views: dict[str, list[str]] = field(default_factory=dict)  # per curve, the views of `offsets`
+    offset_stds: dict[str, list[float]] = field(default_factory=dict)  # per curve, each offset's reported std (px)
     edge_trend: TrendChoice | None = None  # how the edges follow exposure under the curve taken (edge_trend)
 
     def metadata(self) -> dict:
@@ -215,7 +216,8 @@ def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     choice = judged_tone_curve(cases, board, camera)
     if board.kind == "chessboard":
         choice.edge_trend = fit_edge_trend(choice.offsets.get(choice.curve, []),
-                                           choice.whites.get(choice.curve, []), choice.curve)
+                                           choice.whites.get(choice.curve, []), choice.curve,
+                                           choice.offset_stds.get(choice.curve, []))
     return choice
 
 
@@ -239,6 +241,7 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     offsets: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
     whites: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
     offset_views: dict[str, list[str]] = {curve: [] for curve in TONE_CURVES}
+    offset_stds: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
     sizes: list[float] = []
     left_out: dict[str, str] = {}
     for case, grey in cases:
@@ -259,20 +262,22 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
             # the white level of the views whose shares were applied: the trend is applied to such frames
             white = None if levels is None or not result.subpixel_applied else max(levels.object, levels.background)
             # the error over the edges' length is how far they moved (m), in the view's idealized px
-            offset_px = (result.area_m2 - truth) / edge_length_m(board) * case.square_px / board.square
-            measured[curve] = (result.area_m2 / truth - 1, offset_px, white)
+            px_per_m2 = case.square_px / board.square / edge_length_m(board)
+            measured[curve] = (result.area_m2 / truth - 1, (result.area_m2 - truth) * px_per_m2, white,
+                               result.area_std_m2 * px_per_m2)
         else:
-            for curve, (error, offset, white) in measured.items():
+            for curve, (error, offset, white, offset_std) in measured.items():
                 errors[curve].append(error)
                 if white is not None:
                     offsets[curve].append(offset)
                     whites[curve].append(white)
                     offset_views[curve].append(case.name)
+                    offset_stds[curve].append(offset_std)
             sizes.append(case.square_px)
     n = len(sizes)
     span = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
     choice = ToneChoice("linear", False, "", n, span, left_out=left_out, sizes=sizes, errors=errors,
-                        offsets=offsets, whites=whites, offset_views=offset_views)
+                        offsets=offsets, whites=whites, offset_views=offset_views, offset_stds=offset_stds)
     if n < MIN_VIEWS:
         choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard well inside the image, "
                          f"whites not clipped, near and far, tell the curves apart; {n} could be measured")
