@@ -143,15 +143,20 @@ def boundary_length_px(mask: np.ndarray, roi: np.ndarray) -> float:
     contours, _ = cv2.findContours(mask, cv2.RETR_LIST, cv2.CHAIN_APPROX_NONE)
     if not contours:
         return 0.0
-    inner = cv2.erode(roi, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
-    cut = (roi > 0) & (inner == 0)
+    # the ROI's edge: its pixels with a neighbour outside it (or past the window), looked up at the contour's
+    # points only (a whole-frame erosion cost a 10 MP frame more than the contours)
+    padded = cv2.copyMakeBorder(roi, 1, 1, 1, 1, cv2.BORDER_CONSTANT, value=0)
     total = 0.0
     for contour in contours:
         points = contour.reshape(-1, 2)
+        x, y = points[:, 0] + 1, points[:, 1] + 1
+        cut = np.zeros(len(points), bool)
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                cut |= padded[y + dy, x + dx] == 0
         following = np.roll(points, -1, axis=0)
         steps = np.hypot(*(following - points).T)
-        on_cut = cut[points[:, 1], points[:, 0]] & cut[following[:, 1], following[:, 0]]
-        total += float(steps[~on_cut].sum())
+        total += float(steps[~(cut & np.roll(cut, -1))].sum())
     return total
 
 
