@@ -1290,12 +1290,17 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
 def scenario_metadata(options: dict, nodes: Nodes) -> dict:
     """A calibration whose file records the tone curve srgb and the medium air, served on camera_info by the
     camera node (camera_info_url) or the calibration node (its camera_info_url) to an area node given no
-    calibration_file (tone_curve auto): the tone curve the area node's results were read with."""
+    calibration_file (tone_curve auto): the tone curve the area node's results were read with, and what the
+    file's edge trend did to them."""
     from veg_area_ros.calib_io import write_calibration
     from veg_area_ros.sim.synthetic import ENDOSCOPE
 
     calibration = Path("endoscope_srgb.yaml").resolve()
-    write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air", "tone_curve": options["tone_curve"]})
+    # and an edge trend learned under the linear curve: applied to frames read as grey levels, refused (said) else
+    trend = {"learned": True, "slope_px_per_dn": -0.003, "slope_std": 0.0005, "reference_dn": 190.0,
+             "range_dn": [150.0, 250.0], "views": 8, "residual_px": 0.02, "scatter_px": 0.0, "tone_curve": "linear"}
+    write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air", "tone_curve": options["tone_curve"],
+                                                            "edge_trend": trend})
     if options["server"] == "camera":
         nodes.start("camera_node", rate_hz=5.0, synthetic_scene="cube", synthetic_medium="air",
                     camera_info_url=f"file://{calibration}")
@@ -1322,7 +1327,8 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
-    return {"tone_curves": [i.get("tone_curve") for i in infos if i.get("calibrated")]}
+    return {"tone_curves": [i.get("tone_curve") for i in infos if i.get("calibrated")],
+            "edge_trends": [i.get("edge_trend") for i in infos if i.get("calibrated")]}
 
 
 if __name__ == "__main__":

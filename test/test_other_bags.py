@@ -431,7 +431,8 @@ def test_an_area_node_given_camera_info_reads_the_calibrations_tone_curve(tmp_pa
     """camera_info has no field for what a calibration file records beside the lens (the tone curve judged on
     its views, the medium, the distance): the node serving it publishes that on camera_info/metadata, and an
     area node with tone_curve auto and no calibration_file reads its frames with the curve the file records,
-    as `veg-area measure` given the file does (it read them as grey levels before, whatever the file said)."""
+    as `veg-area measure` given the file does (it read them as grey levels before, whatever the file said). The
+    file's edge trend with exposure comes the same way."""
     from ros_harness import run_scenario
 
     result = run_scenario("metadata", tmp_path, server=server, tone_curve=tone_curve, seconds=90.0)
@@ -439,3 +440,13 @@ def test_an_area_node_given_camera_info_reads_the_calibrations_tone_curve(tmp_pa
     assert len(curves) >= 10, result["log"]
     first = curves.index(tone_curve)  # a frame measured before the metadata came is read as grey levels
     assert set(curves[first:]) == {tone_curve} and len(curves) - first >= 5, curves
+    # the file's edge trend, learned under linear, comes along: the frames read as grey levels have their edges
+    # moved back by it at their white level; those read through srgb say why it was not applied
+    trends = result["edge_trends"]
+    came = next(k for k, trend in enumerate(trends) if trend is not None)  # before the metadata: none
+    assert len(trends) - came >= 5 and None not in trends[came:], trends
+    for trend in trends[came:]:
+        if tone_curve == "linear":
+            assert trend["applied"] and trend["offset_px"] < 0 and trend["area_m2"] > 0, trend
+        else:
+            assert not trend["applied"] and "learned under the linear tone curve" in trend["reason"], trend
