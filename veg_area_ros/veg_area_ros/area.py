@@ -87,9 +87,10 @@ class AreaMeasurer:
     def carry_on_from(self, previous: object) -> bool:
         """Takes over what `previous` carried from frame to frame (tracked markers, weights, light) when both were
         built alike: the same camera, the same targets and background objects, and equal classifier, ROI, area
-        mode and levels. A measurer rebuilt for what changes only its warnings (a calibration's conditions heard
-        after the first frames) then measures the next frame as `previous` would have, not as a first frame, so
-        a live run and the same frames measured offline give the same numbers. Returns whether it did."""
+        mode and levels. A measurer rebuilt for a calibration's conditions heard after the first frames (its
+        warnings, and an edge trend applied frame by frame) then measures the next frame with what `previous`
+        carried, not as a first frame, so a live run and the same frames measured offline give the same
+        numbers. Returns whether it did."""
         if not isinstance(previous, AreaMeasurer):
             return False
         mine, theirs = self.light_settings, previous.light_settings

@@ -236,7 +236,7 @@ class AreaNode(Node):
         except Exception as exc:  # e.g. a tone curve this version does not know: measured as before
             self.get_logger().error(f"camera_info/metadata not applied ({exc.__class__.__name__}: {exc})")
             return
-        if measurer is not None:  # the frames' sequence goes on where only the warnings change
+        if measurer is not None:  # the frames' sequence goes on: the conditions change no carried state
             measurer.carry_on_from(self.measurer)
         self.measurer = measurer
         self._say_metadata(conditions)
