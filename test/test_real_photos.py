@@ -105,8 +105,9 @@ def test_the_calibrations_edge_trend_holds_each_photo_learned_from_the_others(ph
     learned from all seven, as the calibration file holds it: 0.20 %."""
     curve = evidence.curve
     assert evidence.edge_trend.trend is not None, evidence.edge_trend.reason
-    names = np.array(evidence.offset_views[curve])
-    offsets, whites = np.array(evidence.offsets[curve]), np.array(evidence.whites[curve])
+    edges = evidence.edges[curve]
+    names = np.array([e.name for e in edges])
+    offsets, whites = np.array([e.offset_px for e in edges]), np.array([e.white_dn for e in edges])
     well = [p for p in photos if p.clipped_share < 0.01]
     assert sorted(names) == sorted(p.name for p in well)  # the burnt-out views teach nothing
     errors, stds, counted = [], [], []

@@ -86,6 +86,17 @@ class EdgeTrend:
         return self.slope_px_per_dn * (taken - self.reference_dn), math.hypot(slope_part, self.scatter_px), not inside
 
 
+@dataclass(frozen=True)
+class ViewEdge:
+    """One calibration view as evidence of where the camera puts its edges: how far they moved (px, positive:
+    the black grows), its white level (DN) and the offset's reported std (px)."""
+
+    name: str
+    offset_px: float
+    white_dn: float
+    std_px: float
+
+
 @dataclass
 class TrendChoice:
     """What the calibration records of its views' edges (a trend learned, or only their scatter), or None, and

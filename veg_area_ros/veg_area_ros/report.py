@@ -129,7 +129,7 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
         written.append(plot_variety(guide, folder / "variety.png", result.views_used))
     if tone is not None and tone.sizes:
         written.append(plot_tone_evidence(tone, folder / "tone_curve.png"))
-    if tone is not None and len(tone.offsets.get(tone.curve, [])) >= 2:
+    if tone is not None and len(tone.edges.get(tone.curve, [])) >= 2:
         written.append(plot_edge_trend(tone, folder / "edge_trend.png"))
     written.append(folder / "calibration.json")
     written[-1].write_text(json.dumps(result.summary(), indent=2))
@@ -199,10 +199,12 @@ def plot_edge_trend(tone, path: str | Path) -> Path:
     white level, under the curve taken, with the trend the calibration records (or the line it did not take)."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
-    whites, offsets = np.asarray(tone.whites[tone.curve]), np.asarray(tone.offsets[tone.curve])
+    edges = tone.edges[tone.curve]
+    whites, offsets = np.array([e.white_dn for e in edges]), np.array([e.offset_px for e in edges])
     ax.plot(whites, offsets, "o", color="tab:blue", label="views")
-    for name, white, offset in zip(tone.offset_views[tone.curve], whites, offsets, strict=True):
-        ax.annotate(Path(name).stem, (white, offset), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    for edge in edges:
+        ax.annotate(Path(edge.name).stem, (edge.white_dn, edge.offset_px), fontsize=7, xytext=(3, 3),
+                    textcoords="offset points")
     choice = tone.edge_trend
     if choice is not None and choice.trend is not None:
         trend = choice.trend

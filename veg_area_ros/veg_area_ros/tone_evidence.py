@@ -22,7 +22,7 @@ from .area import AreaMeasurer
 from .board import BoardSpec, Detection, to_grey
 from .camera_model import BrownCamera
 from .classify import TONE_CURVES, Classifier
-from .edge_trend import TrendChoice, fit_edge_trend
+from .edge_trend import TrendChoice, ViewEdge, fit_edge_trend
 from .targets import TargetsSpec
 
 MAX_VIEWS = 24  # views measured, evenly over the board's sizes: about 1.5 s each at 10 MP (both curves)
@@ -125,10 +125,7 @@ class ToneChoice:
     left_out: dict[str, str] = field(default_factory=dict)  # view name -> why it was not measured
     sizes: list[float] = field(default_factory=list)  # each measured view's px per square
     errors: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's relative error
-    offsets: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's edge offset (px)
-    whites: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's white level (DN)
-    offset_views: dict[str, list[str]] = field(default_factory=dict)  # per curve, the views of `offsets`
-    offset_stds: dict[str, list[float]] = field(default_factory=dict)  # per curve, each offset's reported std (px)
+    edges: dict[str, list[ViewEdge]] = field(default_factory=dict)  # per curve, the views whose shares were used
     edge_trend: TrendChoice | None = None  # how the edges follow exposure under the curve taken (edge_trend)
 
     def metadata(self) -> dict:
@@ -215,9 +212,9 @@ def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     edges."""
     choice = judged_tone_curve(cases, board, camera)
     if board.kind == "chessboard":
-        choice.edge_trend = fit_edge_trend(choice.offsets.get(choice.curve, []),
-                                           choice.whites.get(choice.curve, []), choice.curve,
-                                           choice.offset_stds.get(choice.curve, []))
+        edges = choice.edges.get(choice.curve, [])
+        choice.edge_trend = fit_edge_trend([e.offset_px for e in edges], [e.white_dn for e in edges], choice.curve,
+                                           [e.std_px for e in edges])
     return choice
 
 
@@ -238,14 +235,13 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
         return ToneChoice("linear", False, f"not judged: the tone curve is read from a chessboard's squares, "
                                            f"the views show a {board.kind} board")
     errors: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
-    offsets: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
-    whites: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
-    offset_views: dict[str, list[str]] = {curve: [] for curve in TONE_CURVES}
-    offset_stds: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
+    edges: dict[str, list[ViewEdge]] = {curve: [] for curve in TONE_CURVES}
     sizes: list[float] = []
     left_out: dict[str, str] = {}
     for case, grey in cases:
         truth = case.true_area_m2(board, case.first_black(grey))
+        # the error over the edges' length is how far they moved (m), in the view's idealized px
+        px_per_m2 = case.square_px / board.square / edge_length_m(board)
         measured = {}
         for curve in TONE_CURVES:
             try:
@@ -259,25 +255,20 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
                 left_out[case.name] = f"{curve}: {spoiled[0]}"
                 break
             levels = result.levels
-            # the white level of the views whose shares were applied: the trend is applied to such frames
-            white = None if levels is None or not result.subpixel_applied else max(levels.object, levels.background)
-            # the error over the edges' length is how far they moved (m), in the view's idealized px
-            px_per_m2 = case.square_px / board.square / edge_length_m(board)
-            measured[curve] = (result.area_m2 / truth - 1, (result.area_m2 - truth) * px_per_m2, white,
-                               result.area_std_m2 * px_per_m2)
+            # the views whose shares were applied, with their white level: the trend is applied to such frames
+            edge = (None if levels is None or not result.subpixel_applied else
+                    ViewEdge(case.name, (result.area_m2 - truth) * px_per_m2, max(levels.object, levels.background),
+                             result.area_std_m2 * px_per_m2))
+            measured[curve] = (result.area_m2 / truth - 1, edge)
         else:
-            for curve, (error, offset, white, offset_std) in measured.items():
+            for curve, (error, edge) in measured.items():
                 errors[curve].append(error)
-                if white is not None:
-                    offsets[curve].append(offset)
-                    whites[curve].append(white)
-                    offset_views[curve].append(case.name)
-                    offset_stds[curve].append(offset_std)
+                if edge is not None:
+                    edges[curve].append(edge)
             sizes.append(case.square_px)
     n = len(sizes)
     span = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
-    choice = ToneChoice("linear", False, "", n, span, left_out=left_out, sizes=sizes, errors=errors,
-                        offsets=offsets, whites=whites, offset_views=offset_views, offset_stds=offset_stds)
+    choice = ToneChoice("linear", False, "", n, span, left_out=left_out, sizes=sizes, errors=errors, edges=edges)
     if n < MIN_VIEWS:
         choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard well inside the image, "
                          f"whites not clipped, near and far, tell the curves apart; {n} could be measured")
