@@ -18,7 +18,7 @@ from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
 from veg_area_ros.classify import Classifier, ClassifyError, polygon_roi
 from veg_area_ros.settings import MeasurementSettings
-from veg_area_ros.sim.synthetic import ENDOSCOPE, board_views, render_board_views
+from veg_area_ros.sim.synthetic import ENDOSCOPE, board_views, look_at_pose, render_board_views
 from veg_area_ros.tone_evidence import board_case, choose_tone_curve
 
 BOARD = BoardSpec.parse("chessboard:9x6:0.02")
@@ -62,6 +62,31 @@ def test_a_boards_black_area_is_measured_right_near_and_far():
             result = AreaMeasurer(ENDOSCOPE, case.targets, Classifier(threshold="otsu"), roi=case.roi,
                                   area_mode=mode).measure(image)
             assert abs(result.area_m2 / truth - 1) < bound, (case.name, case.square_px, mode, result.area_m2 / truth)
+
+
+def test_a_board_filling_the_frame_is_measured_one_square_in():
+    """Held at 13-15 cm the board's outer squares leave the 640x480 frame while its inner corners are all found:
+    such a view was no evidence (a webcam's calibration kept 4 of its 9 well-exposed views, too few to learn how
+    its edges follow exposure). It is measured inside the rectangle through the centres of the squares one in
+    (7 x 4 squares, half of them black), within 0.1 % in the default mode."""
+    middle = (4 * BOARD.square, 2.5 * BOARD.square)
+    poses = [look_at_pose(distance, tilt_x, tilt_y, roll, plane_point=middle) for distance, tilt_x, tilt_y, roll in
+             ((0.14, 10, 0, 3), (0.145, 0, 10, -3), (0.135, 5, 5, 0), (0.15, -8, 4, 2), (0.13, 0, 0, 0))]
+    images = render_board_views(ENDOSCOPE, BOARD, poses, noise_sigma=2.0, rng=np.random.default_rng(1),
+                                blur_sigma_px=0.7)
+    for image in images:
+        detection = BOARD.detect(image)
+        assert detection is not None
+        whole = board_case("view", detection, BOARD, ENDOSCOPE, inside_only=False)
+        assert whole.roi.min() < 0 or whole.roi[:, 0].max() > ENDOSCOPE.width - 1 or \
+            whole.roi[:, 1].max() > ENDOSCOPE.height - 1  # the outer squares' centres leave the frame
+        case = board_case("view", detection, BOARD, ENDOSCOPE)
+        assert case is not None and case.inset == 1
+        truth = case.true_area_m2(BOARD, case.first_black(image))
+        assert truth == pytest.approx(7 * 4 / 2 * BOARD.square**2)
+        assert case.edge_length_m(BOARD) == pytest.approx(2 * 7 * 4 * BOARD.square)
+        result = AreaMeasurer(ENDOSCOPE, case.targets, Classifier(threshold="otsu"), roi=case.roi).measure(image)
+        assert abs(result.area_m2 / truth - 1) < 0.001, result.area_m2 / truth
 
 
 def test_a_roi_holds_the_pixels_whose_centre_lies_inside_it():

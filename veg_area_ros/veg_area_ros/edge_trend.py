@@ -10,7 +10,9 @@ white). Neither area mode can see that in one frame. A chessboard's views can: e
 known answer, its error over the board's edge length is how far that view moved its edges, and the views'
 white levels say how that follows exposure. Where the views show a trend clearly (its slope over three
 standard errors, over a span of white levels), each frame's edges are moved back by the trend at its own
-white level, relative to the views' mean: the print's own ink gain, common to all views, is left as it is.
+white level, relative to the views' mean: the print's own ink gain is left as it is (a reach in metres, it
+is fitted beside the trend where the views' scales differ, so that near views that are also bright ones do not
+teach it as a trend with exposure).
 The slope's standard error, over the frame's distance from the views' mean, is a term of Af's std; so is how
 far the views' edges scatter about the trend (or about their mean, where none is learned) beyond what their own
 reported std says, measured on the views with a known answer rather than guessed.
@@ -27,6 +29,7 @@ import numpy as np
 MIN_VIEWS = 6  # a slope and its scatter need a few more views than its two parameters
 DECISIVE_SIGMA = 3.0  # the slope this many standard errors from zero
 MIN_SPAN_DN = 10.0  # white levels this far apart: below it the views cannot show a trend
+MIN_SCALE_RATIO = 1.1  # the nearest view's scale over the farthest's: from it on the print's gain is fitted too
 
 
 @dataclass(frozen=True)
@@ -89,12 +92,14 @@ class EdgeTrend:
 @dataclass(frozen=True)
 class ViewEdge:
     """One calibration view as evidence of where the camera puts its edges: how far they moved (px, positive:
-    the black grows), its white level (DN) and the offset's reported std (px)."""
+    the black grows), its white level (DN), the offset's reported std (px) and the print's scale in the view
+    (px per metre: the print's own ink gain moves the edges in proportion to it)."""
 
     name: str
     offset_px: float
     white_dn: float
     std_px: float
+    scale_px_per_m: float
 
 
 @dataclass
@@ -104,12 +109,17 @@ class TrendChoice:
 
     trend: EdgeTrend | None
     reason: str
+    gain_px: tuple[float, ...] = ()  # per view, the print's gain's part of its offset (about their mean), if fitted
 
 
 def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: str,
-                   stds_px: list[float] | None = None) -> TrendChoice:
+                   stds_px: list[float] | None = None, scales_px_per_m: list[float] | None = None) -> TrendChoice:
     """The line through each view's edge offset (px) against its white level (DN), taken where it is clear;
-    and how far the offsets scatter about it (or about their mean) beyond their reported std (`stds_px`)."""
+    and how far the offsets scatter about it (or about their mean) beyond their reported std (`stds_px`).
+    Given each view's scale (`scales_px_per_m`) and views near and far, the print's ink gain (a reach in
+    metres, so in px in proportion to the scale) is fitted beside it: where near views are also brighter
+    ones, the gain would otherwise pass for a trend with exposure (a GoPro's views: +0.21 +/- 0.06 px per
+    10 DN without it, -0.03 +/- 0.05 with it)."""
     n = len(offsets_px)
     if n < MIN_VIEWS:
         return TrendChoice(None, f"not learned: {MIN_VIEWS} or more views of the whole chessboard, whites not "
@@ -117,35 +127,46 @@ def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: 
     offsets, whites = np.asarray(offsets_px, float), np.asarray(whites_dn, float)
     span = float(whites.max() - whites.min())
     centre, reach = float(whites.mean()), (float(whites.min()), float(whites.max()))
+    # the print's gain, in proportion to the scale, where the views' scales differ enough to show it
+    gain = np.empty((n, 0))
+    if scales_px_per_m is not None and len(scales_px_per_m) == n:
+        scales = np.asarray(scales_px_per_m, float)
+        if scales.min() > 0 and scales.max() / scales.min() >= MIN_SCALE_RATIO:
+            gain = (scales / scales.mean() - 1.0)[:, None]
     slope = slope_std = 0.0
     learned = False
     if span < MIN_SPAN_DN:
         reason = (f"not learned: the views' whites span {span:.1f} DN, too alike in exposure to show a trend "
                   f"(under {MIN_SPAN_DN:g} DN)")
     else:
-        design = np.column_stack([np.ones(n), whites - centre])
+        design = np.column_stack([np.ones(n), whites - centre, gain])
         coef, *_ = np.linalg.lstsq(design, offsets, rcond=None)
         residual = offsets - design @ coef
         slope = float(coef[1])
-        slope_std = math.sqrt(float(residual @ residual) / (n - 2) / float(np.sum((whites - centre) ** 2)))
+        variance = float(residual @ residual) / max(n - design.shape[1], 1)
+        slope_std = math.sqrt(variance * float(np.linalg.inv(design.T @ design)[1, 1]))
         described = (f"{slope * 10:+.3f} +/- {slope_std * 10:.3f} px per 10 DN of white over {n} views "
-                     f"({reach[0]:.0f}-{reach[1]:.0f} DN)")
+                     f"({reach[0]:.0f}-{reach[1]:.0f} DN)" + (", the print's gain with the board's size in pixels "
+                                                               "taken out" if gain.size else ""))
         learned = abs(slope) > DECISIVE_SIGMA * slope_std
         reason = (f"the edges follow exposure: {described}" if learned else
                   f"not learned: the edges do not clearly follow exposure ({described})")
     if not learned:
         slope = slope_std = 0.0
-    residual = offsets - offsets.mean() - slope * (whites - centre)
-    variance = float(residual @ residual) / (n - (2 if learned else 1))
+    design = np.column_stack([np.ones(n), gain])
+    coef, *_ = np.linalg.lstsq(design, offsets - slope * (whites - centre), rcond=None)
+    residual = offsets - slope * (whites - centre) - design @ coef
+    variance = float(residual @ residual) / max(n - design.shape[1] - (1 if learned else 0), 1)
     own = float(np.mean(np.square(stds_px))) if stds_px is not None and len(stds_px) == n else variance
     scatter = math.sqrt(max(variance - own, 0.0))
     if scatter > 0:
         reason += (f"; the views' edges scatter {math.sqrt(variance):.3f} px about it, {scatter:.3f} px beyond "
                    "their reported std: a term of every frame's std")
+    gain_part = tuple(float(v) for v in gain[:, 0] * coef[1]) if gain.size else ()
     if not learned and scatter == 0:
-        return TrendChoice(None, reason)
+        return TrendChoice(None, reason, gain_part)
     return TrendChoice(EdgeTrend(slope, slope_std, centre, reach, n, math.sqrt(variance), tone_curve, learned,
-                                 scatter), reason)
+                                 scatter), reason, gain_part)
 
 
 def boundary_length_px(mask: np.ndarray, roi: np.ndarray) -> float:

@@ -196,16 +196,19 @@ def plot_tone_evidence(tone, path: str | Path) -> Path:
 
 def plot_edge_trend(tone, path: str | Path) -> Path:
     """Each measured view's edge offset (its black area's error over the board's edge length, px) against its
-    white level, under the curve taken, with the trend the calibration records (or the line it did not take)."""
+    white level, under the curve taken, with the trend the calibration records (or the line it did not take).
+    Where the print's gain was fitted beside the trend, the views are drawn with it taken out."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
     edges = tone.edges[tone.curve]
-    whites, offsets = np.array([e.white_dn for e in edges]), np.array([e.offset_px for e in edges])
-    ax.plot(whites, offsets, "o", color="tab:blue", label="views")
-    for edge in edges:
-        ax.annotate(Path(edge.name).stem, (edge.white_dn, edge.offset_px), fontsize=7, xytext=(3, 3),
-                    textcoords="offset points")
     choice = tone.edge_trend
+    gain = np.array(choice.gain_px if choice is not None and choice.gain_px else [0.0] * len(edges))
+    whites, offsets = np.array([e.white_dn for e in edges]), np.array([e.offset_px for e in edges]) - gain
+    ax.plot(whites, offsets, "o", color="tab:blue",
+            label="views, the print's gain with their scale taken out" if gain.any() else "views")
+    for edge, offset in zip(edges, offsets, strict=True):
+        ax.annotate(Path(edge.name).stem, (edge.white_dn, offset), fontsize=7, xytext=(3, 3),
+                    textcoords="offset points")
     if choice is not None and choice.trend is not None:
         trend = choice.trend
         line = np.linspace(*trend.range_dn, 50)

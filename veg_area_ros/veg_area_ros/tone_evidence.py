@@ -42,18 +42,24 @@ class BoardCase:
 
     name: str
     targets: TargetsSpec  # the four outer inner corners, their board coordinates in metres
-    roi: np.ndarray  # (4, 2) idealized px: the rectangle through the outer squares' centres
+    roi: np.ndarray  # (4, 2) idealized px: the rectangle through the centres of the squares `inset` in
     square_px: float  # idealized pixels per square: the board's size in the image
-    first_black_probe: np.ndarray  # (2, 2) raw px: the outer square at the first corner, and its neighbour
+    first_black_probe: np.ndarray  # (2, 2) raw px: the rectangle's corner square at the first corner, and its neighbour
+    inset: int = 0  # 0: the rectangle through the outer squares' centres; 1: one square further in
 
     def true_area_m2(self, board: BoardSpec, first_black: bool) -> float:
         """The black squares' area inside the rectangle: quarter squares at its corners, halves along its sides."""
         total = 0.0
-        for i in range(board.cols + 1):
-            for j in range(board.rows + 1):
+        first, last_col, last_row = self.inset, board.cols - self.inset, board.rows - self.inset
+        for i in range(first, last_col + 1):
+            for j in range(first, last_row + 1):
                 if ((i + j) % 2 == 0) == first_black:
-                    total += (0.5 if i in (0, board.cols) else 1.0) * (0.5 if j in (0, board.rows) else 1.0)
+                    total += (0.5 if i in (first, last_col) else 1.0) * (0.5 if j in (first, last_row) else 1.0)
         return total * board.square**2
+
+    def edge_length_m(self, board: BoardSpec) -> float:
+        """The black squares' edges inside the rectangle: every inner grid line within it, whole (m)."""
+        return 2.0 * (board.cols - 2 * self.inset) * (board.rows - 2 * self.inset) * board.square
 
     def first_black(self, grey: np.ndarray) -> bool:
         """Whether the outer square at the first corner is the black one, read in the view's grey image."""
@@ -64,7 +70,17 @@ class BoardCase:
 def board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownCamera, inside_only: bool = True
                ) -> BoardCase | None:
     """The view as a measurement, or None where it cannot be one: not a full chessboard, or (`inside_only`)
-    the rectangle or the probe of the first square's colour reaching beyond the image."""
+    the rectangle or the probe of the first square's colour reaching beyond the image. With `inside_only`, a
+    view whose outer squares reach the image's edge is measured one square further in, where the board has
+    room (a board filling the frame is still evidence)."""
+    if not inside_only:
+        return _board_case(name, detection, board, camera, 0, False)
+    return next((case for inset in (0, 1) if min(board.cols, board.rows) > 2 * inset + 1
+                 and (case := _board_case(name, detection, board, camera, inset, True)) is not None), None)
+
+
+def _board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownCamera, inset: int,
+                inside_only: bool) -> BoardCase | None:
     cols, rows = board.cols, board.rows
     if board.kind != "chessboard" or len(detection) != cols * rows:
         return None
@@ -81,7 +97,7 @@ def board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownC
     homography, _ = cv2.findHomography(squares.astype(np.float32), idealized.astype(np.float32))
     if homography is None:
         return None
-    (x0, y0), (x1, y1) = squares.min(axis=0) - 0.5, squares.max(axis=0) + 0.5
+    (x0, y0), (x1, y1) = squares.min(axis=0) - 0.5 + inset, squares.max(axis=0) + 0.5 - inset
 
     def placed(board_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Board points in idealized and in raw pixels."""
@@ -91,7 +107,7 @@ def board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownC
     corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
     roi, _ = placed(corners)
     sx, sy = squares[0]
-    _, probe = placed(np.array([[sx - 0.5, sy - 0.5], [sx + 0.5, sy - 0.5]]))
+    _, probe = placed(np.array([[sx - 0.5 + inset, sy - 0.5 + inset], [sx + 0.5 + inset, sy - 0.5 + inset]]))
     # the rectangle's outline, sampled, must lie inside the idealized image (a wide lens's is cropped) and
     # have raw pixels behind it (the lens bends its sides outwards), the probe too
     t = np.linspace(0, 1, 16, endpoint=False)[:, None]
@@ -101,7 +117,7 @@ def board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownC
                             and _within(np.concatenate([raw_outline, probe]), camera, 2)):
         return None
     square_px = math.sqrt(cv2.contourArea(np.float32(roi)) / ((x1 - x0) * (y1 - y0)))
-    return BoardCase(name, targets, roi, square_px, probe)
+    return BoardCase(name, targets, roi, square_px, probe, inset)
 
 
 def _within(points: np.ndarray, camera: BrownCamera, margin: float) -> bool:
@@ -214,14 +230,8 @@ def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     if board.kind == "chessboard":
         edges = choice.edges.get(choice.curve, [])
         choice.edge_trend = fit_edge_trend([e.offset_px for e in edges], [e.white_dn for e in edges], choice.curve,
-                                           [e.std_px for e in edges])
+                                           [e.std_px for e in edges], [e.scale_px_per_m for e in edges])
     return choice
-
-
-def edge_length_m(board: BoardSpec) -> float:
-    """The black squares' edges inside the rectangle through the outer squares' centres: every inner grid line,
-    whole (m)."""
-    return 2.0 * board.cols * board.rows * board.square
 
 
 def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: BoardSpec, camera: BrownCamera
@@ -241,7 +251,7 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     for case, grey in cases:
         truth = case.true_area_m2(board, case.first_black(grey))
         # the error over the edges' length is how far they moved (m), in the view's idealized px
-        px_per_m2 = case.square_px / board.square / edge_length_m(board)
+        px_per_m2 = case.square_px / board.square / case.edge_length_m(board)
         measured = {}
         for curve in TONE_CURVES:
             try:
@@ -258,7 +268,7 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
             # the views whose shares were applied, with their white level: the trend is applied to such frames
             edge = (None if levels is None or not result.subpixel_applied else
                     ViewEdge(case.name, (result.area_m2 - truth) * px_per_m2, max(levels.object, levels.background),
-                             result.area_std_m2 * px_per_m2))
+                             result.area_std_m2 * px_per_m2, case.square_px / board.square))
             measured[curve] = (result.area_m2 / truth - 1, edge)
         else:
             for curve, (error, edge) in measured.items():
@@ -270,7 +280,8 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     span = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
     choice = ToneChoice("linear", False, "", n, span, left_out=left_out, sizes=sizes, errors=errors, edges=edges)
     if n < MIN_VIEWS:
-        choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard well inside the image, "
+        choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard inside the image (all "
+                         "but its outer squares will do), "
                          f"whites not clipped, near and far, tell the curves apart; {n} could be measured")
         return choice
     inverse = 1.0 / np.array(sizes)
