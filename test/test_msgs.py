@@ -114,14 +114,19 @@ def test_a_frames_result_fills_every_field_and_rosbags_reads_the_bytes_alike(pre
 
     frame = render_scene(ENDOSCOPE, cube_scene(), 0.5)
     frame[:40, :40] = 255  # a clipped corner far from the cube: the result must carry whatever it warns
-    result = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120.0)).measure(frame)
+    from veg_area_ros.camera_uncertainty import CameraCovariance
+
+    covariance = CameraCovariance.from_std(dict.fromkeys(ENDOSCOPE.param_names, 1e-3), {})
+    result = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120.0),
+                          calibration_conditions={"camera_covariance": covariance.as_dict()}).measure(frame)
+    assert result.calibration_std_m2 > 0
     from builtin_interfaces.msg import Time
 
     msg = projected_area(result, Time(sec=12, nanosec=5), "camera", "calibration_file /data/endoscope.yaml")
     assert (msg.area_m2, msg.area_std_m2, msg.pixel_count) == (result.area_m2, result.area_std_m2,
                                                               result.pixel_count)
     terms = [msg.scale_std_m2, msg.threshold_std_m2, msg.discretisation_std_m2, msg.levels_std_m2,
-             msg.plane_offset_std_m2, msg.exposure_std_m2, msg.edge_trend_std_m2]
+             msg.plane_offset_std_m2, msg.exposure_std_m2, msg.edge_trend_std_m2, msg.calibration_std_m2]
     assert msg.area_std_m2 == pytest.approx(float(np.hypot.reduce(terms)), rel=1e-9)
     assert (msg.area_mode, msg.subpixel_applied, msg.threshold, msg.tone_curve) == (
         result.area_mode, result.subpixel_applied, result.threshold, result.tone_curve)

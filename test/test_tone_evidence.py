@@ -241,6 +241,9 @@ def test_webcam_photos_at_one_distance_record_no_curve_and_say_why_and_their_edg
     assert shift["applied"] and shift["offset_px"] > 0.03 and shift["area_m2"] < 0, shift
     assert row["edge_trend_std_m2"] > 0 and not shift["outside"]
     assert abs(row["area_m2"] / photo.true_area_m2 - 1) < abs(row["count_area_m2"] / photo.true_area_m2 - 1)
+    # the calibration's own uncertainty: recorded, carried to Af, small where the targets frame the object
+    assert block["camera_covariance"]["parameters"] == ["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3"]
+    assert 0 < row["calibration_std_m2"] < 1e-3 * row["area_m2"], row["calibration_std_m2"]
 
 
 def test_a_live_calibration_keeps_its_views_frames_and_judges_the_curve_on_them(monkeypatch):

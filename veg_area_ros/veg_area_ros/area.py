@@ -27,6 +27,7 @@ import numpy as np
 from .area_result import AreaResult
 from .area_terms import area_terms, thresholds_read
 from .camera_model import BrownCamera
+from .camera_uncertainty import CameraCovariance
 from .checks import CheckSettings, check
 from .classify import AREA_MODES, Classifier, ClassifyError
 from .edge_trend import apply_correction, edge_correction, settings_from
@@ -64,14 +65,15 @@ class AreaMeasurer:
                                                     camera.image_size if camera is not None else None)
         self.locator = Locator(targets, self.view, classifier.tone_curve)
         self.region = Region(targets, self.view, roi)
-        self.weighting = Weighting(targets, self.view, self.region)
         self.check_settings = CheckSettings(classifier, area_mode, threshold_delta, self.view, calibration_conditions)
         try:  # how the calibration's views moved their edges with exposure, where it applies (edge_trend)
             self.edge_trend, self.edge_trend_reason = settings_from(
                 calibration_conditions if camera is not None else None, classifier.tone_curve, classifier.object,
                 classifier.channel, area_mode)
+            covariance = CameraCovariance.from_conditions(calibration_conditions, camera)
         except ValueError as exc:
             raise ClassifyError(f"the calibration's {exc}") from None
+        self.weighting = Weighting(targets, self.view, self.region, covariance)
         self.carried = Carried()
 
     @property
@@ -88,9 +90,9 @@ class AreaMeasurer:
         """Takes over what `previous` carried from frame to frame (tracked markers, weights, light) when both were
         built alike: the same camera, the same targets and background objects, and equal classifier, ROI, area
         mode and levels. A measurer rebuilt for a calibration's conditions heard after the first frames (its
-        warnings, and an edge trend applied frame by frame) then measures the next frame with what `previous`
-        carried, not as a first frame, so a live run and the same frames measured offline give the same
-        numbers. Returns whether it did."""
+        warnings, an edge trend applied frame by frame, the calibration's covariance in the std) then measures
+        the next frame with what `previous` carried, not as a first frame, so a live run and the same frames
+        measured offline give the same numbers. Returns whether it did."""
         if not isinstance(previous, AreaMeasurer):
             return False
         mine, theirs = self.light_settings, previous.light_settings
@@ -103,6 +105,9 @@ class AreaMeasurer:
                  and (ours is None) == (others is None) and (ours is None or np.array_equal(ours, others)))
         if alike:
             self.carried = previous.carried
+            weights = self.carried.weights.weights
+            if weights is not None and self.weighting.covariance != previous.weighting.covariance:
+                weights.relative_calibration_std = self.weighting.calibration_std(weights)
         return alike
 
     def start_segment(self) -> None:
@@ -142,7 +147,8 @@ class AreaMeasurer:
             area_mode=self.area_mode, tone_curve=self.classifier.tone_curve, levels=terms.levels,
             subpixel_applied=terms.applied,
             discretisation_std_m2=terms.edge.discretisation, levels_std_m2=terms.edge.levels,
-            plane_offset_std_m2=terms.offset_std, edge_length_px=terms.edge.length_px, count_area_m2=terms.counted,
+            plane_offset_std_m2=terms.offset_std, calibration_std_m2=terms.calibration_std,
+            edge_length_px=terms.edge.length_px, count_area_m2=terms.counted,
             flat_field=lit.flat)
         mask = self.classifier.mask(lit.band, weights.roi, lit.threshold)
         if self.edge_trend is not None and terms.applied and terms.count:

@@ -40,6 +40,7 @@ class AreaResult:
     discretisation_std_m2: float = 0.0  # count mode: whole edge pixels counted or not
     levels_std_m2: float = 0.0  # sub-pixel mode: level estimates, noise, pure zones
     plane_offset_std_m2: float = 0.0  # the object's plane offset from the targets' plane
+    calibration_std_m2: float = 0.0  # the calibration's covariance over the ROI (0: the calibration records none)
     edge_length_px: float = 0.0  # the object's boundary in raw pixels, from its mixed pixels
     count_area_m2: float = 0.0  # Af of the whole-pixel count (equals area_m2 in count mode)
     subpixel_applied: bool = False  # sub-pixel mode used the shares (else it counted whole pixels)
@@ -63,7 +64,7 @@ class AreaResult:
             "threshold": self.threshold, "tone_curve": self.tone_curve, "calibrated": self.calibrated,
             "scale_std_m2": self.scale_std_m2, "threshold_std_m2": self.threshold_std_m2,
             "discretisation_std_m2": self.discretisation_std_m2, "levels_std_m2": self.levels_std_m2,
-            "plane_offset_std_m2": self.plane_offset_std_m2,
+            "plane_offset_std_m2": self.plane_offset_std_m2, "calibration_std_m2": self.calibration_std_m2,
             "levels": self.levels.to_dict() if self.levels is not None else None,
             "edge_length_px": self.edge_length_px,
             "missing_targets": list(self.missing_targets), "sweep": [list(s) for s in self.sweep],

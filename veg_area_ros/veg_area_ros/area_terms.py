@@ -43,6 +43,7 @@ class AreaTerms:
     threshold_std: float
     scale_std: float
     offset_std: float
+    calibration_std: float  # the calibration's covariance over the ROI
     std: float  # all of them in quadrature
     sweep: list[tuple[float, float]] = field(default_factory=list)  # (threshold, Af) around the chosen one
 
@@ -135,8 +136,11 @@ def area_terms(lit: LitFrame, weights: Weights, factor: float, carried: float, c
     sweep = [(float(level), measured(level)[0 if applied else 1]) for level in _sweep(threshold, delta)]
     scale_std = area * float(np.hypot(weights.relative_scale_std, carried))  # carrying errs like the scale
     offset_std = area * weights.relative_offset_std
-    std = float(np.sqrt(scale_std**2 + threshold_std**2 + edge.discretisation**2 + edge.levels**2 + offset_std**2))
-    return AreaTerms(area, counted, count, levels, applied, edge, threshold_std, scale_std, offset_std, std, sweep)
+    calibration_std = area * weights.relative_calibration_std
+    std = float(np.sqrt(scale_std**2 + threshold_std**2 + edge.discretisation**2 + edge.levels**2 + offset_std**2
+                        + calibration_std**2))
+    return AreaTerms(area, counted, count, levels, applied, edge, threshold_std, scale_std, offset_std,
+                     calibration_std, std, sweep)
 
 
 def _halfway(levels: Levels | None) -> float | None:

@@ -25,6 +25,7 @@ import yaml
 from . import __version__
 from .camera_info import camera_from_info, camera_info_fields
 from .camera_model import BrownCamera, check_plausible
+from .camera_uncertainty import CameraCovariance
 from .files import write_atomic
 from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
 from .strict_yaml import StrictYamlError, dump_portable, load_text, read_text
@@ -300,7 +301,10 @@ def fit_metadata(summary: dict, medium: str, distance_m: float | None, board: st
             **({"model_choice": {"chosen": summary["model_choice"]["chosen"],
                                  "reason": summary["model_choice"]["reason"]}} if summary.get("model_choice") else {}),
             "projection_std_px": {k: summary["projection_std_px"][k] for k in ("median", "max")
-                                  if k in summary.get("projection_std_px", {})}}
+                                  if k in summary.get("projection_std_px", {})},
+            # what measuring carries to Af's std (camera_uncertainty): the parameters' covariance
+            **({"camera_covariance": CameraCovariance.from_std(summary["std"], summary["correlations"]).as_dict()}
+               if summary.get("std") and "correlations" in summary else {})}
 
 
 def quality_rms(calibration: CalibrationFile) -> float:

@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from .camera_model import BrownCamera
+from .camera_uncertainty import CameraCovariance, relative_area_std
 from .classify import ClassifyError
 from .idealize import OUTSIDE_PX, IdealView
 from .locate import Located
@@ -31,6 +32,7 @@ GEOMETRY_MARGIN_PX = 16  # raw px around the ROI's window: a small move of the R
 ROI_TOLERANCE_PX = 0.5  # targets moved further than this (idealized px) since the weights were built: rebuild
 SCALE_TOLERANCE = 2e-4  # the scale changed unevenly by more than this (relative) over the ROI: rebuild...
 CARRY_SHARE = 1.0  # ...unless that is within Af's relative scale std: sensor noise jitters the fit by about that
+CALIBRATION_STD_KEPT_PX = 8.0  # targets within this of the last layout's (idealized px): its calibration term holds
 
 
 @dataclass
@@ -115,6 +117,7 @@ class Weights:
     centre: np.ndarray  # ROI centroid (idealized px)
     relative_scale_std: float
     relative_offset_std: float  # relative std of Af from the object plane offset's uncertainty
+    relative_calibration_std: float = 0.0  # relative std of Af over the ROI from the calibration's covariance
     _border: np.ndarray | None = None
     marker_edge_px: float | None = None  # the printed markers' edge width in this layout (px)
     marker_edge_found: bool = False
@@ -154,8 +157,9 @@ class WeightsMemory:
 class Weighting:
     """The weights of one camera's frames over the ROI (`Region`)."""
 
-    def __init__(self, targets: TargetsSpec, view: IdealView, region: Region):
-        self.targets, self.view, self.region = targets, view, region
+    def __init__(self, targets: TargetsSpec, view: IdealView, region: Region,
+                 covariance: CameraCovariance | None = None):
+        self.targets, self.view, self.region, self.covariance = targets, view, region, covariance
 
     def _pixel_geometry(self, height: int, width: int, roi_ideal: np.ndarray, memory: WeightsMemory
                         ) -> PixelGeometry:
@@ -227,9 +231,24 @@ class Weighting:
         if self.targets.object_plane_offset_m is not None:
             offset_std = (located.scale.relative_area_change_per_metre_at(centre)
                           * self.targets.object_plane_offset_std_m)
-        return Weights(window, roi, levels, level_area, float(np.max(np.abs(level_area[level] - exact) / exact)),
-                       roi_ideal, located.scale, list(located.labels), np.array(located.pixels), polygon, centre,
-                       located.scale.relative_area_std_at(centre), offset_std, roi_cut_share=cut)
+        weights = Weights(window, roi, levels, level_area, float(np.max(np.abs(level_area[level] - exact) / exact)),
+                          roi_ideal, located.scale, list(located.labels), np.array(located.pixels), polygon, centre,
+                          located.scale.relative_area_std_at(centre), offset_std, roi_cut_share=cut)
+        last = memory.weights
+        if (last is not None and last.labels == weights.labels and last.roi.shape == weights.roi.shape
+                and np.max(np.abs(last.pixels - weights.pixels)) <= CALIBRATION_STD_KEPT_PX):
+            weights.relative_calibration_std = last.relative_calibration_std
+        else:
+            weights.relative_calibration_std = self.calibration_std(weights)
+        return weights
+
+    def calibration_std(self, weights: Weights) -> float:
+        """Af's relative std over the weights' ROI from the calibration's covariance (0 without one)."""
+        if self.covariance is None or self.view.camera is None:
+            return 0.0
+        rows, cols = np.nonzero(weights.roi)
+        raw = np.column_stack([cols + weights.window[1].start, rows + weights.window[0].start]).astype(float)
+        return relative_area_std(self.view.camera, self.covariance, raw, weights.scale)
 
     def weights_for(self, shape: tuple[int, ...], located: Located, memory: WeightsMemory
                     ) -> tuple[Weights, float, float]:

@@ -1,0 +1,118 @@
+"""The calibration's own uncertainty at the object: its parameters' covariance carried to Af. No ROS here.
+
+It exists because a calibration is an estimate: its focal length, principal point and distortion each have a
+standard error (the calibration reports them), and a frame measured with it inherits that error wherever the
+distortion it undoes, and the targets' idealized positions that set the scale, would lie elsewhere under
+another fit the views allow. On real webcam photos that is 0.2-0.7 % of Af per photo, more than any other term
+of the std near the image's edges, and it differs between places in the image, so between photos.
+
+`veg-area calibrate` and the calibration node record the covariance of the camera's parameters in the file's
+metadata (`camera_covariance`); the weights stage (weights.py) asks `relative_area_std` once per target layout
+(kept while the targets stay within a few pixels: it changes slowly with their place, and costs tens of ms):
+Af over the ROI's raw pixels (each pixel's footprint on the object's plane: the idealized area it covers,
+times the metric area of an idealized pixel under the targets' fit) is re-worked under the camera moved by one
+standard deviation each way along every principal axis of the covariance, the targets re-idealized and the
+scale fitted again. The pixels are the ROI's, not the object's: where in the ROI the object lies is not
+weighed (a term per layout, not per frame).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .camera_model import BrownCamera
+from .scale import PlaneScale
+
+SAMPLE_PIXELS = 1024  # the ROI's raw pixels, evenly subsampled: Af's relative change is smooth over them
+
+
+@dataclass(frozen=True, eq=False)
+class CameraCovariance:
+    """The covariance of a camera's parameters (OpenCV's names, in `BrownCamera.param_names`' order)."""
+
+    parameters: tuple[str, ...]
+    matrix: np.ndarray  # (n, n)
+
+    def __eq__(self, other: object) -> bool:
+        return (isinstance(other, CameraCovariance) and self.parameters == other.parameters
+                and np.array_equal(self.matrix, other.matrix))
+
+    __hash__ = None  # mutable contents: not a key
+
+    def as_dict(self) -> dict:
+        return {"parameters": list(self.parameters), "matrix": [[float(v) for v in row] for row in self.matrix]}
+
+    @classmethod
+    def from_std(cls, std: dict[str, float], correlations: dict[str, float]) -> CameraCovariance:
+        """From the calibration's standard deviations and its correlations keyed 'a-b'."""
+        names = tuple(std)
+        sigma = np.array([std[n] for n in names], float)
+        correlation = np.eye(len(names))
+        for i, a in enumerate(names):
+            for j, b in enumerate(names[i + 1:], start=i + 1):
+                correlation[i, j] = correlation[j, i] = float(correlations.get(f"{a}-{b}", 0.0))
+        return cls(names, correlation * np.outer(sigma, sigma))
+
+    @classmethod
+    def from_conditions(cls, conditions: dict | None, camera: BrownCamera | None) -> CameraCovariance | None:
+        """The covariance a calibration's metadata records for `camera`, or None where it records none.
+        ValueError where it records one that does not fit the camera's model or is no covariance."""
+        recorded = (conditions or {}).get("camera_covariance")
+        if recorded is None or camera is None:
+            return None
+        try:
+            names = tuple(str(n) for n in recorded["parameters"])
+            matrix = np.array(recorded["matrix"], float)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"camera_covariance is not readable ({exc.__class__.__name__}: {exc})") from None
+        if names != tuple(camera.param_names):
+            raise ValueError(f"camera_covariance is for the parameters {list(names)}, the camera's "
+                             f"{camera.model} model has {list(camera.param_names)}")
+        if (matrix.shape != (len(names), len(names)) or not np.all(np.isfinite(matrix))
+                or not np.allclose(matrix, matrix.T, rtol=1e-6, atol=0)
+                or np.linalg.eigvalsh(matrix).min() < -1e-9 * max(float(np.abs(matrix).max()), 1e-300)):
+            raise ValueError(f"camera_covariance is no covariance matrix for {len(names)} parameters")
+        return cls(names, matrix)
+
+
+def moved_camera(camera: BrownCamera, step: np.ndarray) -> BrownCamera:
+    """The camera with its parameters (fx, fy, cx, cy, then the distortion's) moved by `step`."""
+    values = np.array(list(camera.parameters().values()), float) + step
+    matrix = np.array([[values[0], 0.0, values[2]], [0.0, values[1], values[3]], [0.0, 0.0, 1.0]])
+    return BrownCamera.from_opencv(matrix, values[4:], camera.image_size, camera.model)
+
+
+def relative_area_std(camera: BrownCamera, covariance: CameraCovariance, roi_raw_px: np.ndarray,
+                      scale: PlaneScale) -> float:
+    """Af's relative std over the ROI's raw pixels (N, 2) from the camera's covariance, with the targets of
+    `scale` (idealized by `camera`) re-idealized under each moved camera and the scale fitted again."""
+    step = max(1, math.ceil(len(roi_raw_px) / SAMPLE_PIXELS))
+    pixels = np.asarray(roi_raw_px, float)[::step]
+    ideal = camera.ideal()
+    targets_raw = camera.normalized_to_pixels(ideal.pixels_to_normalized(scale.pixels))
+
+    def total(moved: BrownCamera) -> float:
+        ideal_targets, _ = moved.pixels_to_ideal(targets_raw)
+        matrix = moved.ideal().camera_matrix if scale.plane_offset_m is not None else None
+        fitted = PlaneScale.fit(ideal_targets, scale.planes, scale.distance_std_m, scale.pixel_std,
+                                scale.plane_offset_m, matrix)
+        ideal_pixels, area = moved.pixels_to_ideal(pixels)
+        return float(np.sum(area * fitted.pixel_area(ideal_pixels)))
+
+    base = total(camera)
+    values, vectors = np.linalg.eigh(covariance.matrix)
+    variance = 0.0
+    for value, vector in zip(values, vectors.T, strict=True):
+        if value <= 0:
+            continue
+        shift = math.sqrt(value) * vector
+        try:
+            change = (total(moved_camera(camera, shift)) - total(moved_camera(camera, -shift))) / (2 * base)
+        except ValueError:  # a moved model that folds inside the ROI: this axis says nothing
+            continue
+        if math.isfinite(change):
+            variance += change**2
+    return math.sqrt(variance)
