@@ -50,6 +50,10 @@ def main() -> int:
     parser.add_argument("--skip-cores", action="store_true", help="only the video cases")
     parser.add_argument("--video-runs", type=int, default=5,
                         help="times the video case is measured (its ratio moves by a third run to run here)")
+    parser.add_argument("--fitted-calibration", action="store_true",
+                        help="the video cases' calibration file carries what `veg-area calibrate` records for "
+                             "measuring: an edge trend (each frame then finds its object's boundary) and the "
+                             "parameters' covariance (carried to Af once per target layout)")
     args = parser.parse_args()
     targets = scene_targets()
     for camera in () if args.skip_cores else (ENDOSCOPE, DSLR):
@@ -91,9 +95,10 @@ def main() -> int:
         if camera is ENDOSCOPE:
             light_cases(targets, repeats)
     if args.video_frames:
-        video_case(targets, args.video_frames, max(1, args.video_runs))
+        video_case(targets, args.video_frames, max(1, args.video_runs), fitted=args.fitted_calibration)
     if args.dslr_video_frames:  # a DSLR's video: decoding is most of the work (goal: at most twice it)
-        video_case(targets, args.dslr_video_frames, max(1, args.video_runs), DSLR, 1.0, goal=2.0)
+        video_case(targets, args.dslr_video_frames, max(1, args.video_runs), DSLR, 1.0, goal=2.0,
+                   fitted=args.fitted_calibration)
     return 0
 
 
@@ -140,8 +145,20 @@ def light_cases(targets: TargetsSpec, repeats: int) -> None:
               f"sub-pixel core without evening, {cost[False]:.3f} ms)")
 
 
+def fitted_metadata(camera) -> dict:
+    """What a calibration file from `veg-area calibrate` gives measuring beyond the camera: an edge trend learned
+    (as the webcam's, its white range wide enough for any frame) and the parameters' covariance (stds of the
+    webcam's calibration, no correlations)."""
+    from veg_area_ros.camera_uncertainty import CameraCovariance
+    from veg_area_ros.edge_trend import EdgeTrend
+
+    trend = EdgeTrend(-0.0023, 0.0003, 128.0, (0.0, 255.0), 7, 0.013, "linear")
+    std = dict(zip(camera.param_names, (0.5, 0.5, 1.3, 0.7, 0.009, 0.04, 2.5e-4, 2.8e-4, 0.055), strict=True))
+    return {"edge_trend": trend.as_dict(), "camera_covariance": CameraCovariance.from_std(std, {}).as_dict()}
+
+
 def video_case(targets: TargetsSpec, count: int, runs: int = 1, camera=ENDOSCOPE, distance_m: float = 0.7,
-               goal: float = 3.0) -> None:
+               goal: float = 3.0, fitted: bool = False) -> None:
     """`veg-area measure` of an MJPG video of the cube (in air, 3 DN of fresh sensor noise per frame, the true
     camera's calibration) beside decoding the same video with OpenCV, `runs` times (each a median of three; the
     command in this process, its imports done), the spread of the ratio over the runs, and the peak memory of
@@ -158,7 +175,8 @@ def video_case(targets: TargetsSpec, count: int, runs: int = 1, camera=ENDOSCOPE
         for _ in range(count):
             writer.write(noisy(clean, 3.0, rng))
         writer.release()
-        write_calibration(Path(folder) / "camera.yaml", camera, "camera", {"medium": "air"})
+        metadata = {"medium": "air", **(fitted_metadata(camera) if fitted else {})}
+        write_calibration(Path(folder) / "camera.yaml", camera, "camera", metadata)
         (Path(folder) / "targets.yaml").write_text(yaml.safe_dump(
             {"dictionary": targets.dictionary, "markers": {k: v.tolist() for k, v in targets.markers.items()}}))
         command = ["measure", str(video), "--calibration", str(Path(folder) / "camera.yaml"), "--targets",
@@ -179,7 +197,7 @@ def video_case(targets: TargetsSpec, count: int, runs: int = 1, camera=ENDOSCOPE
         def loop(overlapped: bool) -> None:  # the measurement over the video, decoding (and grey) overlapped or not
             from veg_area_ros.frames import decode_with_grey, decoded, iter_frames
 
-            measurer = AreaMeasurer(camera, targets, Classifier(threshold=120))
+            measurer = AreaMeasurer(camera, targets, Classifier(threshold=120), calibration_conditions=metadata)
             frames = iter_frames([video], encoded=True)
             for frame in decoded(frames) if overlapped else map(decode_with_grey, frames):
                 measurer.measure(frame.image, grey=frame.grey)
@@ -191,7 +209,8 @@ def video_case(targets: TargetsSpec, count: int, runs: int = 1, camera=ENDOSCOPE
             sequential_s = median_seconds(lambda: loop(False), 3)
             overlapped_s = median_seconds(lambda: loop(True), 3)
             ratios.append(measure_s / decode_s)
-            print(f"veg-area measure of a {count}-frame {width}x{height} video with 3 DN noise (run {run} of {runs}): "
+            print(f"veg-area measure of a {count}-frame {width}x{height} video with 3 DN noise"
+                  f"{', the calibration with an edge trend and covariance' if fitted else ''} (run {run} of {runs}): "
                   f"{measure_s:.2f} s ({1000 * measure_s / count:.1f} ms a frame), decoding it alone {decode_s:.2f} s "
                   f"({measure_s / decode_s:.2f}x)")
             print(f"  decode + measure in one loop {sequential_s:.2f} s ({sequential_s / decode_s:.2f}x decoding); "

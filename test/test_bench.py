@@ -50,6 +50,15 @@ def test_area_speed_prints_the_core_beside_a_copy_for_both_cameras():
     assert len(memory) == 2 and all(int(m) > 50 for m in memory), out
 
 
+def test_area_speed_measures_the_video_with_a_fitted_calibrations_extras():
+    out = run_bench("area_speed.py", "--skip-cores", "--video-frames", "10", "--video-runs", "1",
+                    "--dslr-video-frames", "0", "--fitted-calibration", timeout=900)
+    videos = [line for line in out.splitlines() if "veg-area measure of a 10-frame" in line]
+    assert len(videos) == 1 and "the calibration with an edge trend and covariance" in videos[0], out
+    assert numbers(videos[0].split("(")[-1])[0] > 0, out
+    assert re.search(r"peak memory of the command as its own process: \d+ MB \(exit 0\)", out), out
+
+
 def test_calibration_speed_ours_fits_no_worse_than_opencv():
     out = run_bench("calibration_speed.py", "--repeats", "1", "--large-views", "20",
                     "--real", str(REPO / "test" / "data" / "opencv-left"), "chessboard:9x6:0.03")
