@@ -71,6 +71,23 @@ def _ignore_ctrl_c() -> None:
             ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
+class CtrlCWhileStarting:
+    """Ctrl-C ignored while the batch's processes start, until `started()`: they begin with it ignored (exec
+    keeps an ignored signal, and Python then leaves it so). A worker interrupted while importing, before its
+    initializer, broke the pool and lost the other's work; a blocked mask did not carry over (spawning a process
+    cleared it). A Ctrl-C within these few hundred milliseconds is not seen."""
+
+    def __enter__(self) -> CtrlCWhileStarting:
+        self.previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        return self
+
+    def started(self) -> None:
+        signal.signal(signal.SIGINT, self.previous)
+
+    def __exit__(self, *exc) -> None:
+        self.started()
+
+
 def _summary(source: str, csv_path: str, error: str = "") -> dict:
     """One input's row of batch_summary.csv before anything was measured."""
     return {"input": source, "frames": 0, "measured": 0, "mean_area_m2": "", "mean_area_std_m2": "",
@@ -193,18 +210,15 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
     handlers = catch_stop_signals(stop)
     summaries: dict[int, dict] = {}
     interrupted = False
-    # Ctrl-C held back while the manager and the workers start: they inherit the mask, so they never see it (a
-    # worker interrupted before its initializer ran would break the pool); here it arrives once they run
-    unblocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
-        with _started_manager(context) as manager, ProcessPoolExecutor(workers, mp_context=context,
-                                                                       initializer=_ignore_ctrl_c) as pool:
+        with (CtrlCWhileStarting() as starting, _started_manager(context) as manager,
+              ProcessPoolExecutor(workers, mp_context=context, initializer=_ignore_ctrl_c) as pool):
             progress_queue, stopping = manager.Queue(), manager.Event()
             pending = {}
             for k, source in enumerate(inputs):
                 pending[pool.submit(_measure_one, input_job(job, source, csv_paths[k]), k, progress_queue,
                                     stopping)] = k
-            signal.pthread_sigmask(signal.SIG_SETMASK, unblocked)  # every worker is started by its submit
+            starting.started()  # every worker is started by its submit
             done_frames: dict[int, tuple[int, int]] = {}
             last_line = 0.0
             while pending and not stop.is_set():
@@ -232,7 +246,6 @@ def measure_batch(job: MeasureJob, jobs: int, folder: Path) -> int:
                 for future, k in pending.items():
                     summaries[k] = _outcome(future, inputs[k], csv_paths[k])
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, unblocked)
         restore_signals(handlers)
     return finish_batch(job, folder, [summaries[k] for k in range(len(inputs))], interrupted)
 
