@@ -1299,8 +1299,12 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
     # and an edge trend learned under the linear curve: applied to frames read as grey levels, refused (said) else
     trend = {"learned": True, "slope_px_per_dn": -0.003, "slope_std": 0.0005, "reference_dn": 190.0,
              "range_dn": [150.0, 250.0], "views": 8, "residual_px": 0.02, "scatter_px": 0.0, "tone_curve": "linear"}
+    # and the parameters' covariance, carried to each frame's std once the metadata has come
+    from veg_area_ros.camera_uncertainty import CameraCovariance
+
+    covariance = CameraCovariance.from_std(dict.fromkeys(ENDOSCOPE.param_names, 1e-3), {}).as_dict()
     write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air", "tone_curve": options["tone_curve"],
-                                                            "edge_trend": trend})
+                                                            "edge_trend": trend, "camera_covariance": covariance})
     if options["server"] == "camera":
         nodes.start("camera_node", rate_hz=5.0, synthetic_scene="cube", synthetic_medium="air",
                     camera_info_url=f"file://{calibration}")
@@ -1328,7 +1332,8 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
         probe.destroy_node()
         rclpy.try_shutdown()
     return {"tone_curves": [i.get("tone_curve") for i in infos if i.get("calibrated")],
-            "edge_trends": [i.get("edge_trend") for i in infos if i.get("calibrated")]}
+            "edge_trends": [i.get("edge_trend") for i in infos if i.get("calibrated")],
+            "calibration_stds": [i.get("calibration_std_m2") for i in infos if i.get("calibrated")]}
 
 
 if __name__ == "__main__":

@@ -432,7 +432,7 @@ def test_an_area_node_given_camera_info_reads_the_calibrations_tone_curve(tmp_pa
     its views, the medium, the distance): the node serving it publishes that on camera_info/metadata, and an
     area node with tone_curve auto and no calibration_file reads its frames with the curve the file records,
     as `veg-area measure` given the file does (it read them as grey levels before, whatever the file said). The
-    file's edge trend with exposure comes the same way."""
+    file's edge trend with exposure comes the same way, and its covariance."""
     from ros_harness import run_scenario
 
     result = run_scenario("metadata", tmp_path, server=server, tone_curve=tone_curve, seconds=90.0)
@@ -450,3 +450,6 @@ def test_an_area_node_given_camera_info_reads_the_calibrations_tone_curve(tmp_pa
             assert trend["applied"] and trend["offset_px"] < 0 and trend["area_m2"] > 0, trend
         else:
             assert not trend["applied"] and "learned under the linear tone curve" in trend["reason"], trend
+    # and the calibration's covariance: a term of the std from then on (none before)
+    stds = result["calibration_stds"]
+    assert all(std > 0 for std in stds[came:]) and all(std == 0 for std in stds[:came]), stds
