@@ -3,8 +3,11 @@
 It exists because a calibration is an estimate: its focal length, principal point and distortion each have a
 standard error (the calibration reports them), and a frame measured with it inherits that error wherever the
 distortion it undoes, and the targets' idealized positions that set the scale, would lie elsewhere under
-another fit the views allow. On real webcam photos that is 0.2-0.7 % of Af per photo, more than any other term
-of the std near the image's edges, and it differs between places in the image, so between photos.
+another fit the views allow. Where the targets frame the object their fit takes most of that out (OpenCV's webcam
+photos, the targets at the board's outer corners: 0.01-0.02 % of Af); where the scale is carried from targets
+beside the object across the image, it grows (a render with targets three squares apart: 0.01 %, ten times
+more). Moving the ROI with the camera instead of keeping its raw pixels made it look 0.2-0.7 %: the term keeps
+the object's pixels, which no calibration moves.
 
 `veg-area calibrate` and the calibration node record the covariance of the camera's parameters in the file's
 metadata (`camera_covariance`); the weights stage (weights.py) asks `relative_area_std` once per target layout
