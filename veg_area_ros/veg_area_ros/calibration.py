@@ -456,7 +456,7 @@ def _halves(object_points: list[np.ndarray], image_points: list[np.ndarray], x: 
     z = np.abs(difference) / np.maximum(combined, 1e-300)
     grid = _covered_grid(camera, covered)
     directions = camera.pixels_to_normalized(grid)
-    projected = [_camera_from(f, camera).normalized_to_pixels(directions) for f in fitted]
+    projected = [camera.with_parameters(f).normalized_to_pixels(directions) for f in fitted]
     shift = np.hypot(*(projected[0] - projected[1]).T)
     worst = int(np.argmax(z))
     return {"z": dict(zip(names, map(float, z), strict=True)), "max_z": float(z.max()),
@@ -482,12 +482,6 @@ def pose_residuals(intrinsics: np.ndarray, pose: np.ndarray, object_points: np.n
             break
     uv, _ = _project_with_jacobian(intrinsics, pose, object_points, model)
     return uv - observed
-
-
-def _camera_from(x: np.ndarray, like: BrownCamera) -> BrownCamera:
-    n = len(like.param_names)
-    return BrownCamera.from_opencv(np.array([[x[0], 0, x[2]], [0, x[1], x[3]], [0, 0, 1]]), x[4:n], like.image_size,
-                                   like.model)
 
 
 def _image_grid(camera: BrownCamera, n: int = 9) -> np.ndarray:
@@ -518,7 +512,7 @@ def projection_std(camera: BrownCamera, covariance: np.ndarray, covered: np.ndar
         step = 1e-6 * max(abs(values[i]), 1.0)
         moved = values.copy()
         moved[i] += step
-        shifted = _camera_from(moved, camera).normalized_to_pixels(directions)
+        shifted = camera.with_parameters(moved).normalized_to_pixels(directions)
         jac[:, :, i] = (shifted - camera.normalized_to_pixels(directions)) / step
     variances = np.einsum("pij,jk,pik->pi", jac, covariance, jac)
     std = np.sqrt(np.clip(variances.sum(axis=1), 0, None))

@@ -231,6 +231,13 @@ class BrownCamera:
         values = [self.fx, self.fy, self.xp, self.yp, *self.dist]
         return {name: float(v) for name, v in zip(self.param_names, values, strict=True)}
 
+    def with_parameters(self, values: np.ndarray) -> BrownCamera:
+        """This model with other parameters, in `parameters()`' order (fx, fy, cx, cy, then the distortion's;
+        values past them are not read)."""
+        n = len(self.param_names)
+        matrix = np.array([[values[0], 0.0, values[2]], [0.0, values[1], values[3]], [0.0, 0.0, 1.0]])
+        return BrownCamera.from_opencv(matrix, np.asarray(values[4:n], float), self.image_size, self.model)
+
     def ideal(self) -> BrownCamera:
         """The idealized camera: no distortion, square pixels (scale of the horizontal axis), principal point
         at the image centre. Frames remapped to it can be measured with a single scale."""

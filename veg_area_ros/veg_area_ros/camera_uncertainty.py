@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera_model import BrownCamera
+from .idealize import IdealView
 from .scale import PlaneScale
 
 SAMPLE_PIXELS = 1024  # the ROI's raw pixels, evenly subsampled: Af's relative change is smooth over them
@@ -81,21 +82,15 @@ class CameraCovariance:
         return cls(names, matrix)
 
 
-def moved_camera(camera: BrownCamera, step: np.ndarray) -> BrownCamera:
-    """The camera with its parameters (fx, fy, cx, cy, then the distortion's) moved by `step`."""
-    values = np.array(list(camera.parameters().values()), float) + step
-    matrix = np.array([[values[0], 0.0, values[2]], [0.0, values[1], values[3]], [0.0, 0.0, 1.0]])
-    return BrownCamera.from_opencv(matrix, values[4:], camera.image_size, camera.model)
-
-
-def relative_area_std(camera: BrownCamera, covariance: CameraCovariance, roi_raw_px: np.ndarray,
+def relative_area_std(view: IdealView, covariance: CameraCovariance, roi_raw_px: np.ndarray,
                       scale: PlaneScale) -> float:
-    """Af's relative std over the ROI's raw pixels (N, 2) from the camera's covariance, with the targets of
-    `scale` (idealized by `camera`) re-idealized under each moved camera and the scale fitted again."""
+    """Af's relative std over the ROI's raw pixels (N, 2) from the covariance of the view's camera, with the
+    targets of `scale` (idealized in `view`) re-idealized under each moved camera and the scale fitted again."""
+    camera = view.camera
     step = max(1, math.ceil(len(roi_raw_px) / SAMPLE_PIXELS))
     pixels = np.asarray(roi_raw_px, float)[::step]
-    ideal = camera.ideal()
-    targets_raw = camera.normalized_to_pixels(ideal.pixels_to_normalized(scale.pixels))
+    targets_raw = view.to_raw(scale.pixels)
+    parameters = np.array(list(camera.parameters().values()), float)
 
     def total(moved: BrownCamera) -> float:
         ideal_targets, _ = moved.pixels_to_ideal(targets_raw)
@@ -113,7 +108,8 @@ def relative_area_std(camera: BrownCamera, covariance: CameraCovariance, roi_raw
             continue
         shift = math.sqrt(value) * vector
         try:
-            change = (total(moved_camera(camera, shift)) - total(moved_camera(camera, -shift))) / (2 * base)
+            change = (total(camera.with_parameters(parameters + shift))
+                      - total(camera.with_parameters(parameters - shift))) / (2 * base)
         except ValueError:  # a moved model that folds inside the ROI: this axis says nothing
             continue
         if math.isfinite(change):

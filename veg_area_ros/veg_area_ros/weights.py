@@ -251,7 +251,7 @@ class Weighting:
         rows, cols = np.nonzero(weights.roi[::stride, ::stride])
         raw = np.column_stack([cols * stride + weights.window[1].start,
                                rows * stride + weights.window[0].start]).astype(float)
-        return relative_area_std(self.view.camera, self.covariance, raw, weights.scale)
+        return relative_area_std(self.view, self.covariance, raw, weights.scale)
 
     def weights_for(self, shape: tuple[int, ...], located: Located, memory: WeightsMemory
                     ) -> tuple[Weights, float, float]:
