@@ -44,6 +44,17 @@ def _evidence(folder, camera):
                               for case in cases), board, camera)
 
 
+def _with_the_others_trend(photo, camera, evidence):
+    """(what the other views' edges teach, as the calibration fits it; the photo measured with it, or without a
+    trend where they teach none)."""
+    others = [e for e in evidence.edges[evidence.curve] if e.name != photo.name]
+    learned = fit_edge_trend([e.offset_px for e in others], [e.white_dn for e in others], evidence.curve,
+                             [e.std_px for e in others], [e.scale_px_per_m for e in others])
+    conditions = None if learned.trend is None else {"edge_trend": learned.trend.as_dict()}
+    return learned, AreaMeasurer(camera, photo.targets, Classifier(threshold="otsu"), roi=np.array(photo.roi),
+                                 calibration_conditions=conditions).measure(photo.frame)
+
+
 @pytest.fixture(scope="module")
 def evidence(camera):
     return _evidence(OPENCV_LEFT, camera)
@@ -108,21 +119,13 @@ def test_the_calibrations_edge_trend_holds_each_photo_learned_from_the_others(ph
     without it; counting 0.48 %), its worst photo nearer the mean than counting's, every photo within 3
     reported std of the set's mean. With the trend learned from all seven, as the calibration file holds it:
     0.21 %."""
-    curve = evidence.curve
     assert evidence.edge_trend.trend is not None, evidence.edge_trend.reason
-    edges = evidence.edges[curve]
-    names = np.array([e.name for e in edges])
-    offsets, whites = np.array([e.offset_px for e in edges]), np.array([e.white_dn for e in edges])
-    scales = np.array([e.scale_px_per_m for e in edges])
     well = [p for p in photos if p.clipped_share < 0.01]
-    assert sorted(names) == sorted(p.name for p in well)  # the burnt-out views teach nothing
+    assert sorted(e.name for e in evidence.edges[evidence.curve]) == sorted(p.name for p in well)  # burnt-out: none
     errors, stds, counted = [], [], []
     for photo in well:
-        learned = fit_edge_trend(list(offsets[names != photo.name]), list(whites[names != photo.name]), curve,
-                                 scales_px_per_m=list(scales[names != photo.name]))
+        learned, result = _with_the_others_trend(photo, camera, evidence)
         assert learned.trend is not None, (photo.name, learned.reason)
-        result = AreaMeasurer(camera, photo.targets, Classifier(threshold="otsu"), roi=np.array(photo.roi),
-                              calibration_conditions={"edge_trend": learned.trend.as_dict()}).measure(photo.frame)
         assert result.edge_trend is not None and result.edge_trend["applied"]
         errors.append(result.area_m2 / photo.true_area_m2 - 1)
         stds.append(result.area_std_m2 / photo.true_area_m2)
@@ -223,12 +226,7 @@ def test_the_other_cameras_edge_trend_learned_from_views_filling_the_frame_holds
     well = [p for p in board_photos(OPENCV_RIGHT, BOARD, camera=camera) if p.clipped_share < 0.01]
     errors, stds, counted, plain = [], [], [], []
     for photo in well:
-        others = [e for e in edges if e.name != photo.name]
-        learned = fit_edge_trend([e.offset_px for e in others], [e.white_dn for e in others], evidence.curve,
-                                 [e.std_px for e in others], [e.scale_px_per_m for e in others])
-        conditions = None if learned.trend is None else {"edge_trend": learned.trend.as_dict()}
-        result = AreaMeasurer(camera, photo.targets, Classifier(threshold="otsu"), roi=np.array(photo.roi),
-                              calibration_conditions=conditions).measure(photo.frame)
+        _, result = _with_the_others_trend(photo, camera, evidence)
         errors.append(result.area_m2 / photo.true_area_m2 - 1)
         stds.append(result.area_std_m2 / photo.true_area_m2)
         counted.append(_measure(photo, camera, "otsu", "count").area_m2 / photo.true_area_m2 - 1)
