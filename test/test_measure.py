@@ -527,6 +527,44 @@ def test_a_disk_that_fills_mid_run_is_said_and_keeps_what_was_written(workspace,
         assert (len(rows) == 24) == (case == "plot"), len(rows)
 
 
+ROWS_UNTIL_THE_LIMIT = """
+import csv, resource, signal, sys
+from pathlib import Path
+from veg_area_ros.cli.common import FileWriteError, RowLog
+
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails (EFBIG) instead of killing
+resource.setrlimit(resource.RLIMIT_FSIZE, (int(sys.argv[2]), resource.RLIM_INFINITY))
+log = RowLog(Path(sys.argv[1]), ["frame", "area_m2", "warnings"], lambda row: True)
+try:
+    for k in range(1000):
+        log.add({"frame": k, "area_m2": 0.01 + k * 1e-6, "warnings": "a warning of some length; " * 3})
+except FileWriteError as exc:
+    print(k, exc)
+"""
+
+
+@pytest.mark.parametrize("limit", [40, 1000, 1234])
+def test_rows_cut_by_a_full_disk_end_at_the_last_whole_row(tmp_path, limit):
+    """A disk that fills in the middle of a row (here: a file size limit, which cuts a write where it reaches
+    it, as a full disk does) leaves the table at its last whole row; a header that did not fit leaves no
+    file. (A row's first bytes stayed at the end of the table before.)"""
+    import subprocess
+    import sys
+
+    table = tmp_path / "rows.csv"
+    done = subprocess.run([sys.executable, "-c", ROWS_UNTIL_THE_LIMIT, str(table), str(limit)], capture_output=True,
+                          text=True, timeout=120, env={"PYTHONPATH": str(SOURCE), "PATH": "/usr/bin:/bin"})
+    assert done.returncode == 0 and "could not be written" in done.stdout, (done.stdout, done.stderr)
+    written = int(done.stdout.split()[0])
+    if limit < 100:  # not even the header and one row
+        assert not table.exists()
+        return
+    text = table.read_text()
+    assert len(text) <= limit and text.endswith("\n")
+    rows = list(csv.DictReader(text.splitlines()))
+    assert len(rows) == written and all(row["warnings"].endswith("length; ") for row in rows), text[-200:]
+
+
 def test_a_calibration_report_on_a_full_disk_is_said(tmp_path):
     from helpers import OPENCV_LEFT
 

@@ -170,6 +170,7 @@ class RowLog:
         self._handle = None
         self._writer: csv.DictWriter | None = None
         self._synced = 0.0
+        self._whole_bytes = 0  # the file's size after its last whole row
 
     @property
     def begun(self) -> bool:
@@ -183,10 +184,17 @@ class RowLog:
             raise FileWriteError.of(self.path, exc) from exc
 
     def _abandon(self) -> None:
+        """Close the table at its last whole row: a disk that filled mid-row took part of it (cutting a file
+        short needs no space)."""
         if self._handle is not None:
             with contextlib.suppress(OSError):
                 self._handle.close()
             self._handle = None
+            with contextlib.suppress(OSError):
+                if self._whole_bytes:
+                    os.truncate(self.path, self._whole_bytes)
+                else:  # not even the header: no table at all
+                    self.path.unlink()
 
     def _add(self, row: dict) -> None:
         if self._handle is None:
@@ -201,6 +209,7 @@ class RowLog:
             self.held = []
         self._writer.writerow(row)
         self._handle.flush()
+        self._whole_bytes = os.fstat(self._handle.fileno()).st_size
         if time.monotonic() - self._synced > 1.0:
             os.fsync(self._handle.fileno())
             self._synced = time.monotonic()
