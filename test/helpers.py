@@ -70,6 +70,14 @@ def render_views(seed: int, count: int = 15, port: FlatPort | None = None, spec:
     return board, poses, images
 
 
+def recorded_conditions(camera, medium: str = "water") -> dict:
+    """What a calibration of ours records beside a camera a test knows exactly (the renders' own): its medium,
+    and a covariance of zero (the truth has no uncertainty), so nothing is said of either."""
+    from veg_area_ros.camera_uncertainty import CameraCovariance
+
+    names = camera.param_names
+    return {"medium": medium,
+            "camera_covariance": CameraCovariance(tuple(names), np.zeros((len(names), len(names)))).as_dict()}
 
 
 def calibrated_endoscope(medium: str):
@@ -91,3 +99,20 @@ def calibration_result(setup: str, medium: str):
 
     condition = next(c for c in CONDITIONS if c.name == {"air": "air", "water": "water tank"}[medium])
     return calibrate_synthetic(SETUPS[setup], condition, np.random.default_rng(3))
+
+
+@functools.cache
+def _fitted_conditions(setup: str, medium: str) -> str:
+    import json
+
+    from veg_area_ros.calib_io import fit_metadata
+
+    return json.dumps(fit_metadata(calibration_result(setup, medium).summary(), medium, None, CHESSBOARD, "test"))
+
+
+def fitted_conditions(setup: str, medium: str) -> dict:
+    """What `veg-area calibrate` records beside `calibrated_camera(setup, medium)` (its medium, uncertainty...;
+    no distance, so a test at any distance hears nothing of it)."""
+    import json
+
+    return json.loads(_fitted_conditions(setup, medium))

@@ -49,9 +49,10 @@ def test_the_calibrations_covariance_says_how_far_af_moves_between_calibrations_
     the ROI is the same raw pixels under each (its outline in the white margin, so no pixel of the object
     changes sides) and the targets four inner corners three squares apart, so the scale is carried across the
     board and the calibration's error shows. Af moves between them by 0.0075 %; each calibration's covariance
-    carried to Af says 0.010 % (its std is the larger of the covariance's and the views' resampling, and the
-    subsets share views, so the spread reads a little under it). Where the targets frame the board, both are
-    ten times smaller: the targets' fit takes most of a calibration's error out."""
+    carried to Af over the board's black squares says 0.009 % (its std is the larger of the covariance's and
+    the views' resampling, and the subsets share views, so the spread reads a little under it). Where the
+    targets frame the board, both are ten times smaller: the targets' fit takes most of a calibration's error
+    out."""
     rng = np.random.default_rng(4)
     poses = board_views(ENDOSCOPE, BOARD, 30, 0.4, rng, max_tilt_deg=30)
     images = render_board_views(ENDOSCOPE, BOARD, poses, noise_sigma=2.0, rng=np.random.default_rng(1),

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers import recorded_conditions
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
@@ -108,10 +109,11 @@ def test_the_boundary_leaves_out_where_the_roi_cuts_the_object():
 
 def test_the_correction_moves_af_by_the_offset_over_the_boundary_and_only_where_it_applies():
     frame = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=2.0)
-    plain = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
+    plain = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120),
+                         calibration_conditions=recorded_conditions(ENDOSCOPE, "air")).measure(frame)
     white = max(plain.levels.object, plain.levels.background)
     trend = EdgeTrend(-0.004, 0.0005, white - 10, (white - 30, white + 30), 8, 0.02, "linear")
-    conditions = {"edge_trend": trend.as_dict()}
+    conditions = {**recorded_conditions(ENDOSCOPE, "air"), "edge_trend": trend.as_dict()}
     corrected = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120),
                              calibration_conditions=conditions).measure(frame)
     shift = corrected.edge_trend

@@ -151,8 +151,16 @@ def test_af_under_water_from_the_air_calibration_and_the_port(distance, fitted_u
 
 def test_the_command_line_fits_writes_and_measures_with_a_port(tmp_path):
     """`calibrate --port --lens` with underwater views, and with none (the port as measured); the file carries
-    the absorbed plumb_bob equivalent for ROS tools and the port in its own block; `measure` uses the port."""
-    write_calibration(tmp_path / "air.yaml", calibrated_camera("endoscope", "air"), "endoscope", {"medium": "air"})
+    the absorbed plumb_bob equivalent for ROS tools and the port in its own block; `measure` uses the port.
+    A lens file that records its covariance (as `veg-area calibrate` writes it) widens the port's std by what
+    the lens's own uncertainty moves it, and both go into Af's std; a lens file that records none is said, at
+    the calibration and in each result."""
+    from veg_area_ros.calib_io import fit_metadata
+
+    air = calibration_result("endoscope", "air")
+    write_calibration(tmp_path / "air.yaml", air.camera, "endoscope",
+                      fit_metadata(air.summary(), "air", None, BOARD, "test"))
+    write_calibration(tmp_path / "bare.yaml", air.camera, "endoscope", {"medium": "air"})
     board = BoardSpec.parse(BOARD)
     rng = np.random.default_rng(4)
     poses = board_views(ENDOSCOPE, board, 5, 0.6, rng, port=UNDERWATER)
@@ -165,6 +173,17 @@ def test_the_command_line_fits_writes_and_measures_with_a_port(tmp_path):
     assert fitted.returncode == 0, fitted.stderr
     summary = json.loads(fitted.stdout)
     assert summary["port"] == "fitted" and abs(summary["distance_m"] - UNDERWATER.distance) < 0.002
+    assert "warnings" not in summary
+    bare = run_cli("calibrate", *(str(tmp_path / f"view{k}.png") for k in range(5)), "--board", BOARD,
+                   "--port", port_text, "--lens", str(tmp_path / "bare.yaml"), "-o", str(tmp_path / "bare_port.yaml"),
+                   "--json")
+    assert bare.returncode == 0, bare.stderr
+    assert "records no covariance" in bare.stderr and "records no covariance" in json.loads(bare.stdout)["warnings"][0]
+    with_lens = read_calibration(tmp_path / "fitted.yaml").metadata["flat_port"]
+    lens_exact = read_calibration(tmp_path / "bare_port.yaml").metadata["flat_port"]
+    assert "camera_covariance" in with_lens["lens"] and "camera_covariance" not in lens_exact["lens"]
+    for name in ("distance", "tilt_x_rad", "tilt_y_rad"):
+        assert with_lens["std"][name] > 1.05 * lens_exact["std"][name], (name, with_lens["std"], lens_exact["std"])
     as_measured = run_cli("calibrate", "--port", f"flat:{UNDERWATER.distance}:{UNDERWATER.thickness}:"
                           f"{UNDERWATER.glass_index}", "--lens", str(tmp_path / "air.yaml"), "-o",
                           str(tmp_path / "measured.yaml"))
@@ -178,13 +197,53 @@ def test_the_command_line_fits_writes_and_measures_with_a_port(tmp_path):
     cv2.imwrite(str(tmp_path / "cube.png"), render_scene(ENDOSCOPE, scene, 0.55, UNDERWATER))
     (tmp_path / "targets.yaml").write_text(yaml.safe_dump(
         {"dictionary": SCENE_DICTIONARY, "markers": {k: [float(c) for c in v] for k, v in targets.markers.items()}}))
-    for calibration_name in ("fitted.yaml", "measured.yaml"):
+    for calibration_name in ("fitted.yaml", "measured.yaml", "bare_port.yaml"):
         done = run_cli("measure", str(tmp_path / "cube.png"), "--calibration", str(tmp_path / calibration_name),
                        "--targets", str(tmp_path / "targets.yaml"), "--threshold", "120", "--json")
         assert done.returncode == 0, done.stderr
-        assert abs(json.loads(done.stdout)["area_m2"] / scene.true_area_m2 - 1) <= 0.005, calibration_name
+        measured = json.loads(done.stdout)
+        assert abs(measured["area_m2"] / scene.true_area_m2 - 1) <= 0.005, calibration_name
+        unknown = [w for w in measured["warnings"] if w.startswith("calibration uncertainty not recorded")]
+        assert measured["calibration_std_m2"] > 0 and not unknown, (calibration_name, measured)
+        assert not any("calibration conditions not recorded" in w for w in measured["warnings"])
+        as_measured = [w for w in measured["warnings"] if w.startswith("port uncertainty not recorded")]
+        assert bool(as_measured) == (calibration_name == "measured.yaml"), measured["warnings"]
+    lens_only = read_calibration(tmp_path / "measured.yaml").metadata["flat_port"]
+    assert "std" not in lens_only and "camera_covariance" in lens_only["lens"]  # the port as measured
+    nothing = PortAreaMeasurer(FlatPortCamera(air.camera, UNDERWATER), targets, Classifier(threshold=120),
+                               {"medium": "water"}).measure(render_scene(ENDOSCOPE, scene, 0.55, UNDERWATER))
+    assert nothing.calibration_std_m2 == 0 and any(
+        w.startswith("calibration uncertainty not recorded") for w in nothing.warnings), nothing.warnings
     lonely = run_cli("calibrate", "--port", port_text, "-o", str(tmp_path / "x.yaml"))
     assert lonely.returncode == 2 and "--port and --lens go together" in lonely.stderr
+
+
+def test_the_ports_std_says_how_far_af_moves_between_the_ports_its_views_allow():
+    """Eight ports, each fitted from 6 other rendered underwater views (the lens at its air calibration, its
+    covariance carried into the port's std), measure one frame of the cube at 0.4 m: Af moves between them by
+    0.042 %, and each port's std carried to Af says 0.033 % (each port parameter moved alone). Taken over the
+    whole ROI instead of the object's pixels it said half as much: the ROI's edges move the other way."""
+    from veg_area_ros.flat_port import PORT_KEY, port_to_dict
+
+    air = calibration_result("endoscope", "air")
+    start = FlatPort(0.015, thickness=UNDERWATER.thickness, glass_index=UNDERWATER.glass_index)
+    scene, targets = _scene(0.4)
+    frame = render_scene(ENDOSCOPE, scene, 0.4, UNDERWATER)
+    areas, said, counts = [], [], set()
+    for seed in range(8):
+        fit = fit_port(air.camera, underwater_views(ENDOSCOPE, UNDERWATER, 6, seed=100 + seed), start,
+                       lens_covariance=lens_covariance(air))
+        camera = FlatPortCamera(air.camera, fit.port)
+        measured = PortAreaMeasurer(camera, targets, Classifier(threshold=120),
+                                    {"medium": "water", PORT_KEY: port_to_dict(camera, fit.std)}).measure(frame)
+        areas.append(measured.area_m2)
+        said.append(measured.calibration_std_m2)
+        counts.add(measured.pixel_count)
+        assert measured.area_std_m2 > measured.calibration_std_m2 > 0 and not measured.warnings, measured.warnings
+    assert len(counts) == 1  # the same pixels: only the port moved Af
+    spread, median = np.std(areas, ddof=1), float(np.median(said))
+    assert 0.5 < spread / median < 2.0, (spread, median)
+    assert abs(np.mean(areas) / scene.true_area_m2 - 1) < 0.005
 
 
 def test_the_explicit_model_holds_where_the_absorbed_one_drifts():

@@ -275,6 +275,22 @@ def test_a_wide_lens_behind_an_explicit_flat_port_measures_within_0_3_percent(mo
     assert abs(result.area_m2 / scene.true_area_m2 - 1) < 0.003, result.area_m2 / scene.true_area_m2
 
 
+def test_a_port_file_keeps_its_lenss_model():
+    """A wide lens behind a port written to a file and read back is the same lens: its model is recorded beside
+    its coefficients (an equidistant lens's k1-k4 were read as plumb_bob's k1, k2, p1, p2 without a word);
+    a block written before the model was recorded reads as plumb_bob, as it was."""
+    from veg_area_ros.flat_port import FlatPortCamera, port_from_dict, port_to_dict
+    from veg_area_ros.sim.synthetic import ENDOSCOPE as PLAIN
+
+    for lens in (PLAIN, FISHEYE, RATIONAL):
+        back = port_from_dict(port_to_dict(FlatPortCamera(lens, FlatPort())), lens.image_size)
+        assert back.lens.model == lens.model and back.port == FlatPort(), lens.model
+        assert np.allclose(list(back.lens.parameters().values()), list(lens.parameters().values()), rtol=1e-12)
+    old_block = port_to_dict(FlatPortCamera(PLAIN, FlatPort()))
+    del old_block["lens"]["distortion_model"]
+    assert port_from_dict(old_block, PLAIN.image_size).lens.model == "plumb_bob"
+
+
 def test_auto_with_too_few_distinct_views_takes_plumb_bob_and_says_why():
     """Ten photos of which four repeat others leave six distinct views, too few to split into halves: `auto`
     ended in "no camera model fits these views"; it takes plumb_bob and says why."""

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from helpers import OPENCV_LEFT, SOURCE, calibrated_camera
+from helpers import OPENCV_LEFT, SOURCE, calibrated_camera, fitted_conditions, recorded_conditions
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
@@ -66,7 +66,9 @@ def flume_results():
         empty = render_scene(ENDOSCOPE, empty_scene(scene), plan["distance"], FlatPort(), seed=100 + plan["seed"],
                              **view)
         for source, options in (("fitted", {}), ("background frame", {"background": empty})):
-            result = AreaMeasurer(camera, targets_for(scene), Classifier(threshold="otsu"), **options).measure(frame)
+            result = AreaMeasurer(camera, targets_for(scene), Classifier(threshold="otsu"),
+                                  calibration_conditions=fitted_conditions("endoscope", "water"),
+                                  **options).measure(frame)
             results.append((plan, source, result, scene.true_area_m2))
     return results
 
@@ -228,8 +230,8 @@ def test_a_steady_cameras_light_is_carried_and_found_again_when_it_changes():
 @pytest.mark.parametrize("gain", [1.3, 1.5])
 def test_clipped_highlights_are_said_and_bounded_on_renders(gain):
     scene = cube_scene()
-    camera = calibrated_camera("endoscope", "water")
-    measurer = AreaMeasurer(camera, targets_for(scene), Classifier())
+    camera, conditions = calibrated_camera("endoscope", "water"), fitted_conditions("endoscope", "water")
+    measurer = AreaMeasurer(camera, targets_for(scene), Classifier(), calibration_conditions=conditions)
     clipped = measurer.measure(render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, noise_sigma=2.0,
                                             blur_sigma_px=1.0, gain=gain))
     error = clipped.area_m2 / scene.true_area_m2 - 1
@@ -237,7 +239,7 @@ def test_clipped_highlights_are_said_and_bounded_on_renders(gain):
     (warning,) = [w for w in clipped.warnings if w.startswith("clipped highlights")]
     assert "reads low" in warning and clipped.exposure["highlights"]["edge_share"] > 0.5
     assert clipped.exposure_std_m2 > 0 and abs(error) * scene.true_area_m2 <= 2 * clipped.area_std_m2
-    well = AreaMeasurer(camera, targets_for(scene), Classifier()).measure(
+    well = AreaMeasurer(camera, targets_for(scene), Classifier(), calibration_conditions=conditions).measure(
         render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, noise_sigma=2.0, blur_sigma_px=1.0, gain=1.2))
     assert well.warnings == [] and well.exposure_std_m2 == 0  # bright (240) but not clipped: silent
 
@@ -300,7 +302,8 @@ def test_a_clean_frame_has_no_warning(clean):
     scene, frame = clean
     for mode in ("subpixel", "count"):
         result = AreaMeasurer(ENDOSCOPE, targets_for(scene), Classifier(), area_mode=mode,
-                              calibration_conditions={"medium": "air", "calibration_distance_m": 0.7}).measure(frame)
+                              calibration_conditions={**recorded_conditions(ENDOSCOPE, "air"),
+                                                      "calibration_distance_m": 0.7}).measure(frame)
         assert result.warnings == [] and result.summary()["warnings"] == []
 
 
@@ -348,6 +351,25 @@ def test_a_calibration_used_at_another_distance_or_without_a_medium_is_said(clea
     assert warned(unspecified, "calibration medium unspecified")
 
 
+def test_a_calibration_that_records_no_conditions_or_no_uncertainty_is_said(clean):
+    """A camera_info from another tool (or set by hand) says nothing of its medium, distance or uncertainty: the
+    result says that none of them can be checked or carried into the std; one of ours that records a medium
+    but no covariance (written before it recorded one) says the std leaves the calibration's own out. The
+    uncalibrated frame is said otherwise."""
+    scene, frame = clean
+    foreign = AreaMeasurer(ENDOSCOPE, targets_for(scene), Classifier()).measure(frame)
+    (line,) = warned(foreign, "calibration conditions not recorded")
+    assert "Af's std leaves out its uncertainty" in line and foreign.calibration_std_m2 == 0
+    older = AreaMeasurer(ENDOSCOPE, targets_for(scene), Classifier(),
+                         calibration_conditions={"medium": "water"}).measure(frame)
+    assert warned(older, "calibration uncertainty not recorded") and not warned(older, "calibration conditions")
+    ours = AreaMeasurer(ENDOSCOPE, targets_for(scene), Classifier(),
+                        calibration_conditions=recorded_conditions(ENDOSCOPE)).measure(frame)
+    assert ours.warnings == []
+    uncalibrated = AreaMeasurer(None, targets_for(scene), Classifier()).measure(frame)
+    assert not warned(uncalibrated, "calibration conditions") and not warned(uncalibrated, "calibration uncertainty")
+
+
 def test_warnings_reach_the_json_the_csv_and_the_batch_summary(tmp_path):
     scene = cube_scene()
     for name, gain in (("clipped.png", 1.4), ("fine.png", 1.0)):
@@ -355,7 +377,7 @@ def test_warnings_reach_the_json_the_csv_and_the_batch_summary(tmp_path):
                                                        blur_sigma_px=1.0, gain=gain))
     from veg_area_ros.calib_io import write_calibration
 
-    write_calibration(tmp_path / "camera.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
+    write_calibration(tmp_path / "camera.yaml", ENDOSCOPE, "endoscope", recorded_conditions(ENDOSCOPE, "air"))
     (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
     base = [sys.executable, "-m", "veg_area_ros.cli", "measure", "--calibration", "camera.yaml",
             "--targets", "targets.yaml"]

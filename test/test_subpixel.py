@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from helpers import calibrated_camera
+from helpers import calibrated_camera, fitted_conditions
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.classify import (
@@ -268,8 +268,8 @@ def test_dslr_bush_in_the_flume_reads_its_levels_as_deep_inside_as_the_blur_reac
     empty = render_scene(DSLR, empty_scene(scene), 0.7, setting.port, **{**flume, "seed": 12})
     camera = calibrated_camera("dslr", "water")  # the water tank's: same medium and distance
     for background in (None, empty):
-        result = AreaMeasurer(camera, targets_for(scene), Classifier(threshold=120),
-                              background=background).measure(frame)
+        result = AreaMeasurer(camera, targets_for(scene), Classifier(threshold=120), background=background,
+                              calibration_conditions=fitted_conditions("dslr", "water")).measure(frame)
         error = result.area_m2 / scene.true_area_m2 - 1
         assert result.subpixel_applied, result.warnings
         assert abs(error) <= 0.006 and abs(error) * scene.true_area_m2 <= 3 * result.area_std_m2, error

@@ -27,7 +27,7 @@ import numpy as np
 from .area_result import AreaResult
 from .area_terms import area_terms, thresholds_read
 from .camera_model import BrownCamera
-from .camera_uncertainty import CameraCovariance
+from .camera_uncertainty import CalibrationSpread, CameraCovariance
 from .checks import CheckSettings, check
 from .classify import AREA_MODES, Classifier, ClassifyError
 from .edge_trend import apply_correction, edge_correction, settings_from
@@ -55,7 +55,8 @@ class AreaMeasurer:
     def __init__(self, camera: BrownCamera | None, targets: TargetsSpec, classifier: Classifier,
                  roi: np.ndarray | None = None, threshold_delta: float = 5.0, area_mode: str = "subpixel",
                  levels: tuple[float, float] | None = None, background: np.ndarray | None = None,
-                 even_light: bool = True, calibration_conditions: dict | None = None):
+                 even_light: bool = True, calibration_conditions: dict | None = None,
+                 calibration_spread: CalibrationSpread | None = None):
         if area_mode not in AREA_MODES:
             raise ClassifyError(f"area mode must be one of {', '.join(AREA_MODES)}, got {area_mode!r}")
         self.camera, self.targets, self.classifier = camera, targets, classifier
@@ -65,15 +66,16 @@ class AreaMeasurer:
                                                     camera.image_size if camera is not None else None)
         self.locator = Locator(targets, self.view, classifier.tone_curve)
         self.region = Region(targets, self.view, roi)
-        self.check_settings = CheckSettings(classifier, area_mode, threshold_delta, self.view, calibration_conditions)
         try:  # how the calibration's views moved their edges with exposure, where it applies (edge_trend)
             self.edge_trend, self.edge_trend_reason = settings_from(
                 calibration_conditions if camera is not None else None, classifier.tone_curve, classifier.object,
                 classifier.channel, area_mode)
-            covariance = CameraCovariance.from_conditions(calibration_conditions, camera)
+            spread = calibration_spread or CameraCovariance.from_conditions(calibration_conditions, camera)
         except ValueError as exc:
             raise ClassifyError(f"the calibration's {exc}") from None
-        self.weighting = Weighting(targets, self.view, self.region, covariance)
+        self.check_settings = CheckSettings(classifier, area_mode, threshold_delta, self.view, calibration_conditions,
+                                            spread is not None)
+        self.weighting = Weighting(targets, self.view, self.region, spread)
         self.carried = Carried()
 
     @property
@@ -106,8 +108,8 @@ class AreaMeasurer:
         if alike:
             self.carried = previous.carried
             weights = self.carried.weights.weights
-            if weights is not None and self.weighting.covariance != previous.weighting.covariance:
-                weights.relative_calibration_std = self.weighting.calibration_std(weights)
+            if weights is not None and self.weighting.spread != previous.weighting.spread:
+                weights.calibration = self.weighting.calibration_sensitivity(weights)
         return alike
 
     def start_segment(self) -> None:
@@ -138,7 +140,9 @@ class AreaMeasurer:
         subpixel = self.area_mode == "subpixel"
         wanted = thresholds_read(lit.threshold, self.threshold_delta, self.classifier, subpixel)
         levels = levels_for(lit, wanted, light, carried.light)
-        terms = area_terms(lit, weights, factor, carry_error, self.classifier, subpixel, self.threshold_delta, levels)
+        mask = self.classifier.mask(lit.band, weights.roi, lit.threshold)
+        terms = area_terms(lit, weights, factor, carry_error, self.classifier, subpixel, self.threshold_delta, levels,
+                           weights.relative_calibration_std(mask))
         result = AreaResult(
             area_m2=terms.area, area_std_m2=terms.std, pixel_count=terms.count, threshold=lit.threshold,
             calibrated=self.camera is not None, scale=located.scale, scale_std_m2=terms.scale_std,
@@ -150,7 +154,6 @@ class AreaMeasurer:
             plane_offset_std_m2=terms.offset_std, calibration_std_m2=terms.calibration_std,
             edge_length_px=terms.edge.length_px, count_area_m2=terms.counted,
             flat_field=lit.flat)
-        mask = self.classifier.mask(lit.band, weights.roi, lit.threshold)
         if self.edge_trend is not None and terms.applied and terms.count:
             white = max(terms.levels.object, terms.levels.background)
             correction = edge_correction(self.edge_trend, white, self.classifier.object, mask, weights.roi,

@@ -10,19 +10,23 @@ more). Moving the ROI with the camera instead of keeping its raw pixels made it 
 the object's pixels, which no calibration moves.
 
 `veg-area calibrate` and the calibration node record the covariance of the camera's parameters in the file's
-metadata (`camera_covariance`); the weights stage (weights.py) asks `relative_area_std` once per target layout
-(kept while the targets stay within a few pixels: it changes slowly with their place, and costs tens of ms):
-Af over the ROI's raw pixels (each pixel's footprint on the object's plane: the idealized area it covers,
-times the metric area of an idealized pixel under the targets' fit) is re-worked under the camera moved by one
-standard deviation each way along every principal axis of the covariance, the targets re-idealized and the
-scale fitted again. The pixels are the ROI's, not the object's: where in the ROI the object lies is not
-weighed (a term per layout, not per frame).
+metadata (`camera_covariance`); a flat port's file records its port's std and the lens's covariance, which
+port_area.py turns into stand-in cameras (`CalibrationSpread`). The weights stage (weights.py) asks
+`area_sensitivity` once per target layout (kept while the targets stay within a few pixels: it changes slowly
+with their place, and costs tens of ms): each of about a thousand raw pixels over the ROI with its footprint on
+the object's plane (the idealized area it covers, times the metric area of an idealized pixel under the
+targets' fit), re-worked under the camera moved by one standard deviation each way along every axis, the
+targets re-idealized and the scale fitted again. Each frame then sums those changes over the samples in its
+object's mask: where in the ROI the object lies decides the term (through a port, the whole ROI said half of
+what the object's pixels say: its edges move the other way).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -81,37 +85,71 @@ class CameraCovariance:
             raise ValueError(f"camera_covariance is no covariance matrix for {len(names)} parameters")
         return cls(names, matrix)
 
+    def axes(self, camera: BrownCamera) -> Iterator[Callable[[float], BrownCamera]]:
+        """The camera moved along each principal axis of the covariance (`CalibrationSpread`)."""
+        parameters = np.array(list(camera.parameters().values()), float)
+        values, vectors = np.linalg.eigh(self.matrix)
+        for value, vector in zip(values, vectors.T, strict=True):
+            if value > 0:
+                shift = math.sqrt(value) * vector
+                yield lambda sign, shift=shift: camera.with_parameters(parameters + sign * shift)
 
-def relative_area_std(view: IdealView, covariance: CameraCovariance, roi_raw_px: np.ndarray,
-                      scale: PlaneScale) -> float:
-    """Af's relative std over the ROI's raw pixels (N, 2) from the covariance of the view's camera, with the
-    targets of `scale` (idealized in `view`) re-idealized under each moved camera and the scale fitted again."""
+
+class CalibrationSpread(Protocol):
+    """A calibration's uncertainty as the cameras it allows: each of `axes` moves the camera one standard
+    deviation along one independent direction, either way (sign +1 or -1)."""
+
+    def axes(self, camera: BrownCamera) -> Iterator[Callable[[float], BrownCamera]]: ...
+
+
+@dataclass(frozen=True, eq=False)
+class AreaSensitivity:
+    """How each raw pixel's metric footprint moves along each axis of a calibration's spread, at samples over
+    the ROI: Af's relative std for any set of the ROI's pixels (the object's, frame by frame) is then a sum."""
+
+    raw_px: np.ndarray  # (N, 2) the samples' raw pixel coordinates (u, v), integers
+    footprint: np.ndarray  # (N,) each sample's footprint under the calibration (m² per raw pixel)
+    change: np.ndarray  # (axes, N) half the footprint's difference between the camera moved either way
+
+    def relative_std(self, inside: np.ndarray | None = None) -> float:
+        """Af's relative std over the samples `inside` marks (bool (N,)); over all of them where it marks none
+        (an object too small to hold a sample: the ROI's figure stands in)."""
+        if inside is None or not np.any(inside):
+            inside = np.ones(len(self.footprint), bool)
+        base = float(self.footprint[inside].sum())
+        if not self.change.size or base <= 0:
+            return 0.0
+        return float(np.sqrt(np.sum((self.change[:, inside].sum(axis=1) / base) ** 2)))
+
+
+def area_sensitivity(view: IdealView, spread: CalibrationSpread, roi_raw_px: np.ndarray,
+                     scale: PlaneScale) -> AreaSensitivity:
+    """Each of the ROI's raw pixels (N, 2; subsampled to SAMPLE_PIXELS) with its footprint on the object's plane
+    (the idealized area it covers times the metric area of an idealized pixel under the targets' fit) under the
+    view's camera, and how far it moves under the camera moved along each axis of `spread` (a `CameraCovariance`
+    or another `CalibrationSpread`), the targets of `scale` (idealized in `view`) re-idealized under each moved
+    camera and the scale fitted again. An axis whose moved camera folds inside the ROI (or finds no pose) is left
+    out: it says nothing."""
     camera = view.camera
     step = max(1, math.ceil(len(roi_raw_px) / SAMPLE_PIXELS))
     pixels = np.asarray(roi_raw_px, float)[::step]
     targets_raw = view.to_raw(scale.pixels)
-    parameters = np.array(list(camera.parameters().values()), float)
 
-    def total(moved: BrownCamera) -> float:
+    def footprints(moved: BrownCamera) -> np.ndarray:
         ideal_targets, _ = moved.pixels_to_ideal(targets_raw)
         matrix = moved.ideal().camera_matrix if scale.plane_offset_m is not None else None
         fitted = PlaneScale.fit(ideal_targets, scale.planes, scale.distance_std_m, scale.pixel_std,
                                 scale.plane_offset_m, matrix)
         ideal_pixels, area = moved.pixels_to_ideal(pixels)
-        return float(np.sum(area * fitted.pixel_area(ideal_pixels)))
+        return area * fitted.pixel_area(ideal_pixels)
 
-    base = total(camera)
-    values, vectors = np.linalg.eigh(covariance.matrix)
-    variance = 0.0
-    for value, vector in zip(values, vectors.T, strict=True):
-        if value <= 0:
-            continue
-        shift = math.sqrt(value) * vector
+    changes = []
+    for moved in spread.axes(camera):
         try:
-            change = (total(camera.with_parameters(parameters + shift))
-                      - total(camera.with_parameters(parameters - shift))) / (2 * base)
-        except ValueError:  # a moved model that folds inside the ROI: this axis says nothing
+            change = (footprints(moved(1.0)) - footprints(moved(-1.0))) / 2
+        except ValueError:
             continue
-        if math.isfinite(change):
-            variance += change**2
-    return math.sqrt(variance)
+        if np.all(np.isfinite(change)):
+            changes.append(change)
+    return AreaSensitivity(pixels, footprints(camera), np.array(changes).reshape(len(changes), len(pixels)))
+

@@ -55,6 +55,7 @@ class CheckSettings:
     threshold_delta: float
     view: IdealView
     calibration_conditions: dict | None  # the calibration file's medium and distance
+    calibration_uncertainty_known: bool = True  # the calibration records its uncertainty (it is in Af's std)
 
 
 def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, mask: np.ndarray,
@@ -247,11 +248,20 @@ def _edge_widths(frame: np.ndarray, mask: np.ndarray, counts: np.ndarray, weight
 
 def _condition_warnings(located: Located, settings: CheckSettings) -> list[str]:
     """A calibration used outside its conditions (the calibration file's metadata): another distance of the
-    targets' plane, or no medium recorded. A plumb_bob calibration absorbs refraction at one distance only."""
-    conditions = settings.calibration_conditions
-    if not conditions or not settings.view.calibrated:
+    targets' plane, or no medium recorded; or a calibration that records no uncertainty, whose term Af's std
+    then leaves out. A plumb_bob calibration absorbs refraction at one distance only."""
+    if not settings.view.calibrated:
         return []
+    conditions = settings.calibration_conditions or {}
     said = []
+    if "medium" not in conditions:  # a camera_info or file from another tool, or one set by hand
+        said.append("calibration conditions not recorded (no medium, distance or uncertainty beside the "
+                    "camera_info): a calibration holds only in the medium and at the distance it was made at, which "
+                    "cannot be checked, and Af's std leaves out its uncertainty (veg-area calibrate --medium "
+                    "air|water records them)")
+    elif not settings.calibration_uncertainty_known:
+        said.append("calibration uncertainty not recorded: Af's std leaves out the calibration's own "
+                    "(veg-area calibrate and the calibration node record it)")
     if conditions.get("medium") == "unspecified":
         said.append("calibration medium unspecified: a calibration holds only in the medium it was made in "
                     "(recalibrate with --medium air|water)")

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .camera_model import MODEL_DIST_NAMES, BrownCamera
+from .camera_uncertainty import CameraCovariance
 
 WATER_INDEX = 1.333  # fresh water at about 20 °C, visible light
 ACRYLIC_INDEX = 1.49
@@ -347,15 +348,19 @@ PORT_KEY = "flat_port"  # the block in a calibration file's veg_area_ros metadat
 
 
 def port_to_dict(camera: FlatPortCamera, std: dict[str, float] | None = None,
-                 absorbed_at_m: float | None = None) -> dict:
+                 absorbed_at_m: float | None = None, lens_covariance: dict | None = None) -> dict:
     """The lens and port as our own block of a camera_info YAML (the standard fields carry the absorbed
-    plumb_bob equivalent for ROS tools)."""
+    plumb_bob equivalent for ROS tools). `lens_covariance`: the air calibration's `camera_covariance`, kept
+    beside the lens so that measuring carries it to Af's std."""
     port, lens = camera.port, camera.lens
     block = {"distance_m": port.distance, "thickness_m": port.thickness, "glass_index": port.glass_index,
              "water_index": port.water_index, "tilt_x_deg": float(np.degrees(port.tilt_x_rad)),
              "tilt_y_deg": float(np.degrees(port.tilt_y_rad)),
-             "lens": {"camera_matrix": [float(v) for v in lens.camera_matrix.ravel()],
+             "lens": {"distortion_model": lens.model,
+                      "camera_matrix": [float(v) for v in lens.camera_matrix.ravel()],
                       "distortion_coefficients": [float(v) for v in lens.dist]}}
+    if lens_covariance is not None:
+        block["lens"]["camera_covariance"] = lens_covariance
     if std:
         block["std"] = {name: float(value) for name, value in std.items()}
     if absorbed_at_m is not None:
@@ -368,14 +373,44 @@ def port_from_dict(block, image_size: tuple[int, int]) -> FlatPortCamera:
     if not isinstance(block, dict) or not isinstance(block.get("lens"), dict):
         raise PortError(f"'{PORT_KEY}' must be a mapping with the port's numbers and its 'lens'")
     try:
+        # files written before the lens's model was recorded hold plumb_bob lenses only
         lens = BrownCamera.from_opencv(np.array(block["lens"]["camera_matrix"], float).reshape(3, 3),
-                                       np.array(block["lens"]["distortion_coefficients"], float), image_size)
+                                       np.array(block["lens"]["distortion_coefficients"], float), image_size,
+                                       str(block["lens"].get("distortion_model", "plumb_bob")))
         port = FlatPort(float(block["distance_m"]), float(block["water_index"]), float(block["thickness_m"]),
                         float(block["glass_index"]), float(np.radians(block.get("tilt_x_deg", 0.0))),
                         float(np.radians(block.get("tilt_y_deg", 0.0))))
     except (KeyError, TypeError, ValueError) as exc:
         raise PortError(f"'{PORT_KEY}' is incomplete or not numbers ({exc})") from exc
     return FlatPortCamera(lens, port)
+
+
+@dataclass(frozen=True, eq=False)
+class PortUncertainty:
+    """What a port file records of its own uncertainty: each fitted port parameter's std (none for a port as
+    measured) and the air calibration's covariance (none where the lens file recorded none)."""
+
+    port_std: dict[str, float]
+    lens_covariance: CameraCovariance | None
+
+    @property
+    def recorded(self) -> bool:
+        return bool(self.port_std) or self.lens_covariance is not None
+
+
+def port_uncertainty_from_dict(block, lens: BrownCamera) -> PortUncertainty:
+    """The `PortUncertainty` of a `port_to_dict` block for its `lens`; PortError where it is not readable."""
+    std = block.get("std") or {}
+    if not isinstance(std, dict) or any(name not in PORT_PARAMETERS for name in std):
+        raise PortError(f"'{PORT_KEY}' std must map port parameters ({', '.join(PORT_PARAMETERS)}) to numbers")
+    try:
+        port_std = {str(name): float(value) for name, value in std.items()}
+        covariance = CameraCovariance.from_conditions(block["lens"], lens)
+    except (TypeError, ValueError) as exc:
+        raise PortError(f"'{PORT_KEY}' uncertainty is not readable ({exc})") from exc
+    if not all(np.isfinite(v) and v >= 0 for v in port_std.values()):
+        raise PortError(f"'{PORT_KEY}' std must be finite and not negative")
+    return PortUncertainty(port_std, covariance)
 
 
 def absorbed_at_distance(camera: FlatPortCamera, distance_m: float) -> tuple[BrownCamera, float]:

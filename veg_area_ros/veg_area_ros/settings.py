@@ -109,8 +109,9 @@ class MeasurementSettings:
         leave them; the tone curve 'auto' takes). Raises ClassifyError or TargetsError with the reason."""
         options = dict(roi=None if self.roi is None else list(self.roi), threshold_delta=self.sweep_step,
                        area_mode=self.area_mode, levels=self.levels, background=background)
-        if port_camera is not None:  # the port model holds at any distance: no calibration conditions to leave
-            return PortAreaMeasurer(port_camera, targets, self.classifier(calibration_conditions), **options)
+        if port_camera is not None:  # the port model holds at any distance; its file records its uncertainty
+            return PortAreaMeasurer(port_camera, targets, self.classifier(calibration_conditions),
+                                    calibration_conditions, **options)
         return AreaMeasurer(camera, targets, self.classifier(calibration_conditions),
                             calibration_conditions=calibration_conditions,
                             **options)

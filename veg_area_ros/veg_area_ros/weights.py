@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from .camera_model import BrownCamera
-from .camera_uncertainty import SAMPLE_PIXELS, CameraCovariance, relative_area_std
+from .camera_uncertainty import SAMPLE_PIXELS, AreaSensitivity, CalibrationSpread, area_sensitivity
 from .classify import ClassifyError
 from .idealize import OUTSIDE_PX, IdealView
 from .locate import Located
@@ -117,7 +117,7 @@ class Weights:
     centre: np.ndarray  # ROI centroid (idealized px)
     relative_scale_std: float
     relative_offset_std: float  # relative std of Af from the object plane offset's uncertainty
-    relative_calibration_std: float = 0.0  # relative std of Af over the ROI from the calibration's covariance
+    calibration: AreaSensitivity | None = None  # how the calibration's uncertainty moves the ROI's footprints
     _border: np.ndarray | None = None
     marker_edge_px: float | None = None  # the printed markers' edge width in this layout (px)
     marker_edge_found: bool = False
@@ -129,6 +129,18 @@ class Weights:
             inner = cv2.erode(self.roi, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_CONSTANT, borderValue=0)
             self._border = cv2.subtract(self.roi, inner)  # the window's edge is the ROI's edge too
         return self._border
+
+    def relative_calibration_std(self, mask: np.ndarray) -> float:
+        """Af's relative std from the calibration's uncertainty over a mask's pixels (uint8 over the window):
+        the object's, whose place in the image decides how a calibration's error moves its footprints."""
+        if self.calibration is None:
+            return 0.0
+        u = self.calibration.raw_px[:, 0].astype(int) - self.window[1].start
+        v = self.calibration.raw_px[:, 1].astype(int) - self.window[0].start
+        within = (u >= 0) & (v >= 0) & (u < mask.shape[1]) & (v < mask.shape[0])
+        inside = np.zeros(len(u), bool)
+        inside[within] = mask[v[within], u[within]] > 0
+        return self.calibration.relative_std(inside)
 
     def mask_area(self, mask: np.ndarray, factor: float) -> tuple[float, int]:
         """Af (m²) and number of a mask's pixels (uint8 over the window)."""
@@ -158,8 +170,8 @@ class Weighting:
     """The weights of one camera's frames over the ROI (`Region`)."""
 
     def __init__(self, targets: TargetsSpec, view: IdealView, region: Region,
-                 covariance: CameraCovariance | None = None):
-        self.targets, self.view, self.region, self.covariance = targets, view, region, covariance
+                 spread: CalibrationSpread | None = None):
+        self.targets, self.view, self.region, self.spread = targets, view, region, spread
 
     def _pixel_geometry(self, height: int, width: int, roi_ideal: np.ndarray, memory: WeightsMemory
                         ) -> PixelGeometry:
@@ -237,21 +249,22 @@ class Weighting:
         last = memory.weights
         if (last is not None and last.labels == weights.labels and last.roi.shape == weights.roi.shape
                 and np.max(np.abs(last.pixels - weights.pixels)) <= CALIBRATION_STD_KEPT_PX):
-            weights.relative_calibration_std = last.relative_calibration_std
+            weights.calibration = last.calibration
         else:
-            weights.relative_calibration_std = self.calibration_std(weights)
+            weights.calibration = self.calibration_sensitivity(weights)
         return weights
 
-    def calibration_std(self, weights: Weights) -> float:
-        """Af's relative std over the weights' ROI from the calibration's covariance (0 without one)."""
-        if self.covariance is None or self.view.camera is None:
-            return 0.0
+    def calibration_sensitivity(self, weights: Weights) -> AreaSensitivity | None:
+        """How the calibration's uncertainty moves the footprints of the weights' ROI (None where it records
+        none)."""
+        if self.spread is None or self.view.camera is None:
+            return None
         # a grid over the ROI: a 10 MP ROI's every pixel would cost 160 MB of coordinates for the same number
         stride = max(1, int(np.sqrt(cv2.countNonZero(weights.roi) / SAMPLE_PIXELS)))
         rows, cols = np.nonzero(weights.roi[::stride, ::stride])
         raw = np.column_stack([cols * stride + weights.window[1].start,
                                rows * stride + weights.window[0].start]).astype(float)
-        return relative_area_std(self.view, self.covariance, raw, weights.scale)
+        return area_sensitivity(self.view, self.spread, raw, weights.scale)
 
     def weights_for(self, shape: tuple[int, ...], located: Located, memory: WeightsMemory
                     ) -> tuple[Weights, float, float]:

@@ -298,6 +298,7 @@ def _calibrate_port(args: argparse.Namespace, say) -> int:
     in front of the air calibration; written as the absorbed plumb_bob equivalent at --absorbed-distance with
     the lens and port in the file's veg_area_ros block."""
     from ..calib_io import CalibrationFileError, plain, provenance, read_calibration, write_calibration
+    from ..camera_uncertainty import CameraCovariance
     from ..flat_port import PORT_KEY, FlatPort, FlatPortCamera, PortError, absorbed_at_distance, fit_port, port_to_dict
 
     if not (args.port and args.lens):
@@ -311,6 +312,15 @@ def _calibrate_port(args: argparse.Namespace, say) -> int:
     if lens_file.metadata.get("medium") not in ("air", None):
         say(f"warning: {args.lens} says medium {lens_file.metadata.get('medium')!r}; --lens wants the air calibration")
     lens = lens_file.camera
+    try:  # the lens's own uncertainty moves the fitted port and, when measuring, Af
+        lens_covariance = CameraCovariance.from_conditions(lens_file.metadata, lens)
+    except ValueError as exc:
+        raise CliError(f"{args.lens}: the lens calibration's {exc}", EXIT_USAGE) from exc
+    said_of_lens = []
+    if lens_covariance is None:
+        said_of_lens.append(f"the lens calibration {args.lens} records no covariance of its parameters (a file "
+                            "not fitted by veg-area calibrate): the port's std and Af's std count the lens as exact")
+        say(f"warning: {said_of_lens[0]}")
     std: dict[str, float] = {}
     summary: dict = {"port": "as measured"}
     port = start
@@ -323,7 +333,8 @@ def _calibrate_port(args: argparse.Namespace, say) -> int:
         if len(views) < 2:
             raise CliError(f"{len(views)} underwater view(s) with the board: a port fit needs 2 or more")
         try:
-            fit = fit_port(lens, views, start, fit_water_index=args.fit_water_index)
+            fit = fit_port(lens, views, start, fit_water_index=args.fit_water_index,
+                           lens_covariance=None if lens_covariance is None else lens_covariance.matrix)
         except PortError as exc:
             raise CliError(str(exc)) from exc
         port, std = fit.port, fit.std
@@ -336,16 +347,18 @@ def _calibrate_port(args: argparse.Namespace, say) -> int:
     camera = FlatPortCamera(lens, port)
     absorbed, residual = absorbed_at_distance(camera, args.absorbed_distance)
     metadata = {"medium": "water", **provenance("veg-area calibrate --port"), "lens_file": str(args.lens),
-                PORT_KEY: port_to_dict(camera, std, args.absorbed_distance),
-                "absorbed_residual_px": residual, **{k: v for k, v in summary.items() if k != "std"}}
+                PORT_KEY: port_to_dict(camera, std, args.absorbed_distance,
+                                       None if lens_covariance is None else lens_covariance.as_dict()),
+                "absorbed_residual_px": residual, **{k: v for k, v in summary.items() if k != "std"},
+                **({"warnings": said_of_lens} if said_of_lens else {})}
     write_calibration(args.output, absorbed, args.camera_name, metadata)
     summary.update(output=str(args.output), distance_m=port.distance, tilt_x_deg=float(math.degrees(port.tilt_x_rad)),
                    tilt_y_deg=float(math.degrees(port.tilt_y_rad)), water_index=port.water_index,
-                   absorbed_residual_px=residual)
+                   absorbed_residual_px=residual, **({"warnings": said_of_lens} if said_of_lens else {}))
     if args.json:
         print(json.dumps(plain(summary)))
     else:
-        print(f"flat port written to {args.output} (plumb_bob equivalent at {args.absorbed_distance:g} m: "
+        print(f"flat port written to {args.output} ({absorbed.model} equivalent at {args.absorbed_distance:g} m: "
               f"largest misfit {residual:.2f} px)")
     return 0
 
