@@ -29,7 +29,6 @@ from .flat_port import (
 from .markers import detect_markers
 from .targets import TargetsError, TargetsSpec
 
-
 PORT_AS_MEASURED = ("port uncertainty not recorded (the port as measured): Af's std carries the lens's but not "
                     "the port's numbers' (fit the port from underwater board views to have it)")
 
