@@ -149,11 +149,10 @@ class AreaMeasurer:
             threshold_std_m2=terms.threshold_std, missing_targets=list(located.missing), sweep=terms.sweep,
             target_pixels=located.target_pixels, weight_error_bound=weights.error_bound + carry_error,
             area_mode=self.area_mode, tone_curve=self.classifier.tone_curve, levels=terms.levels,
-            subpixel_applied=terms.applied,
-            discretisation_std_m2=terms.edge.discretisation, levels_std_m2=terms.edge.levels,
-            plane_offset_std_m2=terms.offset_std, calibration_std_m2=terms.calibration_std,
-            edge_length_px=terms.edge.length_px, count_area_m2=terms.counted,
-            flat_field=lit.flat)
+            subpixel_applied=terms.applied, discretisation_std_m2=terms.edge.discretisation,
+            levels_std_m2=terms.edge.levels, plane_offset_std_m2=terms.offset_std,
+            calibration_std_m2=terms.calibration_std, edge_length_px=terms.edge.length_px,
+            count_area_m2=terms.counted, flat_field=lit.flat)
         if self.edge_trend is not None and terms.applied and terms.count:
             white = max(terms.levels.object, terms.levels.background)
             correction = edge_correction(self.edge_trend, white, self.classifier.object, mask, weights.roi,
