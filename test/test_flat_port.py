@@ -246,6 +246,27 @@ def test_the_ports_std_says_how_far_af_moves_between_the_ports_its_views_allow()
     assert abs(np.mean(areas) / scene.true_area_m2 - 1) < 0.005
 
 
+def test_a_moving_camera_behind_a_port_works_the_ports_term_out_again_only_when_the_targets_moved_far():
+    """Each plane pose gets its stand-in camera, but the port's term (some 30 stand-ins fitted again) is kept
+    while the targets stay within a few pixels of where it was worked out, and worked again past that."""
+    from veg_area_ros.flat_port import PORT_KEY, port_to_dict
+
+    air = calibration_result("endoscope", "air")
+    camera = FlatPortCamera(air.camera, UNDERWATER)
+    std = {"distance": 0.001, "tilt_x_rad": 0.001, "tilt_y_rad": 0.001}
+    scene, targets = _scene(0.7)
+    measurer = PortAreaMeasurer(camera, targets, Classifier(threshold=120),
+                                {"medium": "water", PORT_KEY: port_to_dict(camera, std)})
+    poses, worked = [], []
+    for shift in (0.0, 0.002, 0.004, 0.02):  # metres sideways: about 0, 2.6, 5.2 and 26 px
+        result = measurer.measure(render_scene(ENDOSCOPE, scene, 0.7, UNDERWATER, centre=(shift, 0.0)))
+        assert result.calibration_std_m2 > 0 and abs(result.area_m2 / scene.true_area_m2 - 1) < 0.005
+        poses.append(measurer.plane_pose[1].copy())
+        worked.append(measurer.sensitivity_memory.worked)
+    assert all(np.linalg.norm(a - b) > 1e-3 for a, b in zip(poses, poses[1:], strict=False))  # a pose each
+    assert worked == [1, 1, 1, 2], worked
+
+
 def test_the_explicit_model_holds_where_the_absorbed_one_drifts():
     """The water calibration at 0.7 m (refraction absorbed into K1..P2) against the air calibration and the
     port, at 0.4 and 1.2 m, with the targets in the object's plane and the object 5 cm off it either way

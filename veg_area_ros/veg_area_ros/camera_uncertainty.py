@@ -34,6 +34,8 @@ from .camera_model import BrownCamera
 from .idealize import IdealView
 from .scale import PlaneScale
 
+# targets within this of those a term was worked for (idealized px): it holds (it changes slowly with their place)
+KEPT_WITHIN_PX = 8.0
 SAMPLE_PIXELS = 1024  # the ROI's raw pixels, evenly subsampled: Af's relative change is smooth over them
 
 
@@ -85,6 +87,9 @@ class CameraCovariance:
             raise ValueError(f"camera_covariance is no covariance matrix for {len(names)} parameters")
         return cls(names, matrix)
 
+    def sensitivity(self, view: IdealView, roi_raw_px: np.ndarray, scale: PlaneScale) -> AreaSensitivity:
+        return area_sensitivity(view, self, roi_raw_px, scale)
+
     def axes(self, camera: BrownCamera) -> Iterator[Callable[[float], BrownCamera]]:
         """The camera moved along each principal axis of the covariance (`CalibrationSpread`)."""
         parameters = np.array(list(camera.parameters().values()), float)
@@ -97,9 +102,12 @@ class CameraCovariance:
 
 class CalibrationSpread(Protocol):
     """A calibration's uncertainty as the cameras it allows: each of `axes` moves the camera one standard
-    deviation along one independent direction, either way (sign +1 or -1)."""
+    deviation along one independent direction, either way (sign +1 or -1); `sensitivity` is what that does to
+    the ROI's footprints (`area_sensitivity`, or one kept from targets a few pixels away)."""
 
     def axes(self, camera: BrownCamera) -> Iterator[Callable[[float], BrownCamera]]: ...
+
+    def sensitivity(self, view: IdealView, roi_raw_px: np.ndarray, scale: PlaneScale) -> AreaSensitivity: ...
 
 
 @dataclass(frozen=True, eq=False)

@@ -16,6 +16,7 @@ import numpy as np
 from .area import AreaMeasurer
 from .area_result import AreaResult
 from .camera_model import BrownCamera
+from .camera_uncertainty import KEPT_WITHIN_PX, AreaSensitivity, area_sensitivity
 from .classify import Classifier, ClassifyError
 from .flat_port import (
     PORT_KEY,
@@ -26,11 +27,23 @@ from .flat_port import (
     estimate_pose,
     port_uncertainty_from_dict,
 )
+from .idealize import IdealView
 from .markers import detect_markers
+from .scale import PlaneScale
 from .targets import TargetsError, TargetsSpec
 
 PORT_AS_MEASURED = ("port uncertainty not recorded (the port as measured): Af's std carries the lens's but not "
                     "the port's numbers' (fit the port from underwater board views to have it)")
+
+
+@dataclass
+class SensitivityMemory:
+    """The last sensitivity a port's spread worked out, with the targets' raw pixels it was worked for: kept
+    across the stand-ins of a moving camera while the targets stay within KEPT_WITHIN_PX (each costs some 30
+    fits of a stand-in, 0.3-0.8 s at 640x480)."""
+    targets_raw: np.ndarray | None = None
+    sensitivity: AreaSensitivity | None = None
+    worked: int = 0  # how often it was worked out
 
 
 @dataclass(frozen=True, eq=False)
@@ -43,6 +56,17 @@ class PortSpread:
     camera: FlatPortCamera
     uncertainty: PortUncertainty
     stand_in: Callable[[FlatPortCamera], BrownCamera]
+    memory: SensitivityMemory
+
+    def sensitivity(self, view: IdealView, roi_raw_px: np.ndarray, scale: PlaneScale) -> AreaSensitivity:
+        targets_raw = view.to_raw(scale.pixels)
+        kept = self.memory.targets_raw
+        if (kept is not None and kept.shape == targets_raw.shape
+                and np.max(np.abs(kept - targets_raw)) <= KEPT_WITHIN_PX):
+            return self.memory.sensitivity
+        self.memory.sensitivity = area_sensitivity(view, self, roi_raw_px, scale)
+        self.memory.targets_raw, self.memory.worked = targets_raw, self.memory.worked + 1
+        return self.memory.sensitivity
 
     def axes(self, camera: BrownCamera) -> Iterator[Callable[[float], BrownCamera]]:
         port, lens = self.camera.port, self.camera.lens
@@ -78,6 +102,7 @@ class PortAreaMeasurer:
             raise ClassifyError(f"the calibration's {exc}") from None
         # the port holds at any distance: the inner measurement checks the medium only
         self.conditions = {"medium": (calibration_conditions or {}).get("medium", "water")}
+        self.sensitivity_memory = SensitivityMemory()
         self._inner: AreaMeasurer | None = None
         self._rebuilds_seen = 0
         self.absorbed_residual_px = float("nan")  # the plumb_bob stand-in's largest misfit around the targets
@@ -130,13 +155,14 @@ class PortAreaMeasurer:
         spread = None
         if self.uncertainty.recorded:
             spread = PortSpread(self.camera, self.uncertainty,
-                                lambda moved: self._stand_in(moved, planes, pixels)[0])
+                                lambda moved: self._stand_in(moved, planes, pixels)[0], self.sensitivity_memory)
         self._inner = AreaMeasurer(absorbed, self.targets, self.classifier, calibration_conditions=self.conditions,
                                    calibration_spread=spread, **self.options)
 
     def start_segment(self) -> None:
-        """As AreaMeasurer.start_segment; the plane's pose through the port is found anew too."""
+        """As AreaMeasurer.start_segment; the plane's pose through the port and its term are found anew too."""
         self._inner, self._rebuilds_seen = None, 0
+        self.sensitivity_memory = SensitivityMemory()
 
     def measure(self, frame: np.ndarray, keep_images: bool = False, grey: np.ndarray | None = None) -> AreaResult:
         """As AreaMeasurer.measure (`grey` too: the markers found in it)."""

@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from .camera_model import BrownCamera
-from .camera_uncertainty import SAMPLE_PIXELS, AreaSensitivity, CalibrationSpread, area_sensitivity
+from .camera_uncertainty import KEPT_WITHIN_PX, SAMPLE_PIXELS, AreaSensitivity, CalibrationSpread
 from .classify import ClassifyError
 from .idealize import OUTSIDE_PX, IdealView
 from .locate import Located
@@ -32,7 +32,6 @@ GEOMETRY_MARGIN_PX = 16  # raw px around the ROI's window: a small move of the R
 ROI_TOLERANCE_PX = 0.5  # targets moved further than this (idealized px) since the weights were built: rebuild
 SCALE_TOLERANCE = 2e-4  # the scale changed unevenly by more than this (relative) over the ROI: rebuild...
 CARRY_SHARE = 1.0  # ...unless that is within Af's relative scale std: sensor noise jitters the fit by about that
-CALIBRATION_STD_KEPT_PX = 8.0  # targets within this of the last layout's (idealized px): its calibration term holds
 
 
 @dataclass
@@ -248,7 +247,7 @@ class Weighting:
                           located.scale.relative_area_std_at(centre), offset_std, roi_cut_share=cut)
         last = memory.weights
         if (last is not None and last.labels == weights.labels and last.roi.shape == weights.roi.shape
-                and np.max(np.abs(last.pixels - weights.pixels)) <= CALIBRATION_STD_KEPT_PX):
+                and np.max(np.abs(last.pixels - weights.pixels)) <= KEPT_WITHIN_PX):
             weights.calibration = last.calibration
         else:
             weights.calibration = self.calibration_sensitivity(weights)
@@ -264,7 +263,7 @@ class Weighting:
         rows, cols = np.nonzero(weights.roi[::stride, ::stride])
         raw = np.column_stack([cols * stride + weights.window[1].start,
                                rows * stride + weights.window[0].start]).astype(float)
-        return area_sensitivity(self.view, self.spread, raw, weights.scale)
+        return self.spread.sensitivity(self.view, raw, weights.scale)
 
     def weights_for(self, shape: tuple[int, ...], located: Located, memory: WeightsMemory
                     ) -> tuple[Weights, float, float]:
