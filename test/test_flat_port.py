@@ -4,6 +4,7 @@ and has glass."""
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import cv2
@@ -263,7 +264,7 @@ def test_a_moving_camera_behind_a_port_works_the_ports_term_out_again_only_when_
         assert result.calibration_std_m2 > 0 and abs(result.area_m2 / scene.true_area_m2 - 1) < 0.005
         poses.append(measurer.plane_pose[1].copy())
         worked.append(measurer.sensitivity_memory.worked)
-    assert all(np.linalg.norm(a - b) > 1e-3 for a, b in zip(poses, poses[1:], strict=False))  # a pose each
+    assert all(np.linalg.norm(a - b) > 1e-3 for a, b in itertools.pairwise(poses))  # a pose each
     assert worked == [1, 1, 1, 2], worked
 
 

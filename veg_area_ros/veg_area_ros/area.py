@@ -178,7 +178,7 @@ class AreaMeasurer:
         self.view.check_size(frame)
         located = self.locator.locate(frame, self.carried.tracking)
         image = self.view.image(frame)
-        roi, polygon, _ = self.region.in_ideal(image.shape, located)
+        roi, polygon, _, _ = self.region.in_ideal(image.shape, located)
         self.region.check_layout(located, polygon)
         band = self.classifier.index_image(image)
         threshold = self.classifier.resolve_threshold(band, roi)

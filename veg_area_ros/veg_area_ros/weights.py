@@ -20,10 +20,10 @@ import numpy as np
 
 from .camera_model import BrownCamera
 from .camera_uncertainty import KEPT_WITHIN_PX, SAMPLE_PIXELS, AreaSensitivity, CalibrationSpread
-from .classify import ClassifyError
+from .classify import ClassifyError, polygon_roi
 from .idealize import OUTSIDE_PX, IdealView
 from .locate import Located
-from .region import Region, centroid
+from .region import Region, beyond_image, centroid
 from .scale import PlaneScale
 from .targets import TargetsSpec
 
@@ -89,6 +89,22 @@ class PixelGeometry:
         """The ROI over the window's raw pixels and its bounding box there (x, y, w, h)."""
         roi_raw = cv2.remap(roi_ideal, self.ideal_u, self.ideal_v, cv2.INTER_NEAREST,
                             borderMode=cv2.BORDER_CONSTANT)
+        return roi_raw, cv2.boundingRect(roi_raw)
+
+    def roi_of(self, polygon: np.ndarray, holes: list[np.ndarray]) -> tuple[np.ndarray, tuple[int, int, int, int]]:
+        """As `roi`, for a polygon reaching past the idealized image's edges: drawn on its own canvas (as far
+        as the window's raw pixels reach), so the raw pixels that idealize beyond those edges are kept."""
+        reached = self.area > 0  # a folding model's pixels past its fold have no place
+        if not reached.any():
+            return np.zeros(self.ideal_u.shape, np.uint8), (0, 0, 0, 0)
+        corners = np.asarray(polygon, float).reshape(-1, 2)
+        low = np.floor(np.maximum(corners.min(axis=0), [self.ideal_u[reached].min(), self.ideal_v[reached].min()]))
+        high = np.ceil(np.minimum(corners.max(axis=0), [self.ideal_u[reached].max(), self.ideal_v[reached].max()]))
+        low -= 1
+        shape = (int(high[1] - low[1]) + 2, int(high[0] - low[0]) + 2)
+        canvas = polygon_roi(shape, corners - low, [np.asarray(h, float).reshape(-1, 2) - low for h in holes])
+        roi_raw = cv2.remap(canvas, self.ideal_u - np.float32(low[0]), self.ideal_v - np.float32(low[1]),
+                            cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT)
         return roi_raw, cv2.boundingRect(roi_raw)
 
     def reaches_inner_edge(self, x: int, y: int, w: int, h: int) -> bool:
@@ -172,7 +188,7 @@ class Weighting:
                  spread: CalibrationSpread | None = None):
         self.targets, self.view, self.region, self.spread = targets, view, region, spread
 
-    def _pixel_geometry(self, height: int, width: int, roi_ideal: np.ndarray, memory: WeightsMemory
+    def _pixel_geometry(self, height: int, width: int, box: tuple[int, int, int, int], memory: WeightsMemory
                         ) -> PixelGeometry:
         """The raw pixels' positions in the idealized image and the areas they cover, over a window holding
         the raw pixels of this ROI (`_raw_window`; the first ROI's window with a margin, the whole frame once
@@ -182,19 +198,19 @@ class Weighting:
             geometry = memory.geometry = None
         if geometry is not None and geometry.full:
             return geometry
-        window = self._raw_window(height, width, roi_ideal)
+        window = self._raw_window(height, width, box)
         if geometry is not None and geometry.covers(*window):
             return geometry
         # the first ROI's window; a second one (the ROI moves): the whole frame, once for all
         memory.geometry = PixelGeometry.build(self.view.camera, height, width, window if geometry is None else None)
         return memory.geometry
 
-    def _raw_window(self, height: int, width: int, roi_ideal: np.ndarray) -> tuple[int, int, int, int]:
+    def _raw_window(self, height: int, width: int, box: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
         """Rows and columns (top, bottom, left, right; ends excluded) of the raw frame whose pixels can land in
         the ROI: the raw image of the ROI's bounding box (widened by a pixel for the nearest-pixel lookup,
         its edges taken every half pixel) with GEOMETRY_MARGIN_PX around it, within the frame. The lens maps
         the box's inside inside its edges' image; `_build` checks that the ROI did not reach the window's edge."""
-        x, y, w, h = cv2.boundingRect(roi_ideal)
+        x, y, w, h = box
         if w == 0 or h == 0 or self.view.camera is None:
             return 0, height, 0, width
         x0, y0, x1, y1 = x - 1.0, y - 1.0, x + w + 0.0, y + h + 0.0
@@ -214,13 +230,19 @@ class Weighting:
 
     def _build(self, shape: tuple[int, ...], located: Located, memory: WeightsMemory) -> Weights:
         height, width = shape[:2]
-        roi_ideal, polygon, cut = self.region.in_ideal(shape, located)
+        roi_ideal, polygon, holes, cut = self.region.in_ideal(shape, located)
         self.region.check_layout(located, polygon)
-        geometry = self._pixel_geometry(height, width, roi_ideal, memory)
-        roi_raw, (x, y, w, h) = geometry.roi(roi_ideal)
+        corners = np.asarray(polygon, float).reshape(-1, 2)
+        if beyond_image(corners, width, height) and self.view.camera is not None:
+            (x0, y0), (x1, y1) = np.floor(corners.min(axis=0)), np.ceil(corners.max(axis=0))
+            box, raw_roi = (int(x0), int(y0), int(x1 - x0) + 1, int(y1 - y0) + 1), lambda g: g.roi_of(polygon, holes)
+        else:
+            box, raw_roi = cv2.boundingRect(roi_ideal), lambda g: g.roi(roi_ideal)
+        geometry = self._pixel_geometry(height, width, box, memory)
+        roi_raw, (x, y, w, h) = raw_roi(geometry)
         if w > 0 and h > 0 and geometry.reaches_inner_edge(x, y, w, h):  # the window was too small: never here
             memory.geometry = geometry = PixelGeometry.build(self.view.camera, height, width)
-            roi_raw, (x, y, w, h) = geometry.roi(roi_ideal)
+            roi_raw, (x, y, w, h) = raw_roi(geometry)
         if w == 0 or h == 0:
             raise ClassifyError("the region of interest is empty")
         local = (slice(y, y + h), slice(x, x + w))  # in the geometry's window
