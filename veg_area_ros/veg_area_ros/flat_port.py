@@ -272,14 +272,6 @@ class PortFit:
 PORT_PARAMETERS = ("tilt_x_rad", "tilt_y_rad", "distance", "water_index")
 
 
-def _lens_from(parameters: np.ndarray, like: BrownCamera) -> BrownCamera:
-    """A lens of `like`'s model and size from its parameters in param_names order (fx, fy, cx, cy, then the
-    model's coefficients)."""
-    fx, fy, cx, cy, *dist = parameters
-    return BrownCamera.from_opencv(np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]), np.array(dist),
-                                   like.image_size, like.model)
-
-
 def fit_port(lens: BrownCamera, views: list[tuple[np.ndarray, np.ndarray]], start: FlatPort,
              fit_water_index: bool = False, lens_covariance: np.ndarray | None = None) -> PortFit:
     """The port's normal (two tilts) and distance (and the water's index if asked) from underwater views of a
@@ -327,8 +319,8 @@ def fit_port(lens: BrownCamera, views: list[tuple[np.ndarray, np.ndarray]], star
             if step <= 0:
                 continue
             moved = [theta + sign * step * np.eye(len(theta))[j] for sign in (1, -1)]
-            derivative = (residual(fit.x, _lens_from(moved[0], lens)) - residual(fit.x, _lens_from(moved[1], lens))
-                          ) / (2 * step)
+            plus, minus = (residual(fit.x, lens.with_parameters(values)) for values in moved)
+            derivative = (plus - minus) / (2 * step)
             sensitivity[:, j] = -normal_inverse @ (fit.jac.T @ derivative)
         covariance = covariance + sensitivity @ lens_covariance @ sensitivity.T
     std = {name: float(np.sqrt(covariance[k, k])) for k, name in enumerate(names)}
