@@ -52,6 +52,11 @@ class AreaResult:
     edge_trend_std_m2: float = 0.0  # that trend's slope uncertainty at this frame's white level (in area_std_m2)
     warnings: list[str] = field(default_factory=list)  # everything that makes this number less trustworthy
 
+    @property
+    def edge_trend_m2(self) -> float:
+        """What the calibration's edge trend moved Af by (0 where no trend was applied)."""
+        return float((self.edge_trend or {}).get("area_m2", 0.0))
+
     def summary(self) -> dict:
         return {
             "area_m2": self.area_m2, "area_std_m2": self.area_std_m2, "area_mode": self.area_mode,
@@ -73,6 +78,6 @@ class AreaResult:
                 "evened_by": self.flat_field.source, "variation": self.flat_field.variation,
                 "misfit": self.flat_field.misfit},
             "exposure": self.exposure, "exposure_std_m2": self.exposure_std_m2, "edge_widths": self.edge_widths,
-            "edge_trend": self.edge_trend, "edge_trend_std_m2": self.edge_trend_std_m2,
-            "warnings": list(self.warnings),
+            "edge_trend": self.edge_trend, "edge_trend_m2": self.edge_trend_m2,
+            "edge_trend_std_m2": self.edge_trend_std_m2, "warnings": list(self.warnings),
         }

@@ -495,8 +495,7 @@ def series_axis(rows: list[dict], name: str) -> tuple[list[float], str, str]:
 def csv_row(row: dict) -> dict:
     """A measured row as the CSV holds it: lists joined into one cell."""
     return {**row, "missing_targets": " ".join(map(str, row.get("missing_targets", []))),
-            "warnings": " | ".join(row.get("warnings", [])),
-            "edge_trend_m2": (row.get("edge_trend") or {}).get("area_m2", 0.0)}
+            "warnings": " | ".join(row.get("warnings", []))}
 
 
 

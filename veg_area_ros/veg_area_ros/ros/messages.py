@@ -33,7 +33,7 @@ def projected_area(result: AreaResult, stamp: Time, frame_id: str, calibration_s
     msg.plane_offset_std_m2, msg.exposure_std_m2 = float(result.plane_offset_std_m2), float(result.exposure_std_m2)
     msg.edge_trend_std_m2 = float(result.edge_trend_std_m2)
     msg.calibration_std_m2 = float(result.calibration_std_m2)
-    msg.edge_trend_m2 = float((result.edge_trend or {}).get("area_m2", 0.0))
+    msg.edge_trend_m2 = result.edge_trend_m2
     msg.pixel_count, msg.count_area_m2 = int(result.pixel_count), float(result.count_area_m2)
     msg.threshold, msg.area_mode, msg.tone_curve = float(result.threshold), result.area_mode, result.tone_curve
     msg.subpixel_applied, msg.calibrated = bool(result.subpixel_applied), bool(result.calibrated)
