@@ -151,7 +151,8 @@ def _project_with_jacobian(
     fx, fy, cx, cy = intrinsics[:4]
     K = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
     if model == "equidistant":
-        uv, jac = cv2.fisheye.projectPoints(object_points.reshape(-1, 1, 3), pose[:3], pose[3:], K, intrinsics[4:])
+        uv, jac = cv2.fisheye.projectPoints(np.ascontiguousarray(object_points.reshape(-1, 1, 3)), pose[:3],
+                                            pose[3:], K, intrinsics[4:])  # contiguous: as in pixels_to_normalized
         # cv2.fisheye's columns: fx fy cx cy k1-k4 rvec(3) tvec(3) skew
         return uv.reshape(-1), np.hstack([jac[:, 8:14], jac[:, :8]])
     uv, jac = cv2.projectPoints(object_points.reshape(-1, 1, 3), pose[:3], pose[3:], K, intrinsics[4:])

@@ -259,7 +259,9 @@ class BrownCamera:
     def pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
         """Distorted pixels -> ideal normalized coordinates: OpenCV's fixed-point start, then Newton steps so
         the round trip is exact to ~1e-10 px even with strong barrel distortion."""
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        # contiguous: OpenCV 5's cv2.fisheye reads a strided view's rows wrongly (a GoPro's ROI sampled every
+        # other pixel came back up to 2.7 normalized units off)
+        uv = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
         target = np.column_stack([(uv[:, 0] - self.xp) / self.fx, (uv[:, 1] - self.yp) / self.fy])
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
         if self.pinhole:
@@ -349,7 +351,8 @@ class BrownCamera:
     def project(self, points: np.ndarray, rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
         """3-D points in a board frame seen from a pose -> distorted pixels (N, 2)."""
         if not self.pinhole:
-            uv, _ = cv2.fisheye.projectPoints(np.asarray(points, float).reshape(-1, 1, 3), np.ravel(rvec).astype(float),
+            uv, _ = cv2.fisheye.projectPoints(np.ascontiguousarray(np.asarray(points, float).reshape(-1, 1, 3)),
+                                              np.ravel(rvec).astype(float),
                                               np.ravel(tvec).astype(float), self.camera_matrix, self.dist)
             return uv.reshape(-1, 2)
         uv, _ = cv2.projectPoints(np.asarray(points, float).reshape(-1, 1, 3), rvec, tvec, *self.to_opencv())
