@@ -295,33 +295,6 @@ def test_a_batchs_processes_begin_with_ctrl_c_ignored_and_the_main_process_hears
     assert signal.getsignal(signal.SIGINT) is before
 
 
-def test_a_ctrl_c_while_a_batch_starts_is_heard_once_it_has_started():
-    """A Ctrl-C in the few hundred milliseconds while the batch's processes start was lost (ignored then): it is
-    held (blocked) and reaches the main process's handler when `started()` restores it; the worker begun in the
-    window still ignores it."""
-    import multiprocessing
-    import os
-    import signal
-    from concurrent.futures import ProcessPoolExecutor
-
-    from veg_area_ros.cli.batch import CtrlCWhileStarting
-
-    heard = []
-    previous = signal.signal(signal.SIGINT, lambda *_: heard.append("ctrl-c"))
-    try:
-        context = multiprocessing.get_context("spawn")
-        with CtrlCWhileStarting() as starting, ProcessPoolExecutor(1, mp_context=context) as pool:
-            worker = pool.submit(signal.getsignal, signal.SIGINT)
-            os.kill(os.getpid(), signal.SIGINT)
-            assert not heard
-            starting.started()
-            assert heard == ["ctrl-c"]
-            assert worker.result(120) is signal.SIG_IGN
-        assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, set())
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
 def test_ctrl_c_on_a_batch_keeps_what_each_worker_measured(workspace, long_video, tmp_path):
     code, err = interrupt_when([str(long_video), str(long_video), "--calibration", str(workspace / "water.yaml"),
                                    "--targets", str(workspace / "targets.yaml"), "--jobs", "2", "--output-dir",

@@ -74,23 +74,16 @@ def _ignore_ctrl_c() -> None:
 class CtrlCWhileStarting:
     """Ctrl-C ignored while the batch's processes start, until `started()`: they begin with it ignored (exec
     keeps an ignored signal, and Python then leaves it so). A worker interrupted while importing, before its
-    initializer, broke the pool and lost the other's work; a blocked mask alone did not carry over (spawning a
-    process cleared it). This process blocks it too meanwhile: Linux keeps a blocked signal pending even while it
-    is ignored, so a Ctrl-C within these few hundred milliseconds reaches the handler `started()` restores
-    (threads begun meanwhile keep it blocked and leave it to the main thread)."""
+    initializer, broke the pool and lost the other's work; a blocked mask did not carry over (spawning a process
+    cleared it). A Ctrl-C within these few hundred milliseconds is not seen: blocking it in this thread as well
+    does not hold it, since another thread (OpenCV's: 4 at a batch's start) takes the signal and drops it."""
 
     def __enter__(self) -> CtrlCWhileStarting:
         self.previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        self.mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-        self.restored = False
         return self
 
     def started(self) -> None:
-        if self.restored:
-            return
-        self.restored = True
         signal.signal(signal.SIGINT, self.previous)
-        signal.pthread_sigmask(signal.SIG_SETMASK, self.mask)  # a pending Ctrl-C is handled here
 
     def __exit__(self, *exc) -> None:
         self.started()
