@@ -17,6 +17,7 @@ from helpers import OPENCV_LEFT, SOURCE, calibrated_camera, fitted_conditions, r
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
 from veg_area_ros.calibration import View, calibrate
+from veg_area_ros.checks import GLARE_SHARE
 from veg_area_ros.classify import Classifier, ClassifyError
 from veg_area_ros.light import EVEN_SHARE, LightError, fit_background_surface, flat_field
 from veg_area_ros.light_levels import interior_levels, levels_inside
@@ -242,6 +243,33 @@ def test_clipped_highlights_are_said_and_bounded_on_renders(gain):
     well = AreaMeasurer(camera, targets_for(scene), Classifier(), calibration_conditions=conditions).measure(
         render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, noise_sigma=2.0, blur_sigma_px=1.0, gain=1.2))
     assert well.warnings == [] and well.exposure_std_m2 == 0  # bright (240) but not clipped: silent
+
+
+def test_a_sheen_across_the_object_is_said_as_glare_and_a_frame_without_one_is_silent():
+    """A specular sheen (a broad blob of reflected light, up to 60 DN) across the cube's upper right corner in
+    the flume's light lifts the black there towards the background: Af reads low, and the result says glare;
+    the same frame without it, 30 % light gradient and all, says nothing (the markers' white paper, whiter
+    than the background, is not taken for glare)."""
+    scene = cube_scene()
+    camera, conditions = calibrated_camera("endoscope", "water"), fitted_conditions("endoscope", "water")
+
+    def measured(frame):
+        return AreaMeasurer(camera, targets_for(scene), Classifier(), calibration_conditions=conditions).measure(
+            frame, keep_images=True)
+
+    frame = render_scene(ENDOSCOPE, scene, 0.7, FlatPort(), roll_deg=0.0, **FLUME)
+    clean = measured(frame)
+    assert not [w for w in clean.warnings if w.startswith("glare")], clean.warnings
+    assert clean.glare is None or clean.glare["share"] < GLARE_SHARE / 10
+    rows, cols = np.nonzero(clean.mask)  # idealized; the cube sits where the lens bends little
+    yy, xx = np.mgrid[:frame.shape[0], :frame.shape[1]]
+    sheen = 60 * np.exp(-((xx - cols.max() + 10) ** 2 + (yy - rows.min() - 10) ** 2) / (2 * 20.0**2))
+    lifted = np.clip(frame + sheen[..., None], 0, 255).astype(np.uint8)
+    sheened = measured(lifted)
+    error = sheened.area_m2 / scene.true_area_m2 - 1
+    assert error < -0.01, error
+    (warning,) = [w for w in sheened.warnings if w.startswith("glare")]
+    assert "Af reads low" in warning and sheened.glare["share"] >= GLARE_SHARE
 
 
 def _left_board_measurements():

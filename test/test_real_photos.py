@@ -244,6 +244,17 @@ def test_the_other_cameras_edge_trend_learned_from_views_filling_the_frame_holds
     assert abs(errors.mean()) < 0.01
 
 
+def test_no_photo_of_either_webcam_says_glare():
+    """OpenCV's 26 webcam photos of a matte print, shaded up to 25 % (`left13.jpg`) and some burnt out: none of
+    them is brighter than its paper's level over more than 0.1 % of the ROI, and none says glare."""
+    for folder in (OPENCV_LEFT, OPENCV_RIGHT):
+        camera = calibrated(str(folder), BOARD)
+        for photo in board_photos(folder, BOARD, camera=camera):
+            result = _measure(photo, camera, "otsu")
+            assert not [w for w in result.warnings if w.startswith("glare")], (photo.name, result.warnings)
+            assert result.glare is None or result.glare["share"] < 0.001, (photo.name, result.glare)
+
+
 def test_a_rectangle_past_the_idealized_images_edge_keeps_the_raw_pixels_behind_it():
     """The webcam's barrel distortion idealizes its raw corners beyond the idealized image's edges: the
     rectangle of `right09.jpg` reaches 11 px past its left edge, yet the raw frame holds every pixel of it.

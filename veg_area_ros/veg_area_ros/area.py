@@ -160,7 +160,7 @@ class AreaMeasurer:
             apply_correction(result, correction)
         elif self.edge_trend is not None or self.edge_trend_reason:  # recorded, not applied: said in the row
             result.edge_trend = {"applied": False, "reason": self.edge_trend_reason or "the shares were not used"}
-        mask = check(result, self.check_settings, raw_band, mask, looked_at, lit.roi_count, weights, factor,
+        mask = check(result, self.check_settings, raw_band, lit.band, mask, looked_at, lit.roi_count, weights, factor,
                      located, carried.tracking.markers, lit.estimator)
         if keep_images:
             raw_mask = np.zeros(frame.shape[:2], np.uint8)

@@ -1,11 +1,11 @@
 """Stage 5 of a frame's measurement, the checks: everything that makes this Af less trustworthy, said in the
-result itself: clipped exposure near the object's edges (and what it may do to Af), an object cut by the
-ROI's border, a threshold sweep that does not settle, edges blurred beyond the printed markers', targets
-missing, a calibration used outside its conditions, and no object at all.
+result itself: clipped exposure near the object's edges (and what it may do to Af), glare (a sheen or a
+specular reflection), an object cut by the ROI's border, a threshold sweep that does not settle, edges blurred
+beyond the printed markers', targets missing, a calibration used outside its conditions, and no object at all.
 
 It exists because trust is judged after the number is made, from the same frame, mask and terms, and each
 check is one rule a reader can find here. Takes the measured `AreaResult` with the frame's band, mask, weights
-and targets; fills its `exposure`, `edge_widths` and `warnings` (and zeroes Af where no object was found).
+and targets; fills its `exposure`, `glare`, `edge_widths` and `warnings` (and zeroes Af where no object was found).
 Carries nothing from frame to frame but the markers' edge width, which it keeps on the layout's `Weights`.
 
 No ROS here.
@@ -40,11 +40,16 @@ SWEEP_UNSETTLED = 0.02  # Af moving this much (relative) per sweep step around t
 EDGE_ZONE = 0.15  # an edge's pixels: between the two levels' outer 15 % (noise stays out at any contrast)
 BLUR_RATIO = 2.0  # the object's edges this much (and a pixel) wider than the markers': blurred on its own
 DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
+# glare: pixels brighter than the brighter class's level by this share of the contrast (or this many of its
+# spreads, where noise is larger), over this share of the ROI. Real photos: a glossy print's sheen 0.6-1.1 % of
+# the ROI (Af -1 to -2.5 %), sheen-free ones up to 0.08 %
+GLARE_CONTRAST, GLARE_SPREADS, GLARE_SHARE = 0.10, 4.0, 0.0025
+MARKER_PAPER = 2.0  # a marker's white paper reaches this many times its own size about its centre: not glare
 
 # warnings about an object's edges, levels or extent: void where no object was found
 OBJECT_WARNINGS = ("counted whole pixels", "object touches the ROI's border", "object surrounds the rest",
                    "threshold sweep does not settle",
-                   "edges wider than the markers'")
+                   "edges wider than the markers'", "glare")
 
 
 @dataclass
@@ -58,12 +63,14 @@ class CheckSettings:
     calibration_uncertainty_known: bool = True  # the calibration records its uncertainty (it is in Af's std)
 
 
-def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, mask: np.ndarray,
+def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, band: np.ndarray, mask: np.ndarray,
           looked_at: np.ndarray, roi_count: np.ndarray, weights: Weights, factor: float, located: Located,
           markers: dict[int, DetectedMarker], estimator: LevelEstimator) -> np.ndarray:
-    """Fills the result's exposure (adding what clipping may do to its std), edge widths and warnings; where no
-    object was found, Af becomes 0 with its reason. Returns the object mask over the weights' window."""
+    """Fills the result's exposure (adding what clipping may do to its std), glare, edge widths and warnings;
+    where no object was found, Af becomes 0 with its reason. `band`: the band the levels were read from (its
+    light evened). Returns the object mask over the weights' window."""
     result.exposure = _exposure(raw_band, mask, weights, factor, settings.classifier)
+    result.glare = _glare(band, weights, result.levels, settings.classifier, markers)
     if result.exposure is not None and result.exposure["matters"]:
         # each edge pixel next to the clipping may be off by up to half a pixel, all the same way
         result.exposure_std_m2 = result.exposure["affected_area_m2"] * 0.5 / np.sqrt(3)
@@ -152,6 +159,34 @@ def _exposure(raw_band: np.ndarray, mask: np.ndarray, weights: Weights, factor: 
     return found if len(found) > 2 else None
 
 
+def _glare(band: np.ndarray, weights: Weights, levels: Levels | None, classifier: Classifier,
+           markers: dict[int, DetectedMarker]) -> dict | None:
+    """A sheen or specular reflection in the ROI: pixels brighter than the brighter class's level by more than
+    GLARE_CONTRAST of the contrast (and GLARE_SPREADS of that level's spread). No pure surface sends more
+    light than its level, so these are reflections; one that lifts the darker class (a glossy print's black, a
+    wet leaf) turns part of it into the brighter one. Read in the evened band, so shading is not taken for it;
+    the markers' white paper, which may well be whiter than the background, is left out. None where nothing is
+    that bright, or the object is no grey level (an excess-green index)."""
+    if levels is None or classifier.object == "green":
+        return None
+    bright_is_background = levels.background >= levels.object
+    bright = max(levels.background, levels.object)
+    spread = levels.background_spread if bright_is_background else levels.object_spread
+    margin = max(GLARE_CONTRAST * abs(levels.background - levels.object), GLARE_SPREADS * spread)
+    looked = weights.roi.copy()
+    offset = np.array([weights.window[1].start, weights.window[0].start], float)
+    for marker in markers.values():
+        paper = marker.centre + MARKER_PAPER * (marker.corners - marker.centre) - offset
+        cv2.fillConvexPoly(looked, np.round(paper).astype(np.int32), 0)
+    roi_pixels = cv2.countNonZero(looked)
+    over = cv2.countNonZero(((band > bright + margin) & (looked > 0)).astype(np.uint8))
+    if not over or not roi_pixels:
+        return None
+    share = over / roi_pixels
+    return {"share": float(share), "above_dn": float(bright + margin), "matters": share >= GLARE_SHARE,
+            "reads": "low" if bright_is_background else "high"}
+
+
 def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: Located, settings: CheckSettings
               ) -> list[str]:
     """Everything that makes this Af less trustworthy, one line each, said in the result itself."""
@@ -165,6 +200,13 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
                         f"clipped): Af reads {clip['reads']} (1.5-5 % on real photos); the std has "
                         f"{100 * result.exposure_std_m2 / max(result.area_m2, 1e-300):.1f} % for it; "
                         f"{'shorten the exposure' if side == 'highlights' else 'lengthen the exposure'}")
+    glare = result.glare
+    if glare and glare["matters"]:
+        darker, brighter = (("object", "background") if glare["reads"] == "low" else ("background", "object"))
+        said.append(f"glare: {100 * glare['share']:.1f} % of the ROI is brighter than the {brighter}'s level "
+                    f"(over {glare['above_dn']:.0f} DN), a sheen or specular reflection; where it lifts the "
+                    f"{darker} too, its pixels read as {brighter} and Af reads {glare['reads']} (-1 to -2.5 % on "
+                    "photos of a glossy print); light from the side or through a diffuser, or turn the camera")
     if settings.area_mode == "subpixel" and not result.subpixel_applied:
         said.append("counted whole pixels: the object's and the background's levels could not be told apart "
                     "well enough for sub-pixel shares (uneven light or texture); the std is the count's")
