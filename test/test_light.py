@@ -272,6 +272,35 @@ def test_a_sheen_across_the_object_is_said_as_glare_and_a_frame_without_one_is_s
     assert "Af reads low" in warning and sheened.glare["share"] >= GLARE_SHARE
 
 
+def test_a_large_windows_glare_is_read_every_fourth_row_as_the_whole_reads_it(monkeypatch):
+    """A 10 MP window is read for glare on every fourth row (a quarter of the cost): a sheen's share comes out
+    as the whole window gives it, and a marker's white paper, whiter than the background, is left out either
+    way."""
+    from types import SimpleNamespace
+
+    import veg_area_ros.checks as checks
+    from veg_area_ros.classify import Levels
+    from veg_area_ros.markers import DetectedMarker
+
+    rng = np.random.default_rng(4)
+    yy, xx = np.mgrid[:2592, :3872]
+    band = 200 + rng.normal(0, 3, yy.shape) + 60 * np.exp(-((xx - 1300) ** 2 + (yy - 1000) ** 2) / (2 * 80.0**2))
+    band[1000:1200, 1000:1300] -= 160  # the object, under the sheen's flank
+    corners = np.array([[3000.0, 300.0], [3200.0, 300.0], [3200.0, 500.0], [3000.0, 500.0]])
+    band[250:551, 2950:3251] = 250  # the marker's paper (its black square aside)
+    band = np.clip(band, 0, 255).astype(np.uint8)
+    weights = SimpleNamespace(roi=np.full(band.shape, 255, np.uint8), window=(slice(0, 2592), slice(0, 3872)))
+    markers = {0: DetectedMarker(corners.mean(axis=0), corners)}
+    levels = Levels(40.0, 200.0, 2.0, 3.0)
+    sampled = checks._glare(band, weights, levels, Classifier(), markers)
+    monkeypatch.setattr(checks, "GLARE_WHOLE_PX", band.size)
+    whole = checks._glare(band, weights, levels, Classifier(), markers)
+    assert whole["matters"] and sampled["matters"]
+    assert sampled["share"] == pytest.approx(whole["share"], rel=0.05)
+    without_marker = checks._glare(band, weights, levels, Classifier(), {})
+    assert without_marker["share"] > whole["share"] + 0.005  # the paper, 90,000 px, would count
+
+
 def _left_board_measurements():
     """OpenCV's 13 real photos of a printed 9x6 chessboard, calibrated on themselves; the black area inside the
     plane rectangle through the centres of the board's outer squares (27 square units), four hand-picked

@@ -13,6 +13,7 @@ No ROS here.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -45,6 +46,7 @@ DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than
 # the ROI (Af -1 to -2.5 %), sheen-free ones up to 0.08 %
 GLARE_CONTRAST, GLARE_SPREADS, GLARE_SHARE = 0.10, 4.0, 0.0025
 MARKER_PAPER = 2.0  # a marker's white paper reaches this many times its own size about its centre: not glare
+GLARE_WHOLE_PX, GLARE_ROW_STEP = 2_000_000, 4  # windows larger than this are read every fourth row for glare
 
 # warnings about an object's edges, levels or extent: void where no object was found
 OBJECT_WARNINGS = ("counted whole pixels", "object touches the ROI's border", "object surrounds the rest",
@@ -172,18 +174,26 @@ def _glare(band: np.ndarray, weights: Weights, levels: Levels | None, classifier
     bright_is_background = levels.background >= levels.object
     bright = max(levels.background, levels.object)
     spread = levels.background_spread if bright_is_background else levels.object_spread
-    margin = max(GLARE_CONTRAST * abs(levels.background - levels.object), GLARE_SPREADS * spread)
-    looked = weights.roi.copy()
-    offset = np.array([weights.window[1].start, weights.window[0].start], float)
-    for marker in markers.values():
-        paper = marker.centre + MARKER_PAPER * (marker.corners - marker.centre) - offset
-        cv2.fillConvexPoly(looked, np.round(paper).astype(np.int32), 0)
+    above = bright + max(GLARE_CONTRAST * abs(levels.background - levels.object), GLARE_SPREADS * spread)
+    if cv2.minMaxLoc(band, weights.roi)[1] <= above:  # one pass where nothing is that bright (most frames)
+        return None
+    # every GLARE_ROW_STEP-th row of a large window (a sheen spans many rows): a 10 MP frame's check costs a
+    # quarter; a small window is read whole
+    step = GLARE_ROW_STEP if band.size > GLARE_WHOLE_PX else 1
+    looked = weights.roi[::step]
+    if markers:
+        looked = looked.copy()
+        offset = np.array([weights.window[1].start, weights.window[0].start], float)
+        for marker in markers.values():
+            paper = (marker.centre + MARKER_PAPER * (marker.corners - marker.centre) - offset) / [1.0, step]
+            cv2.fillConvexPoly(looked, np.round(paper).astype(np.int32), 0)
     roi_pixels = cv2.countNonZero(looked)
-    over = cv2.countNonZero(((band > bright + margin) & (looked > 0)).astype(np.uint8))
+    # the band is whole DN: over `above` is over its floor (cv2.compare would round the scalar)
+    over = cv2.countNonZero(cv2.bitwise_and(cv2.compare(band[::step], math.floor(above), cv2.CMP_GT), looked))
     if not over or not roi_pixels:
         return None
     share = over / roi_pixels
-    return {"share": float(share), "above_dn": float(bright + margin), "matters": share >= GLARE_SHARE,
+    return {"share": float(share), "above_dn": float(above), "matters": share >= GLARE_SHARE,
             "reads": "low" if bright_is_background else "high"}
 
 
