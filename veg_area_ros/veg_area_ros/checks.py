@@ -215,7 +215,7 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
         darker, brighter = (("object", "background") if glare["reads"] == "low" else ("background", "object"))
         said.append(f"glare: {100 * glare['share']:.1f} % of the ROI is brighter than the {brighter}'s level "
                     f"(over {glare['above_dn']:.0f} DN), a sheen or specular reflection; where it lifts the "
-                    f"{darker} too, its pixels read as {brighter} and Af reads {glare['reads']} (-1 to -2.5 % on "
+                    f"{darker} too, its pixels read as {brighter} and Af reads {glare['reads']} (by 1-2.5 % on "
                     "photos of a glossy print); light from the side or through a diffuser, or turn the camera")
     if settings.area_mode == "subpixel" and not result.subpixel_applied:
         said.append("counted whole pixels: the object's and the background's levels could not be told apart "
