@@ -33,11 +33,16 @@ class BoardPhoto:
 
 @functools.cache
 def detections(folder: str, board_spec: str) -> tuple[tuple[str, object], ...]:
-    """Each photo of `folder` (*.jpg, *.png) where the board is found, with its detection."""
+    """Each photo of `folder` (*.jpg, *.png) where the board is found, with its detection; photos of another
+    size than the first one's are left out, as `veg-area calibrate` leaves them."""
     board = BoardSpec.parse(board_spec)
-    found = []
+    found, size = [], None
     for path in sorted([*Path(folder).glob("*.jpg"), *Path(folder).glob("*.png")]):
-        detection = board.detect(cv2.imread(str(path), cv2.IMREAD_COLOR))
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        size = size or image.shape
+        if image.shape != size:
+            continue
+        detection = board.detect(image)
         if detection is not None:
             found.append((path.name, detection))
     return tuple(found)
@@ -55,7 +60,8 @@ def board_photos(folder: Path, board_spec: str = "chessboard:9x6:1", camera: Bro
                  ) -> list[BoardPhoto]:
     """Each photo of `folder` where the board is found, as a measurement with its targets, ROI and truth
     (`tone_evidence.board_case`, the print's square taken as SQUARE_M); with the camera calibrated on them, or
-    `camera`. A photo whose rectangle leaves the image is kept: its ROI then says how much has no pixel."""
+    `camera`. A photo whose rectangle leaves the image is kept: its ROI then says how much has no pixel; one
+    whose first outer square lies beyond the image is left out (which squares are black cannot be read)."""
     spec = BoardSpec.parse(board_spec)
     board = replace(spec, square=SQUARE_M)
     camera = camera or calibrated(str(folder), board_spec)
@@ -65,6 +71,8 @@ def board_photos(folder: Path, board_spec: str = "chessboard:9x6:1", camera: Bro
         scaled = replace(detection, object_points=np.asarray(detection.object_points) / spec.square * SQUARE_M)
         case = board_case(name, scaled, board, camera, inside_only=False)
         grey = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        if not all(0 <= round(v) < grey.shape[0] and 0 <= round(u) < grey.shape[1] for u, v in case.first_black_probe):
+            continue
         mask = np.zeros(grey.shape, np.uint8)
         hull = cv2.convexHull(np.asarray(detection.image_points, np.float32).reshape(-1, 2)).astype(np.int32)
         cv2.fillConvexPoly(mask, hull, 255)

@@ -19,6 +19,7 @@ TEST_DATA = REPO / "test" / "data"
 SHARED_DATA = REPO.parent / "shared" / "data"
 OPENCV_LEFT = TEST_DATA / "opencv-left"
 OPENCV_RIGHT = TEST_DATA / "opencv-right"  # the same stereo pair's other camera
+UDACITY_CAMERA = TEST_DATA / "udacity-camera"  # a third camera, added as a check nobody tuned on
 OPENCV_REFERENCE_RMS = 0.4087  # OpenCV 5.0 on the same 13 images (test/data/README.md)
 CHESSBOARD = "chessboard:9x6:0.03"
 

@@ -11,7 +11,7 @@ from helpers import recorded_conditions
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
 from veg_area_ros.classify import Classifier, ClassifyError
-from veg_area_ros.edge_trend import EdgeTrend, boundary_length_px, fit_edge_trend
+from veg_area_ros.edge_trend import EdgeTrend, boundary_length_px, excess_scatter, fit_edge_trend
 from veg_area_ros.sim.synthetic import (
     ENDOSCOPE,
     board_views,
@@ -74,6 +74,32 @@ def test_a_prints_gain_seen_nearer_in_brighter_views_is_not_taken_for_a_trend_wi
     # views all at one distance: no gain to fit, the trend as before
     alike = fit_edge_trend(list(real), list(whites), "srgb", scales_px_per_m=[3000.0] * scales.size)
     assert alike.gain_px == () and "the print's gain" not in alike.reason
+
+
+def test_a_few_blurred_views_neither_hide_the_sharp_ones_scatter_nor_add_to_it():
+    """Sharp views (std 0.04 px) whose edges scatter 0.1 px about their mean, beside three blurred or clipped
+    ones (0.3-0.45 px) that lie within their std: a mean of the squared stds (0.15 px) hid the 0.09 px beyond;
+    weighed by each view's std, it is found (as on a held-out webcam's views: 0.08 px, test_real_photos), and
+    views within their own std show none."""
+    rng = np.random.default_rng(7)
+    sharp = np.linspace(-1.0, 1.0, 12)
+    sharp = 0.1 * rng.permutation(sharp - sharp.mean()) / np.std(sharp, ddof=1)  # sd 0.1 px exactly
+    blurred = np.array([0.2, -0.25, 0.1])
+    offsets = [*sharp, *blurred]
+    stds = [0.04] * 12 + [0.3, 0.45, 0.35]
+    whites = list(np.linspace(150, 160, 15))
+    mean_of_squares = np.sqrt(max(np.var(offsets, ddof=1) - np.mean(np.square(stds)), 0))
+    assert mean_of_squares == 0
+    choice = fit_edge_trend(offsets, whites, "linear", stds)
+    assert choice.trend is not None and not choice.trend.learned
+    assert 0.07 < choice.trend.scatter_px < 0.12, choice.reason
+    assert "beyond their reported std" in choice.reason
+    residuals = np.array(offsets) - np.mean(offsets)
+    scatter = excess_scatter(residuals, stds, len(offsets) - 1)
+    assert np.sum(residuals**2 / (np.square(stds) + scatter**2)) == pytest.approx(len(offsets) - 1, rel=1e-6)
+    within = 0.7 * np.array(stds) * np.resize([1.0, -1.0], 15)  # each view 0.7 of its own std off
+    assert fit_edge_trend(list(within), whites, "linear", stds).trend is None
+    assert excess_scatter(within - within.mean(), stds, 14) == 0.0
 
 
 def test_the_trend_is_taken_at_the_nearer_end_outside_its_views_and_its_std_grows_with_the_distance():

@@ -329,7 +329,10 @@ def _left_board_measurements():
 def test_real_photos_with_clipped_whites_are_flagged_and_the_others_are_not():
     """The webcam photos with 1 % or more of the board burnt out are flagged and read low, within 3 of their
     reported std (left04, 1.3 % burnt out: -1.8 % against a std of 0.73 %, 2.5 std; the others within 2); the
-    rest are not flagged and read within 1.5 %."""
+    rest are not flagged and read within 1.5 %. Clipping next to fewer of the edge pixels than the warning's
+    share is still in the std, from the first such pixel (`left06`, 6 % of them: 0.49 %; `left01`, 1.8 %: 0.13 %):
+    a step at the share would jump with the last decimals of the calibration (a held-out webcam's photo, 1.2 %
+    high, went from a std of 0.35 % to 0.53 % between two fits of one camera)."""
     rows = _left_board_measurements()
     truth = 27.0  # 9 x 6 square units through the outer squares' centres, half of it black
     clipped = {name for name, share, _ in rows if share >= 0.01}
@@ -340,7 +343,9 @@ def test_real_photos_with_clipped_whites_are_flagged_and_the_others_are_not():
         if name in clipped:  # they read low; the std says how much it may be
             assert error < 0 and abs(error) * truth <= 3 * result.area_std_m2, (name, error)
         else:
-            assert result.exposure_std_m2 == 0 and abs(error) < 0.015, (name, error)
+            touched = max((result.exposure or {}).get(side, {}).get("edge_share", 0.0)
+                          for side in ("highlights", "shadows"))
+            assert (result.exposure_std_m2 > 0) == (touched > 0) and abs(error) < 0.015, (name, error, touched)
 
 
 # ---- one list of warnings --------------------------------------------------------------------------------------

@@ -46,7 +46,7 @@ class AreaResult:
     subpixel_applied: bool = False  # sub-pixel mode used the shares (else it counted whole pixels)
     flat_field: FlatField | None = field(default=None, repr=False)  # the uneven light evened before the shares
     exposure: dict | None = None  # clipped highlights or crushed shadows near the object's edges, when there are
-    exposure_std_m2: float = 0.0  # what clipping may do to Af, where it matters (in area_std_m2)
+    exposure_std_m2: float = 0.0  # what clipping next to the edge may do to Af (in area_std_m2)
     glare: dict | None = None  # pixels brighter than the brighter class's level: a sheen or reflection (checks)
     edge_widths: dict | None = None  # the object's and the printed markers' edge width, px (blur)
     edge_trend: dict | None = None  # the edges moved back by the calibration's trend with exposure (edge_trend)

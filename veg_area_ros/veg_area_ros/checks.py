@@ -73,8 +73,9 @@ def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, ban
     light evened). Returns the object mask over the weights' window."""
     result.exposure = _exposure(raw_band, mask, weights, factor, settings.classifier)
     result.glare = _glare(band, weights, result.levels, settings.classifier, markers)
-    if result.exposure is not None and result.exposure["matters"]:
-        # each edge pixel next to the clipping may be off by up to half a pixel, all the same way
+    if result.exposure is not None and result.exposure["affected_area_m2"] > 0:
+        # each edge pixel next to the clipping may be off by up to half a pixel, all the same way; in the std
+        # from the first such pixel (a step at the warning's share would jump with the model's last decimals)
         result.exposure_std_m2 = result.exposure["affected_area_m2"] * 0.5 / np.sqrt(3)
         result.area_std_m2 = float(np.hypot(result.area_std_m2, result.exposure_std_m2))
     result.edge_widths = _edge_widths(looked_at, mask, roi_count, weights, result.levels, markers)
@@ -155,9 +156,8 @@ def _exposure(raw_band: np.ndarray, mask: np.ndarray, weights: Weights, factor: 
         found[side] = {"edge_share": share, "level_share": level_share, "affected_area_m2": area,
                        "clipped_class": "object" if clipped_is_object else "background",
                        "reads": "high" if clipped_is_object else "low", "matters": matters}
-        if matters:
-            found["matters"] = True
-            found["affected_area_m2"] += area
+        found["affected_area_m2"] += area
+        found["matters"] = found["matters"] or matters
     return found if len(found) > 2 else None
 
 

@@ -156,9 +156,9 @@ def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: 
     design = np.column_stack([np.ones(n), gain])
     coef, *_ = np.linalg.lstsq(design, offsets - slope * (whites - centre), rcond=None)
     residual = offsets - slope * (whites - centre) - design @ coef
-    variance = float(residual @ residual) / max(n - design.shape[1] - (1 if learned else 0), 1)
-    own = float(np.mean(np.square(stds_px))) if stds_px is not None and len(stds_px) == n else variance
-    scatter = math.sqrt(max(variance - own, 0.0))
+    dof = max(n - design.shape[1] - (1 if learned else 0), 1)
+    variance = float(residual @ residual) / dof
+    scatter = excess_scatter(residual, stds_px, dof) if stds_px is not None and len(stds_px) == n else 0.0
     if scatter > 0:
         reason += (f"; the views' edges scatter {math.sqrt(variance):.3f} px about it, {scatter:.3f} px beyond "
                    "their reported std: a term of every frame's std")
@@ -167,6 +167,26 @@ def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: 
         return TrendChoice(None, reason, gain_part)
     return TrendChoice(EdgeTrend(slope, slope_std, centre, reach, n, math.sqrt(variance), tone_curve, learned,
                                  scatter), reason, gain_part)
+
+
+def excess_scatter(residuals: np.ndarray, stds: list[float], dof: int) -> float:
+    """The scatter s the residuals show beyond their own std: where sum(r² / (std² + s²)) equals the degrees of
+    freedom (Paule and Mandel's consensus estimator), 0 where they lie within their std. Views whose std differ
+    are weighed by it: a few blurred or clipped views with a large std (a webcam's 0.2-0.45 px beside 0.04 px)
+    neither hide the scatter of the sharp ones, as a mean of the squared stds would, nor add to it."""
+    r2 = np.square(np.asarray(residuals, float))
+    own = np.maximum(np.square(np.asarray(stds, float)), 1e-12)
+
+    def excess(scatter: float) -> float:
+        return float(np.sum(r2 / (own + scatter**2))) - dof
+
+    if excess(0.0) <= 0:
+        return 0.0
+    low, high = 0.0, math.sqrt(float(r2.sum()) / dof)  # at `high` every view's weight is under 1/high²: <= 0
+    for _ in range(60):  # bisection: the sum falls as the scatter grows
+        middle = (low + high) / 2
+        low, high = (middle, high) if excess(middle) > 0 else (low, middle)
+    return (low + high) / 2
 
 
 def boundary_length_px(mask: np.ndarray, roi: np.ndarray) -> float:

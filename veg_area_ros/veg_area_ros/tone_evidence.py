@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import cv2
 import numpy as np
@@ -252,10 +252,13 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
         truth = case.true_area_m2(board, case.first_black(grey))
         # the error over the edges' length is how far they moved (m), in the view's idealized px
         px_per_m2 = case.square_px / board.square / case.edge_length_m(board)
+        # the board's squares exact, as the calibration takes them: an error of the print's scale is every view's
+        # alike, so it is no part of a view's own std, against which the views' scatter is judged
+        targets = replace(case.targets, distance_std_m=0.0)
         measured = {}
         for curve in TONE_CURVES:
             try:
-                result = AreaMeasurer(camera, case.targets, Classifier(threshold="otsu", tone_curve=curve),
+                result = AreaMeasurer(camera, targets, Classifier(threshold="otsu", tone_curve=curve),
                                       roi=case.roi, area_mode=EVIDENCE_MODE).measure(grey)
             except ValueError as exc:  # targets, light, a frame the measurement refuses: the view is no case
                 left_out[case.name] = f"{curve}: {exc}"
