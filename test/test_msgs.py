@@ -149,6 +149,48 @@ def test_a_frames_result_fills_every_field_and_rosbags_reads_the_bytes_alike(pre
         assert typestore().hash_rihs01(f"veg_area_msgs/msg/{name}") == expected, name
 
 
+def test_a_bag_recorded_before_a_field_was_added_reads_with_its_own_definition(tmp_path):
+    """A bag whose ProjectedArea was recorded with a definition one field shorter than today's (as a recording
+    from before a field is added will be; here without `calibration_std_m2`) is read with the definition it was
+    written with, which its connection carries: Af and the rest come back as written, where today's definition
+    would read its bytes out of step."""
+    from rosbags.rosbag2 import Reader, Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    from veg_area_ros.bags import our_message_files, typestore
+
+    name = "veg_area_msgs/msg/ProjectedArea"
+    today = next(p for p in our_message_files() if p.stem == "ProjectedArea").read_text()
+    before = "\n".join(line for line in today.splitlines() if not line.startswith("float64 calibration_std_m2"))
+    assert before != today
+    old = get_typestore(Stores.ROS2_KILTED)
+    old.register(get_types_from_msg(before, name))
+    fields = {field: 0.0 for field in ("area_m2", "area_std_m2", "scale_std_m2", "threshold_std_m2",
+                                       "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2",
+                                       "exposure_std_m2", "edge_trend_std_m2", "edge_trend_m2",
+                                       "count_area_m2", "threshold")}
+    fields.update(area_m2=0.0105, area_std_m2=1.5e-5, edge_trend_m2=2e-6, pixel_count=4321,
+                  area_mode="subpixel", subpixel_applied=True, tone_curve="linear", calibrated=True,
+                  calibration_source="camera_info", warnings=["exposure: clipped"])
+    header = old.types["std_msgs/msg/Header"](stamp=old.types["builtin_interfaces/msg/Time"](sec=3, nanosec=0),
+                                              frame_id="camera")
+    message = old.types[name](header=header, **fields)
+    with Writer(tmp_path / "old", version=Writer.VERSION_LATEST) as writer:
+        connection = writer.add_connection("/projected_area", name, typestore=old)
+        writer.write(connection, 3 * 10**9, old.serialize_cdr(message, name))
+    with Reader(tmp_path / "old") as reader:
+        (connection, _, data), = list(reader.messages())
+        read = typestore(reader).deserialize_cdr(data, name)
+        assert (read.area_m2, read.area_std_m2, read.edge_trend_m2, read.pixel_count, list(read.warnings)) == (
+            0.0105, 1.5e-5, 2e-6, 4321, ["exposure: clipped"])
+    try:  # today's definition reads these bytes out of step
+        misread = typestore().deserialize_cdr(data, name)
+        alike = (misread.pixel_count, list(misread.warnings)) == (4321, ["exposure: clipped"])
+    except Exception:  # rosbags raises whatever the misplaced bytes make of it
+        alike = False
+    assert not alike
+
+
 def test_calibration_progress_carries_what_the_node_says_and_gives_it_back(prefix):
     from builtin_interfaces.msg import Time
     from rclpy.serialization import deserialize_message, serialize_message

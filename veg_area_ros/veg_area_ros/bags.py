@@ -96,8 +96,10 @@ def typestore(reader: Reader | None = None):
     """The Kilted message types with veg_area_msgs's registered (a bag of ProjectedArea is written with its
     definition and read back), and, given a reader, any other type the bag defines itself (MCAP schemas)."""
     store = get_typestore(Stores.ROS2_KILTED)
-    store.register(dict(_our_types()))
+    ours = dict(_our_types())
     if reader is not None:
+        # the bag's own definitions first, ours included: a bag recorded before a field was added to one of our
+        # messages is read with the definition it was written with
         for connection in reader.connections:
             if connection.msgtype in store.types or not connection.msgdef.data:
                 continue
@@ -108,6 +110,7 @@ def typestore(reader: Reader | None = None):
                     store.register(get_types_from_idl(connection.msgdef.data))
             except Exception:  # a definition rosbags cannot parse: that topic alone stays undecodable
                 continue
+    store.register({name: definition for name, definition in ours.items() if name not in store.types})
     return store
 
 
