@@ -16,7 +16,7 @@ from veg_area_ros.board import BoardSpec
 from veg_area_ros.calibration import View, calibrate
 from veg_area_ros.camera_model import BrownCamera
 from veg_area_ros.targets import TargetsSpec
-from veg_area_ros.tone_evidence import board_case
+from veg_area_ros.tone_evidence import _within, board_case
 
 SQUARE_M = 0.025  # the print's square is not published; any side gives the same relative figures
 
@@ -56,6 +56,11 @@ def calibrated(folder: str, board_spec: str) -> BrownCamera:
     return calibrate([View(name, detection) for name, detection in found], size).camera
 
 
+def metric(detection, spec: BoardSpec):
+    """A detection of the board `spec` with its board points in metres, the print's square taken as SQUARE_M."""
+    return replace(detection, object_points=np.asarray(detection.object_points) / spec.square * SQUARE_M)
+
+
 def board_photos(folder: Path, board_spec: str = "chessboard:9x6:1", camera: BrownCamera | None = None
                  ) -> list[BoardPhoto]:
     """Each photo of `folder` where the board is found, as a measurement with its targets, ROI and truth
@@ -68,10 +73,9 @@ def board_photos(folder: Path, board_spec: str = "chessboard:9x6:1", camera: Bro
     photos = []
     for name, detection in detections(str(folder), board_spec):
         frame = cv2.imread(str(folder / name), cv2.IMREAD_COLOR)
-        scaled = replace(detection, object_points=np.asarray(detection.object_points) / spec.square * SQUARE_M)
-        case = board_case(name, scaled, board, camera, inside_only=False)
+        case = board_case(name, metric(detection, spec), board, camera, inside_only=False)
         grey = cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-        if not all(0 <= round(v) < grey.shape[0] and 0 <= round(u) < grey.shape[1] for u, v in case.first_black_probe):
+        if not _within(case.first_black_probe, camera, 0):
             continue
         mask = np.zeros(grey.shape, np.uint8)
         hull = cv2.convexHull(np.asarray(detection.image_points, np.float32).reshape(-1, 2)).astype(np.int32)

@@ -7,10 +7,12 @@ spread between photos is what is judged, with the mean's offset only bounded."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
-from board_photos import SQUARE_M, board_photos, calibrated, detections
+from board_photos import SQUARE_M, board_photos, calibrated, detections, metric
 from helpers import OPENCV_LEFT, OPENCV_RIGHT, UDACITY_CAMERA
 
 from veg_area_ros.area import AreaMeasurer
@@ -21,7 +23,6 @@ from veg_area_ros.edge_trend import fit_edge_trend
 from veg_area_ros.tone_evidence import choose_tone_curve, chosen_cases
 
 BOARD = "chessboard:9x6:1"
-BOARD_M = f"chessboard:9x6:{SQUARE_M}"
 THRESHOLDS = ("otsu", 100, 120, 128, 150)
 
 
@@ -39,8 +40,9 @@ def _evidence(folder, camera):
     """What `veg-area calibrate` judges on the photos (tone_evidence): each view's edge offset and white level
     under the curve it keeps. The board in metres, at the print's likely square (a 1 m square would put a
     far view tens of metres off, which the measurement refuses as a unit slip)."""
-    board = BoardSpec.parse(BOARD_M)
-    views = [View(name, detection) for name, detection in detections(str(folder), BOARD_M)]
+    spec = BoardSpec.parse(BOARD)
+    board = replace(spec, square=SQUARE_M)
+    views = [View(name, metric(detection, spec)) for name, detection in detections(str(folder), BOARD)]
     cases = chosen_cases(views, board, camera)
     return choose_tone_curve(((case, cv2.imread(str(folder / case.name), cv2.IMREAD_GRAYSCALE))
                               for case in cases), board, camera)

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from scipy.optimize import brentq
 
 MIN_VIEWS = 6  # a slope and its scatter need a few more views than its two parameters
 DECISIVE_SIGMA = 3.0  # the slope this many standard errors from zero
@@ -182,11 +183,8 @@ def excess_scatter(residuals: np.ndarray, stds: list[float], dof: int) -> float:
 
     if excess(0.0) <= 0:
         return 0.0
-    low, high = 0.0, math.sqrt(float(r2.sum()) / dof)  # at `high` every view's weight is under 1/high²: <= 0
-    for _ in range(60):  # bisection: the sum falls as the scatter grows
-        middle = (low + high) / 2
-        low, high = (middle, high) if excess(middle) > 0 else (low, middle)
-    return (low + high) / 2
+    # the sum falls as the scatter grows; at this bound every view's weight is under its inverse square: <= 0
+    return float(brentq(excess, 0.0, math.sqrt(float(r2.sum()) / dof), xtol=1e-12))
 
 
 def boundary_length_px(mask: np.ndarray, roi: np.ndarray) -> float:
