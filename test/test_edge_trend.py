@@ -11,7 +11,14 @@ from helpers import recorded_conditions
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
 from veg_area_ros.classify import Classifier, ClassifyError
-from veg_area_ros.edge_trend import EdgeTrend, boundary_length_px, excess_scatter, fit_edge_trend
+from veg_area_ros.edge_trend import (
+    LOCAL_MIN_VIEWS,
+    LOCAL_VIEWS,
+    EdgeTrend,
+    boundary_length_px,
+    excess_scatter,
+    fit_edge_trend,
+)
 from veg_area_ros.sim.synthetic import (
     ENDOSCOPE,
     board_views,
@@ -49,6 +56,53 @@ def test_a_clear_trend_is_learned_with_its_error_and_a_weak_or_narrow_one_is_not
     assert narrow.trend is None and "too alike in exposure" in narrow.reason
     few = fit_edge_trend(list(offsets[:5]), list(whites[:5]), "linear")
     assert few.trend is None and "5 could be measured" in few.reason
+
+
+def _shoulder(count: int, seed: int = 4) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Views whose edges hold still from 90 to 205 DN and fall 0.12 px towards the white above 210 DN, as a
+    dome housing's machine-vision camera's air photos do (92-225 DN), each with a std of 0.02 px."""
+    rng = np.random.default_rng(seed)
+    whites = np.concatenate([np.linspace(90, 205, count - count // 6), np.linspace(210, 225, count // 6)])
+    offsets = np.where(whites >= 210, -0.12, 0.0) + rng.normal(0, 0.02, count)
+    return whites, offsets, np.full(count, 0.02)
+
+
+def test_many_views_give_each_frame_its_nearest_views_residuals_where_a_line_cannot_follow_them():
+    """A shoulder near the top of the exposures: a line through 48 views leaves the bright views 0.08 px off
+    and takes the flat ones' scatter from the bright ones. With LOCAL_MIN_VIEWS or more each frame also takes
+    the mean residual of its LOCAL_VIEWS nearest views in white level (and their scatter and that mean's std):
+    a bright frame is moved back to within its std of the shoulder, a middling one stays near zero with a
+    smaller std than the line's, and the file holds the residuals. Fewer views keep the line alone."""
+    whites, offsets, stds = _shoulder(48)
+    choice = fit_edge_trend(list(offsets), list(whites), "linear", list(stds))
+    trend = choice.trend
+    assert trend is not None and trend.local and len(trend.residuals) == 48
+    assert f"residuals of the {LOCAL_VIEWS} views nearest its white level" in choice.reason
+    line_bright = trend.slope_px_per_dn * (222 - trend.reference_dn)
+    assert abs(line_bright + 0.12) > 0.05  # what the line alone would leave at 222 DN
+    bright, bright_std, outside = trend.offset_px(222.0)
+    assert abs(bright + 0.12) < 2 * bright_std and bright_std < 0.03 and not outside
+    middle, middle_std, _ = trend.offset_px(150.0)
+    assert abs(middle) < 0.03 and middle_std < trend.scatter_px
+    again = EdgeTrend.from_dict(trend.as_dict())
+    assert again.local and again.offset_px(222.0) == pytest.approx((bright, bright_std, False), abs=1e-3)
+    few = fit_edge_trend(list(offsets[::3]), list(whites[::3]), "linear", list(stds[::3])).trend
+    assert len(offsets[::3]) < LOCAL_MIN_VIEWS and few is not None and not few.local
+    assert "nearest" not in fit_edge_trend(list(offsets[::3]), list(whites[::3]), "linear", list(stds[::3])).reason
+    # views with no shoulder: the nearest views' mean stays within its std of zero everywhere
+    flat = fit_edge_trend(list(np.random.default_rng(6).normal(0, 0.02, 48)), list(whites), "linear",
+                          list(stds)).trend
+    for white in (95.0, 150.0, 220.0):
+        offset, offset_std, _ = (flat.offset_px(white) if flat is not None else (0.0, 0.0, False))
+        assert abs(offset) <= 3 * max(offset_std, 0.007), (white, offset, offset_std)
+
+
+def test_a_files_residuals_that_are_not_numbers_are_refused():
+    whites, offsets, stds = _shoulder(30)
+    recorded = fit_edge_trend(list(offsets), list(whites), "linear", list(stds)).trend.as_dict()
+    for bad in ([[200.0, float("nan"), 0.02]], [[200.0, 0.01, -0.02]], [[200.0, 0.01]], "none"):
+        with pytest.raises(ValueError, match="edge_trend"):
+            EdgeTrend.from_dict({**recorded, "residuals": bad})
 
 
 def test_a_prints_gain_seen_nearer_in_brighter_views_is_not_taken_for_a_trend_with_exposure():

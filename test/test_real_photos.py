@@ -20,7 +20,7 @@ from veg_area_ros.board import BoardSpec
 from veg_area_ros.calibration import View
 from veg_area_ros.classify import Classifier
 from veg_area_ros.edge_trend import fit_edge_trend
-from veg_area_ros.tone_evidence import choose_tone_curve, chosen_cases
+from veg_area_ros.tone_evidence import choose_tone_curve, chosen_cases, curve_names
 
 BOARD = "chessboard:9x6:1"
 THRESHOLDS = ("otsu", 100, 120, 128, 150)
@@ -45,7 +45,7 @@ def _evidence(folder, camera):
     views = [View(name, metric(detection, spec)) for name, detection in detections(str(folder), BOARD)]
     cases = chosen_cases(views, board, camera)
     return choose_tone_curve(((case, cv2.imread(str(folder / case.name), cv2.IMREAD_GRAYSCALE))
-                              for case in cases), board, camera)
+                              for case in cases), board, camera, curve_names(cases))
 
 
 def _with_the_others_trend(photo, camera, evidence):

@@ -19,7 +19,7 @@ from veg_area_ros.board import BoardSpec
 from veg_area_ros.classify import Classifier, ClassifyError, polygon_roi
 from veg_area_ros.settings import MeasurementSettings
 from veg_area_ros.sim.synthetic import ENDOSCOPE, board_views, look_at_pose, render_board_views
-from veg_area_ros.tone_evidence import board_case, choose_tone_curve
+from veg_area_ros.tone_evidence import MAX_VIEWS, board_case, choose_tone_curve, curve_names
 
 BOARD = BoardSpec.parse("chessboard:9x6:0.02")
 
@@ -135,6 +135,23 @@ def test_the_views_near_and_far_tell_the_curve_the_camera_encodes_with(tone_curv
     assert abs(choice.slopes[other]["slope"] * reach) > 0.02, choice.slopes
     assert choice.views >= 10 and not choice.left_out
     assert f"{tone_curve} drifts the least" in choice.reason
+
+
+def test_the_curve_is_judged_on_its_views_and_the_edges_on_all():
+    """The tone curve is read in MAX_VIEWS views evenly over the board's sizes (both curves are measured in
+    each); the edges' trend with exposure takes every view measured (up to MAX_TREND_VIEWS): a camera's few
+    brightest views, which show where its edges fall away, are seldom among those picked by size."""
+    from types import SimpleNamespace
+
+    many = [SimpleNamespace(name=f"v{k}", square_px=10.0 + k) for k in range(40)]
+    names = curve_names(many)
+    assert len(names) == MAX_VIEWS and {"v0", "v39"} <= names
+    cases = _cases("linear")
+    judged = {case.name for case, _ in cases[::2]}
+    choice = choose_tone_curve(cases, BOARD, ENDOSCOPE, judged)
+    assert choice.views == len(judged) < len(cases)
+    assert {edge.name for edge in choice.edges["linear"]} - judged  # views outside the judged ones hold edges too
+    assert len(choice.edges["linear"]) > len(judged)
 
 
 def test_views_at_one_distance_leave_the_default_and_say_why():

@@ -16,6 +16,11 @@ teach it as a trend with exposure).
 The slope's standard error, over the frame's distance from the views' mean, is a term of Af's std; so is how
 far the views' edges scatter about the trend (or about their mean, where none is learned) beyond what their own
 reported std says, measured on the views with a known answer rather than guessed.
+Where many views were measured (LOCAL_MIN_VIEWS), a straight line is not all they can say: a camera's edges
+may hold still over most exposures and fall away near the top (a machine-vision camera's views through a dome
+housing's air photos: within 0.02 px from 92 to 205 DN, then -0.05 to -0.16 px from 210 to 225 DN). Each frame
+then takes, beside the line, the mean of its LOCAL_VIEWS nearest views' residuals in white level, and their
+scatter instead of all views' (both with their std): where the line holds, that mean is near zero.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ MIN_VIEWS = 6  # a slope and its scatter need a few more views than its two para
 DECISIVE_SIGMA = 3.0  # the slope this many standard errors from zero
 MIN_SPAN_DN = 10.0  # white levels this far apart: below it the views cannot show a trend
 MIN_SCALE_RATIO = 1.1  # the nearest view's scale over the farthest's: from it on the print's gain is fitted too
+LOCAL_MIN_VIEWS = 24  # views from which each frame also takes its nearest views' residuals (three groups of them)
+LOCAL_VIEWS = 8  # a frame's nearest views in white level: their mean residual and scatter
 
 
 @dataclass(frozen=True)
@@ -49,13 +56,23 @@ class EdgeTrend:
     tone_curve: str
     learned: bool = True
     scatter_px: float = 0.0
+    # each view's (white DN, residual about the line px, its std px), where LOCAL_MIN_VIEWS or more were measured
+    residuals: tuple[tuple[float, float, float], ...] = ()
 
     def as_dict(self) -> dict:
-        return {"learned": self.learned, "slope_px_per_dn": round(self.slope_px_per_dn, 6),
-                "slope_std": round(self.slope_std, 6), "reference_dn": round(self.reference_dn, 2),
-                "range_dn": [round(v, 1) for v in self.range_dn], "views": self.views,
-                "residual_px": round(self.residual_px, 4), "scatter_px": round(self.scatter_px, 4),
-                "tone_curve": self.tone_curve}
+        recorded = {"learned": self.learned, "slope_px_per_dn": round(self.slope_px_per_dn, 6),
+                    "slope_std": round(self.slope_std, 6), "reference_dn": round(self.reference_dn, 2),
+                    "range_dn": [round(v, 1) for v in self.range_dn], "views": self.views,
+                    "residual_px": round(self.residual_px, 4), "scatter_px": round(self.scatter_px, 4),
+                    "tone_curve": self.tone_curve}
+        if self.residuals:
+            recorded["residuals"] = [[round(w, 1), round(r, 4), round(s, 4)] for w, r, s in self.residuals]
+        return recorded
+
+    @property
+    def local(self) -> bool:
+        """Whether each frame takes its nearest views' residuals too."""
+        return len(self.residuals) >= LOCAL_MIN_VIEWS
 
     @classmethod
     def from_dict(cls, value: object) -> EdgeTrend:
@@ -67,27 +84,44 @@ class EdgeTrend:
             trend = cls(float(value["slope_px_per_dn"]), float(value["slope_std"]), float(value["reference_dn"]),
                         (low, high), int(value["views"]), float(value.get("residual_px", 0.0)),
                         str(value.get("tone_curve", "linear")), bool(value.get("learned", True)),
-                        float(value.get("scatter_px", 0.0)))
+                        float(value.get("scatter_px", 0.0)),
+                        tuple((float(w), float(r), float(s)) for w, r, s in value.get("residuals", ())))
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"edge_trend is not readable ({exc.__class__.__name__}: {exc})") from None
-        numbers = (trend.slope_px_per_dn, trend.slope_std, trend.reference_dn, low, high, trend.scatter_px)
+        numbers = (trend.slope_px_per_dn, trend.slope_std, trend.reference_dn, low, high, trend.scatter_px,
+                   *(v for view in trend.residuals for v in view))
         if (not all(math.isfinite(v) for v in numbers) or min(trend.slope_std, trend.scatter_px) < 0
-                or not low <= trend.reference_dn <= high):
+                or any(s < 0 for _, _, s in trend.residuals) or not low <= trend.reference_dn <= high):
             raise ValueError(f"edge_trend holds no trend: {value!r}")
         return trend
 
     def offset_px(self, white_dn: float) -> tuple[float, float, bool]:
         """(how far the frame's black reaches beyond the views' mean, its std, whether `white_dn` lies outside
         the views' range: the trend is then taken at the nearer end, its std at the frame's own level). The
-        std holds the views' scatter beyond their own std too."""
-        if not self.learned:
-            return 0.0, self.scatter_px, False
+        std holds the views' scatter beyond their own std too: all views', or with `local` the nearest views'
+        scatter and their mean residual's std."""
         low, high = self.range_dn
         inside = low <= white_dn <= high
-        taken = min(max(white_dn, low), high)
-        slope_part = (self.slope_std * abs(white_dn - self.reference_dn)
-                      + abs(self.slope_px_per_dn) * abs(white_dn - taken))
-        return self.slope_px_per_dn * (taken - self.reference_dn), math.hypot(slope_part, self.scatter_px), not inside
+        offset, slope_part = 0.0, 0.0
+        if self.learned:
+            taken = min(max(white_dn, low), high)
+            offset = self.slope_px_per_dn * (taken - self.reference_dn)
+            slope_part = (self.slope_std * abs(white_dn - self.reference_dn)
+                          + abs(self.slope_px_per_dn) * abs(white_dn - taken))
+        if not self.local:
+            return offset, math.hypot(slope_part, self.scatter_px), self.learned and not inside
+        mean, mean_std, scatter = self.nearest_residuals(white_dn)
+        return offset + mean, math.hypot(slope_part, scatter, mean_std), not inside
+
+    def nearest_residuals(self, white_dn: float) -> tuple[float, float, float]:
+        """(the mean residual of the LOCAL_VIEWS views nearest `white_dn` in white level, weighed by their std
+        and scatter; its std; their scatter beyond their own std)."""
+        views = np.array(self.residuals, float)
+        nearest = views[np.argsort(np.abs(views[:, 0] - white_dn), kind="stable")[:LOCAL_VIEWS]]
+        residuals, stds = nearest[:, 1], nearest[:, 2]
+        scatter = excess_scatter(residuals - residuals.mean(), list(stds), len(nearest) - 1)
+        weights = 1.0 / np.maximum(stds**2 + scatter**2, 1e-12)
+        return (float(weights @ residuals / weights.sum()), float(1.0 / math.sqrt(weights.sum())), scatter)
 
 
 @dataclass(frozen=True)
@@ -166,8 +200,13 @@ def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: 
     gain_part = tuple(float(v) for v in gain[:, 0] * coef[1]) if gain.size else ()
     if not learned and scatter == 0:
         return TrendChoice(None, reason, gain_part)
+    residuals = ()
+    if stds_px is not None and len(stds_px) == n and n >= LOCAL_MIN_VIEWS:
+        residuals = tuple(zip(whites.tolist(), residual.tolist(), (float(s) for s in stds_px), strict=True))
+        reason += (f"; each frame also takes the residuals of the {LOCAL_VIEWS} views nearest its white level "
+                   f"({n} views measured)")
     return TrendChoice(EdgeTrend(slope, slope_std, centre, reach, n, math.sqrt(variance), tone_curve, learned,
-                                 scatter), reason, gain_part)
+                                 scatter, residuals), reason, gain_part)
 
 
 def excess_scatter(residuals: np.ndarray, stds: list[float], dof: int) -> float:
@@ -239,7 +278,7 @@ class EdgeCorrection:
     boundary_px: float
     outside: bool  # the frame's white level lies outside the views'
     range_dn: tuple[float, float]  # the views' white levels
-    moved: bool  # a trend was learned and moved the edges (else only the views' scatter is in the std)
+    moved: bool  # a trend (or the nearest views' residuals) moved the edges (else only their scatter is in the std)
 
     def summary(self) -> dict:
         return {"applied": self.moved, "area_m2": self.area_m2, "std_m2": self.std_m2, "offset_px": self.offset_px,
@@ -255,7 +294,7 @@ def edge_correction(trend: EdgeTrend, white_dn: float, object_kind: str, mask: n
     boundary = boundary_length_px(mask, roi)
     sign = -1.0 if object_kind == "dark" else 1.0  # the black reaching further makes a dark object larger
     return EdgeCorrection(sign * offset * boundary * metres_per_px**2, offset_std * boundary * metres_per_px**2,
-                          offset, white_dn, boundary, outside, trend.range_dn, trend.learned)
+                          offset, white_dn, boundary, outside, trend.range_dn, trend.learned or trend.local)
 
 
 def apply_correction(result, correction: EdgeCorrection) -> None:

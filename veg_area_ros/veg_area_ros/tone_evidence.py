@@ -25,7 +25,8 @@ from .classify import TONE_CURVES, Classifier
 from .edge_trend import TrendChoice, ViewEdge, fit_edge_trend
 from .targets import TargetsSpec
 
-MAX_VIEWS = 24  # views measured, evenly over the board's sizes: about 1.5 s each at 10 MP (both curves)
+MAX_VIEWS = 24  # views the tone curve is judged on, evenly over sizes: about 1.5 s each at 10 MP (both curves)
+MAX_TREND_VIEWS = 48  # views measured for how the edges follow exposure (edge_trend): the bright few show a shoulder
 MIN_VIEWS = 6  # a slope and its scatter need a few more views than its two parameters
 MIN_SIZE_RATIO = 1.3  # nearest to farthest board (pixels per square): below it the views cannot tell curves apart
 # what moves a board's area by more than the curves do (burnt-out whites: 1-5 % low; no object found: all of
@@ -174,9 +175,15 @@ def spread_by_size(cases: list[BoardCase], count: int = MAX_VIEWS) -> list[Board
 
 
 def chosen_cases(views: Iterable, board: BoardSpec, camera: BrownCamera) -> list[BoardCase]:
-    """The views (calibration.View) that can be measurements, at most MAX_VIEWS evenly over their sizes."""
+    """The views (calibration.View) that can be measurements, at most MAX_TREND_VIEWS evenly over their sizes."""
     return spread_by_size([case for view in views
-                           if (case := board_case(view.name, view.detection, board, camera)) is not None])
+                           if (case := board_case(view.name, view.detection, board, camera)) is not None],
+                          MAX_TREND_VIEWS)
+
+
+def curve_names(cases: list[BoardCase]) -> set[str]:
+    """The names of the cases the tone curve is judged on: at most MAX_VIEWS evenly over their sizes."""
+    return {case.name for case in spread_by_size(cases)}
 
 
 @dataclass
@@ -206,7 +213,8 @@ class KeptFrames:
         cases = chosen_cases([view for view in views if view.name in self.frames], self.board, camera)
         pairs = ((case, cv2.imdecode(np.frombuffer(self.frames[case.name], np.uint8), cv2.IMREAD_GRAYSCALE))
                  for case in cases)
-        choice = choose_tone_curve(pairs if len(cases) >= MIN_VIEWS else iter(()), self.board, camera)
+        choice = choose_tone_curve(pairs if len(cases) >= MIN_VIEWS else iter(()), self.board, camera,
+                                   curve_names(cases))
         if self.over_budget:
             choice.reason += f" ({self.over_budget} views past the first {len(self.frames)} kept no frame)"
         return choice
@@ -221,12 +229,12 @@ def _slope(errors: np.ndarray, inverse_size: np.ndarray) -> tuple[float, float]:
     return float(coef[1]), math.sqrt(variance * float(np.linalg.inv(design.T @ design)[1, 1]))
 
 
-def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: BoardSpec, camera: BrownCamera
-                      ) -> ToneChoice:
-    """The tone curve judged on the views (`judged_tone_curve`), and how the edges follow exposure under it
-    (edge_trend): each view's error over the board's edge length inside the rectangle is how far it moved its
-    edges."""
-    choice = judged_tone_curve(cases, board, camera)
+def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: BoardSpec, camera: BrownCamera,
+                      judged: set[str] | None = None) -> ToneChoice:
+    """The tone curve judged on the views (`judged_tone_curve`; on those named in `judged`, or all), and how the
+    edges follow exposure under it (edge_trend), on all of them: each view's error over the board's edge length
+    inside the rectangle is how far it moved its edges."""
+    choice = judged_tone_curve(cases, board, camera, judged)
     if board.kind == "chessboard":
         edges = choice.edges.get(choice.curve, [])
         choice.edge_trend = fit_edge_trend([e.offset_px for e in edges], [e.white_dn for e in edges], choice.curve,
@@ -234,13 +242,15 @@ def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     return choice
 
 
-def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: BoardSpec, camera: BrownCamera
-                      ) -> ToneChoice:
+def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: BoardSpec, camera: BrownCamera,
+                      judged: set[str] | None = None) -> ToneChoice:
     """Measure each (case, grey image) under every tone curve (taken one at a time: a reader's generator keeps
     one frame in memory), in the default sub-pixel mode at Otsu's threshold (what frames are measured with; the
     count in light scatters more on some webcams' photos: 1.3 % against 0.5 %), and take the curve under which
     the error does not drift with the board's size, where the other's clearly does. Views with clipped
-    highlights, no object found or the ROI beyond the image are left out."""
+    highlights, no object found or the ROI beyond the image are left out. With `judged`, only the views it
+    names judge the curve (MAX_VIEWS of them: both curves are read in every view, the others are evidence of
+    the edges only)."""
     if board.kind != "chessboard":
         return ToneChoice("linear", False, f"not judged: the tone curve is read from a chessboard's squares, "
                                            f"the views show a {board.kind} board")
@@ -274,11 +284,13 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
                              result.area_std_m2 * px_per_m2, case.square_px / board.square))
             measured[curve] = (result.area_m2 / truth - 1, edge)
         else:
-            for curve, (error, edge) in measured.items():
-                errors[curve].append(error)
+            for curve, (_, edge) in measured.items():
                 if edge is not None:
                     edges[curve].append(edge)
-            sizes.append(case.square_px)
+            if judged is None or case.name in judged:
+                for curve, (error, _) in measured.items():
+                    errors[curve].append(error)
+                sizes.append(case.square_px)
     n = len(sizes)
     span = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
     choice = ToneChoice("linear", False, "", n, span, left_out=left_out, sizes=sizes, errors=errors, edges=edges)

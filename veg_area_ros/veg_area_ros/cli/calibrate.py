@@ -270,12 +270,12 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, camera: BrownCamera, step: int,
                      spread: bool, say: Callable[[str], None]) -> ToneChoice:
     """Which tone curve the camera encodes light with, judged on the calibration's own chessboard views
-    (tone_evidence): up to tone_evidence.MAX_VIEWS of them, evenly over the board's sizes, read again one at a
-    time (a frame is kept only while it is measured)."""
+    (tone_evidence): up to tone_evidence.MAX_TREND_VIEWS of them (MAX_VIEWS judge the curve), evenly over the
+    board's sizes, read again one at a time (a frame is kept only while it is measured)."""
     from collections import Counter
 
     from ..frames import iter_frames, shown_name
-    from ..tone_evidence import MIN_VIEWS, choose_tone_curve, chosen_cases
+    from ..tone_evidence import MIN_VIEWS, choose_tone_curve, chosen_cases, curve_names
 
     named = Counter(view.name for view in found.views)  # a name two files share cannot be read again surely
     cases = chosen_cases([view for view in found.views if named[view.name] == 1], board, camera)
@@ -290,7 +290,7 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, cam
             if frame.name in wanted and frame.image is not None:
                 yield wanted.pop(frame.name), frame.image
 
-    return choose_tone_curve(views(), board, camera)
+    return choose_tone_curve(views(), board, camera, curve_names(cases))
 
 
 def _calibrate_port(args: argparse.Namespace, say) -> int:
