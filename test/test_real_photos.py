@@ -313,3 +313,26 @@ def test_a_third_camera_nobody_tuned_on_the_default_beats_counting_and_its_std_h
     z = (errors - errors.mean()) / stds
     assert np.all(np.abs(z) <= 3), (errors, stds)
     assert 0.6 <= np.sqrt(np.mean(z**2)) <= 1.5, z
+
+
+def test_the_held_out_check_calibrates_on_one_half_and_measures_the_other(tmp_path):
+    """test/held_out_board.py, the check run on other people's board photos (docs/measuring.md's dome housing):
+    `veg-area calibrate` on every other photo, the rest measured in both modes with that file. On OpenCV's
+    webcam (7 photos calibrated on, 6 measured, 4 of them well exposed) no photo is in both halves, each
+    measured one has its error and std in both modes, the targets' calliper only adds to the std, and every
+    well-exposed photo lies within 3 reported std of their mean."""
+    import held_out_board
+
+    rows, summary, metadata = held_out_board.check(OPENCV_LEFT, "chessboard:9x6:0.025", "air", half=0,
+                                                   model="plumb_bob", work=tmp_path)
+    calibrated_on, measured = held_out_board.halves(OPENCV_LEFT, 0)
+    names = {row.name for row in rows}
+    assert names and names <= {p.name for p in measured} and not names & {p.name for p in calibrated_on}
+    assert metadata["medium"] == "air" and (tmp_path / "calibration.yaml").is_file()
+    for row in rows:
+        for mode in held_out_board.MODES:
+            assert abs(row.errors[mode]) < 0.06, row
+            assert 0 < row.stds_without_calliper[mode] <= row.stds[mode], row
+    well = sum(row.clipped_share < held_out_board.WELL_EXPOSED for row in rows)
+    assert well == 4
+    assert all(s.within_3 == well and s.spread > 0 for s in summary.values()), summary

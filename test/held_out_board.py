@@ -1,0 +1,142 @@
+"""A held-out check of Af on real photos of a printed chessboard: calibrate with `veg-area calibrate` on every
+other photo of a folder, then measure the black area of each photo of the other half (test/board_photos.py's
+set-up: the rectangle through the outer squares' centres, the four outer inner corners as targets) in the
+default mode and counted, with the calibration file as `veg-area measure` reads it. Prints each photo's error
+from the print's squares and its reported std, and per mode the spread, the worst photo and how far each photo
+lies from the set's mean in its own std, with the targets' calliper term (the same for every photo of one
+print) and without it.
+
+    PYTHONPATH=veg_area_ros:test .venv/bin/python test/held_out_board.py FOLDER --board chessboard:8x6:0.03 \\
+        --medium water [--half 0|1] [--model auto]
+
+The ink's gain shifts every photo of one print alike: the spread between photos and the std's cover of it are
+what is judged, the mean only bounded."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import sys
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import board_photos
+import numpy as np
+
+from veg_area_ros.calib_io import read_calibration
+from veg_area_ros.cli import main as veg_area
+from veg_area_ros.settings import MeasurementSettings
+
+MODES = ("subpixel", "count")
+WELL_EXPOSED = 0.01  # share of the board's pixels at 250 or more
+
+
+@dataclass
+class PhotoRow:
+    name: str
+    clipped_share: float
+    errors: dict[str, float]  # per mode, Af over the print's black area, minus 1
+    stds: dict[str, float]  # per mode, the reported std over that area
+    stds_without_calliper: dict[str, float]
+    warnings: list[str]
+
+
+@dataclass
+class ModeSummary:
+    mean: float
+    spread: float  # the photos' standard deviation
+    worst: float  # the largest distance from the mean
+    median_std: float
+    largest_z: float  # the largest distance from the mean in the photo's own std
+    largest_z_without_calliper: float
+    within_3: int
+
+
+def halves(folder: Path, half: int) -> tuple[list[Path], list[Path]]:
+    """(the photos calibrated on, the photos measured): alternate photos in name order, `half` choosing which."""
+    photos = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
+    return photos[half::2], photos[1 - half::2]
+
+
+def check(folder: Path, board: str, medium: str, half: int = 0, model: str = "auto",
+          work: Path | None = None) -> tuple[list[PhotoRow], dict[str, ModeSummary], dict]:
+    """(each measured photo's row, a summary per mode over the well-exposed ones, the calibration's metadata)."""
+    kind, size, square = board.split(":")
+    with contextlib.ExitStack() as stack:
+        work = work or Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        calibrated_on, measured = work / "calibrated_on", work / "measured"
+        for target, photos in zip((calibrated_on, measured), halves(folder, half), strict=True):
+            target.mkdir(parents=True, exist_ok=True)
+            for photo in photos:
+                (target / photo.name).symlink_to(photo.resolve())
+        output = work / "calibration.yaml"
+        with contextlib.redirect_stdout(io.StringIO()) as said:
+            code = veg_area(["calibrate", str(calibrated_on), "--board", board, "--medium", medium, "--model", model,
+                             "-o", str(output), "-q"])
+        if code != 0:
+            raise RuntimeError(f"veg-area calibrate exited {code}: {said.getvalue()[-2000:]}")
+        calibration = read_calibration(output)
+        kept, board_photos.SQUARE_M = board_photos.SQUARE_M, float(square)  # the print's: the file's distances hold
+        try:
+            found = board_photos.board_photos(measured, f"{kind}:{size}:1", camera=calibration.camera)
+        finally:
+            board_photos.SQUARE_M = kept
+        rows = [_row(photo, calibration) for photo in found]
+    return rows, summarise(rows), calibration.metadata
+
+
+def _row(photo: board_photos.BoardPhoto, calibration) -> PhotoRow:
+    errors, stds, bare, warnings = {}, {}, {}, []
+    for mode in MODES:
+        settings = MeasurementSettings(roi=tuple(np.ravel(photo.roi)), area_mode=mode)
+        for targets, into in ((photo.targets, stds), (replace(photo.targets, distance_std_m=0.0), bare)):
+            result = settings.measurer(calibration.camera, targets,
+                                       calibration_conditions=calibration.metadata).measure(photo.frame)
+            into[mode] = result.area_std_m2 / photo.true_area_m2
+        errors[mode] = result.area_m2 / photo.true_area_m2 - 1
+        if mode == "subpixel":
+            warnings = list(result.warnings)
+    return PhotoRow(photo.name, photo.clipped_share, errors, stds, bare, warnings)
+
+
+def summarise(rows: list[PhotoRow]) -> dict[str, ModeSummary]:
+    well = [row for row in rows if row.clipped_share < WELL_EXPOSED]
+    summary = {}
+    for mode in MODES:
+        errors = np.array([row.errors[mode] for row in well])
+        z = (errors - errors.mean()) / np.array([row.stds[mode] for row in well])
+        bare = (errors - errors.mean()) / np.array([row.stds_without_calliper[mode] for row in well])
+        summary[mode] = ModeSummary(float(errors.mean()), float(np.std(errors, ddof=1)),
+                                    float(np.max(np.abs(errors - errors.mean()))),
+                                    float(np.median([row.stds[mode] for row in well])), float(np.max(np.abs(z))),
+                                    float(np.max(np.abs(bare))), int(np.sum(np.abs(z) <= 3)))
+    return summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("folder", type=Path)
+    parser.add_argument("--board", required=True, help="chessboard:COLSxROWS:SQUARE_M")
+    parser.add_argument("--medium", required=True, choices=("air", "water"))
+    parser.add_argument("--half", type=int, choices=(0, 1), default=0, help="which half is calibrated on")
+    parser.add_argument("--model", default="auto")
+    args = parser.parse_args(argv)
+    rows, summary, metadata = check(args.folder, args.board, args.medium, args.half, args.model)
+    print(f"calibration: model {metadata.get('distortion_model', 'plumb_bob')}, "
+          f"edge trend: {metadata.get('edge_trend_evidence', 'none recorded')}")
+    for row in rows:
+        print(f"{row.name}  clipped {100 * row.clipped_share:5.2f} %  "
+              + "  ".join(f"{mode} {100 * row.errors[mode]:+.3f} ± {100 * row.stds[mode]:.3f} %" for mode in MODES))
+    well = sum(row.clipped_share < WELL_EXPOSED for row in rows)
+    print(f"{len(rows)} photos measured, {well} with under {100 * WELL_EXPOSED:g} % of the board's pixels clipped:")
+    for mode, s in summary.items():
+        print(f"  {mode:8s} mean {100 * s.mean:+.3f} %, spread {100 * s.spread:.3f} %, worst {100 * s.worst:.3f} % "
+              f"from the mean; std median {100 * s.median_std:.3f} %; |z| at most {s.largest_z:.2f} "
+              f"({s.largest_z_without_calliper:.2f} without the targets' calliper), within 3 std {s.within_3}/{well}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
