@@ -44,8 +44,10 @@ def _evidence(folder, camera):
     board = replace(spec, square=SQUARE_M)
     views = [View(name, metric(detection, spec)) for name, detection in detections(str(folder), BOARD)]
     cases = chosen_cases(views, board, camera)
+    judged = curve_names(cases)
     return choose_tone_curve(((case, cv2.imread(str(folder / case.name), cv2.IMREAD_GRAYSCALE))
-                              for case in cases), board, camera, curve_names(cases))
+                              for case in sorted(cases, key=lambda case: case.name not in judged)), board, camera,
+                             judged)
 
 
 def _with_the_others_trend(photo, camera, evidence):

@@ -152,6 +152,14 @@ def test_the_curve_is_judged_on_its_views_and_the_edges_on_all():
     assert choice.views == len(judged) < len(cases)
     assert {edge.name for edge in choice.edges["linear"]} - judged  # views outside the judged ones hold edges too
     assert len(choice.edges["linear"]) > len(judged)
+    # the judged views read first: the others are read under the curve taken only, and teach the same
+    first = sorted(cases, key=lambda pair: pair[0].name not in judged)
+    again = choose_tone_curve(first, BOARD, ENDOSCOPE, judged)
+    assert again.curve == choice.curve and again.reason == choice.reason
+    other = next(curve for curve in again.edges if curve != again.curve)
+    assert {edge.name for edge in again.edges[other]} <= judged
+    assert [e.offset_px for e in again.edges[again.curve]] == pytest.approx(
+        [e.offset_px for e in sorted(choice.edges[choice.curve], key=lambda e: e.name not in judged)])
 
 
 def test_views_at_one_distance_leave_the_default_and_say_why():

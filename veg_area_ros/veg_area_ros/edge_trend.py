@@ -202,7 +202,7 @@ def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: 
         return TrendChoice(None, reason, gain_part)
     residuals = ()
     if stds_px is not None and len(stds_px) == n and n >= LOCAL_MIN_VIEWS:
-        residuals = tuple(zip(whites.tolist(), residual.tolist(), (float(s) for s in stds_px), strict=True))
+        residuals = tuple(sorted(zip(whites.tolist(), residual.tolist(), (float(s) for s in stds_px), strict=True)))
         reason += (f"; each frame also takes the residuals of the {LOCAL_VIEWS} views nearest its white level "
                    f"({n} views measured)")
     return TrendChoice(EdgeTrend(slope, slope_std, centre, reach, n, math.sqrt(variance), tone_curve, learned,

@@ -211,10 +211,11 @@ class KeptFrames:
     def judge(self, views: Iterable, camera: BrownCamera) -> ToneChoice:
         """The tone curve judged on the kept frames of `views` (calibration.View)."""
         cases = chosen_cases([view for view in views if view.name in self.frames], self.board, camera)
+        judged = curve_names(cases)
+        # the judged views first: the others are then read under the curve taken only (judged_tone_curve)
         pairs = ((case, cv2.imdecode(np.frombuffer(self.frames[case.name], np.uint8), cv2.IMREAD_GRAYSCALE))
-                 for case in cases)
-        choice = choose_tone_curve(pairs if len(cases) >= MIN_VIEWS else iter(()), self.board, camera,
-                                   curve_names(cases))
+                 for case in sorted(cases, key=lambda case: case.name not in judged))
+        choice = choose_tone_curve(pairs if len(cases) >= MIN_VIEWS else iter(()), self.board, camera, judged)
         if self.over_budget:
             choice.reason += f" ({self.over_budget} views past the first {len(self.frames)} kept no frame)"
         return choice
@@ -249,8 +250,8 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     count in light scatters more on some webcams' photos: 1.3 % against 0.5 %), and take the curve under which
     the error does not drift with the board's size, where the other's clearly does. Views with clipped
     highlights, no object found or the ROI beyond the image are left out. With `judged`, only the views it
-    names judge the curve (MAX_VIEWS of them: both curves are read in every view, the others are evidence of
-    the edges only)."""
+    names judge the curve (MAX_VIEWS of them); the others are evidence of the edges only, read under the curve
+    taken once every judged view has been read (so under both curves only where they come before)."""
     if board.kind != "chessboard":
         return ToneChoice("linear", False, f"not judged: the tone curve is read from a chessboard's squares, "
                                            f"the views show a {board.kind} board")
@@ -258,47 +259,72 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     edges: dict[str, list[ViewEdge]] = {curve: [] for curve in TONE_CURVES}
     sizes: list[float] = []
     left_out: dict[str, str] = {}
+    choice = ToneChoice("linear", False, "", left_out=left_out, sizes=sizes, errors=errors, edges=edges)
+    waiting = None if judged is None else set(judged)  # judged views not read yet
+    decided = False
     for case, grey in cases:
-        truth = case.true_area_m2(board, case.first_black(grey))
-        # the error over the edges' length is how far they moved (m), in the view's idealized px
-        px_per_m2 = case.square_px / board.square / case.edge_length_m(board)
-        # the board's squares exact, as the calibration takes them: an error of the print's scale is every view's
-        # alike, so it is no part of a view's own std, against which the views' scatter is judged
-        targets = replace(case.targets, distance_std_m=0.0)
-        measured = {}
-        for curve in TONE_CURVES:
-            try:
-                result = AreaMeasurer(camera, targets, Classifier(threshold="otsu", tone_curve=curve),
-                                      roi=case.roi, area_mode=EVIDENCE_MODE).measure(grey)
-            except ValueError as exc:  # targets, light, a frame the measurement refuses: the view is no case
-                left_out[case.name] = f"{curve}: {exc}"
-                break
-            spoiled = [w for w in result.warnings if w.startswith(SPOILS_THE_EVIDENCE)]
-            if spoiled:
-                left_out[case.name] = f"{curve}: {spoiled[0]}"
-                break
-            levels = result.levels
-            # the views whose shares were applied, with their white level: the trend is applied to such frames
-            edge = (None if levels is None or not result.subpixel_applied else
-                    ViewEdge(case.name, (result.area_m2 - truth) * px_per_m2, max(levels.object, levels.background),
-                             result.area_std_m2 * px_per_m2, case.square_px / board.square))
-            measured[curve] = (result.area_m2 / truth - 1, edge)
-        else:
+        judging = judged is None or case.name in judged
+        curves = TONE_CURVES if judging or not decided else (choice.curve,)
+        measured = _measured(case, grey, board, camera, curves, left_out)
+        if measured is not None:
             for curve, (_, edge) in measured.items():
                 if edge is not None:
                     edges[curve].append(edge)
-            if judged is None or case.name in judged:
+            if judging:
                 for curve, (error, _) in measured.items():
                     errors[curve].append(error)
                 sizes.append(case.square_px)
-    n = len(sizes)
-    span = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
-    choice = ToneChoice("linear", False, "", n, span, left_out=left_out, sizes=sizes, errors=errors, edges=edges)
+        if waiting is not None:
+            waiting.discard(case.name)
+            if not waiting and not decided:
+                _decide(choice)
+                decided = True
+    if not decided:
+        _decide(choice)
+    return choice
+
+
+def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, camera: BrownCamera, curves: Iterable[str],
+              left_out: dict[str, str]) -> dict[str, tuple[float, ViewEdge | None]] | None:
+    """Per curve, the view's relative error and its edge (where the shares were applied); None where the view
+    is no case (said in `left_out`)."""
+    truth = case.true_area_m2(board, case.first_black(grey))
+    # the error over the edges' length is how far they moved (m), in the view's idealized px
+    px_per_m2 = case.square_px / board.square / case.edge_length_m(board)
+    # the board's squares exact, as the calibration takes them: an error of the print's scale is every view's
+    # alike, so it is no part of a view's own std, against which the views' scatter is judged
+    targets = replace(case.targets, distance_std_m=0.0)
+    measured = {}
+    for curve in curves:
+        try:
+            result = AreaMeasurer(camera, targets, Classifier(threshold="otsu", tone_curve=curve),
+                                  roi=case.roi, area_mode=EVIDENCE_MODE).measure(grey)
+        except ValueError as exc:  # targets, light, a frame the measurement refuses: the view is no case
+            left_out[case.name] = f"{curve}: {exc}"
+            return None
+        spoiled = [w for w in result.warnings if w.startswith(SPOILS_THE_EVIDENCE)]
+        if spoiled:
+            left_out[case.name] = f"{curve}: {spoiled[0]}"
+            return None
+        levels = result.levels
+        # the views whose shares were applied, with their white level: the trend is applied to such frames
+        edge = (None if levels is None or not result.subpixel_applied else
+                ViewEdge(case.name, (result.area_m2 - truth) * px_per_m2, max(levels.object, levels.background),
+                         result.area_std_m2 * px_per_m2, case.square_px / board.square))
+        measured[curve] = (result.area_m2 / truth - 1, edge)
+    return measured
+
+
+def _decide(choice: ToneChoice) -> None:
+    """The curve taken on the judged views' errors against their sizes, and why, into `choice`."""
+    sizes, errors = choice.sizes, choice.errors
+    n = choice.views = len(sizes)
+    span = choice.square_px = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
     if n < MIN_VIEWS:
         choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard inside the image (all "
                          "but its outer squares will do), "
                          f"whites not clipped, near and far, tell the curves apart; {n} could be measured")
-        return choice
+        return
     inverse = 1.0 / np.array(sizes)
     for curve in TONE_CURVES:
         slope, error = _slope(np.array(errors[curve]), inverse)
@@ -306,7 +332,7 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     if span[1] / span[0] < MIN_SIZE_RATIO:
         choice.reason = (f"not judged: the boards span {span[0]:.0f}-{span[1]:.0f} px per square, too alike in "
                          "distance to tell the curves apart (photograph the board near and far)")
-        return choice
+        return
     best, other = sorted(TONE_CURVES, key=lambda c: abs(choice.slopes[c]["slope"]))[:2]
     gap = abs(choice.slopes[other]["slope"]) - abs(choice.slopes[best]["slope"])
     combined = math.hypot(choice.slopes[best]["std"], choice.slopes[other]["std"])
@@ -316,8 +342,7 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     if gap <= DECISIVE_SIGMA * combined:
         choice.reason = (f"not told apart: the farthest of {n} views ({span[0]:.0f} px per square) reads against the "
                          f"nearest ({span[1]:.0f} px) about alike under both curves ({described}); linear kept")
-        return choice
+        return
     choice.curve, choice.decided = best, True
     choice.reason = (f"the board's black area in the farthest of {n} views ({span[0]:.0f} px per square) reads "
                      f"against the nearest ({span[1]:.0f} px): {described}; {best} drifts the least")
-    return choice

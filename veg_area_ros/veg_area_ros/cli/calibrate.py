@@ -283,14 +283,18 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, cam
         return choose_tone_curve(iter(()), board, camera)
     wanted = {case.name: case for case in cases}
     sources = set(wanted) | {name.rsplit("#", 1)[0] for name in wanted}  # images, and videos' frames NAME#N
+    judged = curve_names(cases)
+    judged_sources = judged | {name.rsplit("#", 1)[0] for name in judged}
     say(f"tone curve: measuring the board's black area in {len(cases)} views, near and far")
+    # the judged views' files first: the others are then read under the curve taken only
+    ordered = sorted((f for f in files if shown_name(f) in sources), key=lambda f: shown_name(f) not in judged_sources)
 
     def views():
-        for frame in iter_frames([f for f in files if shown_name(f) in sources], step, grey=True, spread=spread):
+        for frame in iter_frames(ordered, step, grey=True, spread=spread):
             if frame.name in wanted and frame.image is not None:
                 yield wanted.pop(frame.name), frame.image
 
-    return choose_tone_curve(views(), board, camera, curve_names(cases))
+    return choose_tone_curve(views(), board, camera, judged)
 
 
 def _calibrate_port(args: argparse.Namespace, say) -> int:
