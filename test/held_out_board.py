@@ -115,6 +115,36 @@ def summarise(rows: list[PhotoRow]) -> dict[str, ModeSummary]:
     return summary
 
 
+def plot(rows: list[PhotoRow], title: str, path: Path) -> Path:
+    """Each well-exposed photo's Af from the set's mean with ±1 of its reported std, per mode (a bar that misses
+    the zero line is a std that did not hold at 1 std); the thin bar leaves out the targets' calliper."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    well = [row for row in rows if row.clipped_share < WELL_EXPOSED]
+    figure, ax = plt.subplots(figsize=(max(6.0, 0.22 * len(well) + 2), 4.2))
+    for offset, mode, colour in ((-0.15, "subpixel", "tab:blue"), (0.15, "count", "tab:grey")):
+        errors = np.array([row.errors[mode] for row in well])
+        centred = 100 * (errors - errors.mean())
+        x = np.arange(len(well)) + offset
+        ax.errorbar(x, centred, yerr=100 * np.array([row.stds[mode] for row in well]), fmt="o", ms=4, capsize=2,
+                    color=colour, label=f"{'default' if mode == 'subpixel' else mode}: sd "
+                                        f"{100 * np.std(errors, ddof=1):.2f} %, worst {np.max(np.abs(centred)):.2f} %")
+        ax.errorbar(x, centred, yerr=100 * np.array([row.stds_without_calliper[mode] for row in well]), fmt="none",
+                    elinewidth=2.5, color=colour, alpha=0.5)
+    ax.axhline(0, color="black", lw=0.8)
+    ax.set_xticks(np.arange(len(well)), [Path(row.name).stem for row in well], rotation=90, fontsize=6)
+    ax.set_ylabel("Af from the set's mean [%], ±1 reported std")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8)
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("folder", type=Path)
@@ -122,8 +152,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--medium", required=True, choices=("air", "water"))
     parser.add_argument("--half", type=int, choices=(0, 1), default=0, help="which half is calibrated on")
     parser.add_argument("--model", default="auto")
+    parser.add_argument("--plot", type=Path, help="draw each photo's Af from the mean with its std (PNG) here")
     args = parser.parse_args(argv)
     rows, summary, metadata = check(args.folder, args.board, args.medium, args.half, args.model)
+    if args.plot:
+        plot(rows, f"{args.folder.name}: half {1 - args.half} measured, calibrated on half {args.half}", args.plot)
     print(f"calibration: model {metadata.get('distortion_model', 'plumb_bob')}, "
           f"edge trend: {metadata.get('edge_trend_evidence', 'none recorded')}")
     for row in rows:

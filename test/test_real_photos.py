@@ -338,3 +338,5 @@ def test_the_held_out_check_calibrates_on_one_half_and_measures_the_other(tmp_pa
     well = sum(row.clipped_share < held_out_board.WELL_EXPOSED for row in rows)
     assert well == 4
     assert all(s.within_3 == well and s.spread > 0 for s in summary.values()), summary
+    drawn = held_out_board.plot(rows, "webcam", tmp_path / "photos.png")
+    assert drawn.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
