@@ -115,26 +115,41 @@ def summarise(rows: list[PhotoRow]) -> dict[str, ModeSummary]:
     return summary
 
 
+def draw_photos(ax, modes: dict[str, tuple[np.ndarray, np.ndarray]],
+                without_calliper: dict[str, np.ndarray] | None = None) -> dict[str, tuple[float, float, float]]:
+    """Each photo's Af from its set's mean (relative errors, per mode: 'default' and 'count') with ±1 of its
+    reported std on `ax`, and, thicker, the std without the targets' calliper where given. A bar that misses the
+    zero line is a std that did not hold at 1 std. Returns per mode the spread and the worst photo (%) and the
+    largest distance from the mean in the photo's std."""
+    figures = {}
+    for offset, (mode, colour) in zip((-0.15, 0.15), (("default", "tab:blue"), ("count", "tab:grey")), strict=True):
+        errors, stds = modes[mode]
+        centred = 100 * (errors - errors.mean())
+        x = np.arange(len(errors)) + offset
+        figures[mode] = (100 * float(np.std(errors, ddof=1)), float(np.max(np.abs(centred))),
+                         float(np.max(np.abs(centred) / (100 * stds))))
+        ax.errorbar(x, centred, yerr=100 * stds, fmt="o", ms=4, capsize=2, color=colour,
+                    label=f"{mode}: sd {figures[mode][0]:.2f} %, worst {figures[mode][1]:.2f} %")
+        if without_calliper is not None:
+            ax.errorbar(x, centred, yerr=100 * without_calliper[mode], fmt="none", elinewidth=2.5, color=colour,
+                        alpha=0.5)
+    ax.axhline(0, color="black", lw=0.8)
+    return figures
+
+
 def plot(rows: list[PhotoRow], title: str, path: Path) -> Path:
-    """Each well-exposed photo's Af from the set's mean with ±1 of its reported std, per mode (a bar that misses
-    the zero line is a std that did not hold at 1 std); the thin bar leaves out the targets' calliper."""
+    """The well-exposed photos drawn by draw_photos (PNG), the default mode's figures beside the count's."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     well = [row for row in rows if row.clipped_share < WELL_EXPOSED]
+    named = {"default": "subpixel", "count": "count"}
     figure, ax = plt.subplots(figsize=(max(6.0, 0.22 * len(well) + 2), 4.2))
-    for offset, mode, colour in ((-0.15, "subpixel", "tab:blue"), (0.15, "count", "tab:grey")):
-        errors = np.array([row.errors[mode] for row in well])
-        centred = 100 * (errors - errors.mean())
-        x = np.arange(len(well)) + offset
-        ax.errorbar(x, centred, yerr=100 * np.array([row.stds[mode] for row in well]), fmt="o", ms=4, capsize=2,
-                    color=colour, label=f"{'default' if mode == 'subpixel' else mode}: sd "
-                                        f"{100 * np.std(errors, ddof=1):.2f} %, worst {np.max(np.abs(centred)):.2f} %")
-        ax.errorbar(x, centred, yerr=100 * np.array([row.stds_without_calliper[mode] for row in well]), fmt="none",
-                    elinewidth=2.5, color=colour, alpha=0.5)
-    ax.axhline(0, color="black", lw=0.8)
+    draw_photos(ax, {shown: (np.array([row.errors[mode] for row in well]), np.array([row.stds[mode] for row in well]))
+                     for shown, mode in named.items()},
+                {shown: np.array([row.stds_without_calliper[mode] for row in well]) for shown, mode in named.items()})
     ax.set_xticks(np.arange(len(well)), [Path(row.name).stem for row in well], rotation=90, fontsize=6)
     ax.set_ylabel("Af from the set's mean [%], ±1 reported std")
     ax.set_title(title, fontsize=10)

@@ -16,6 +16,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE.parent / "veg_area_ros"), str(HERE)]  # the working tree
 from board_photos import board_photos, calibrated  # noqa: E402
+from held_out_board import draw_photos  # noqa: E402
 from helpers import OPENCV_LEFT, OPENCV_RIGHT, UDACITY_CAMERA  # noqa: E402
 from test_real_photos import BOARD, _evidence, _measure, _with_the_others_trend  # noqa: E402
 
@@ -46,18 +47,8 @@ def main(path: str) -> None:
 
     figure, axes = plt.subplots(1, len(CAMERAS), figsize=(13, 4.2), sharey=True)
     for ax, (title, folder) in zip(axes, CAMERAS, strict=True):
-        found = measured(folder)
-        for offset, (mode, colour) in zip((-0.15, 0.15), (("default", "tab:blue"), ("count", "tab:grey")),
-                                          strict=True):
-            errors, stds = found[mode]
-            centred = 100 * (errors - errors.mean())
-            x = np.arange(len(errors)) + offset
-            ax.errorbar(x, centred, yerr=100 * stds, fmt="o", ms=4, capsize=2, color=colour,
-                        label=f"{mode}: sd {100 * np.std(errors, ddof=1):.2f} %, worst "
-                              f"{np.max(np.abs(centred)):.2f} %")
-            print(f"{title}: {mode} sd {100 * np.std(errors, ddof=1):.3f} %, worst {np.max(np.abs(centred)):.3f} %, "
-                  f"at most {np.max(np.abs(centred) / (100 * stds)):.2f} std")
-        ax.axhline(0, color="black", lw=0.8)
+        for mode, (spread, worst, largest) in draw_photos(ax, measured(folder)).items():
+            print(f"{title}: {mode} sd {spread:.3f} %, worst {worst:.3f} %, at most {largest:.2f} std")
         ax.set_title(title, fontsize=10)
         ax.set_xlabel("photo (whites under 250)")
         ax.legend(fontsize=8, loc="lower left")

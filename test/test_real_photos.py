@@ -20,7 +20,7 @@ from veg_area_ros.board import BoardSpec
 from veg_area_ros.calibration import View
 from veg_area_ros.classify import Classifier
 from veg_area_ros.edge_trend import fit_edge_trend
-from veg_area_ros.tone_evidence import choose_tone_curve, chosen_cases, curve_names
+from veg_area_ros.tone_evidence import choose_tone_curve, chosen_cases, judged_first
 
 BOARD = "chessboard:9x6:1"
 THRESHOLDS = ("otsu", 100, 120, 128, 150)
@@ -43,11 +43,9 @@ def _evidence(folder, camera):
     spec = BoardSpec.parse(BOARD)
     board = replace(spec, square=SQUARE_M)
     views = [View(name, metric(detection, spec)) for name, detection in detections(str(folder), BOARD)]
-    cases = chosen_cases(views, board, camera)
-    judged = curve_names(cases)
+    cases, judged = judged_first(chosen_cases(views, board, camera))
     return choose_tone_curve(((case, cv2.imread(str(folder / case.name), cv2.IMREAD_GRAYSCALE))
-                              for case in sorted(cases, key=lambda case: case.name not in judged)), board, camera,
-                             judged)
+                              for case in cases), board, camera, judged)
 
 
 def _with_the_others_trend(photo, camera, evidence):

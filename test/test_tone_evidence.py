@@ -19,7 +19,7 @@ from veg_area_ros.board import BoardSpec
 from veg_area_ros.classify import Classifier, ClassifyError, polygon_roi
 from veg_area_ros.settings import MeasurementSettings
 from veg_area_ros.sim.synthetic import ENDOSCOPE, board_views, look_at_pose, render_board_views
-from veg_area_ros.tone_evidence import MAX_VIEWS, board_case, choose_tone_curve, curve_names
+from veg_area_ros.tone_evidence import MAX_VIEWS, board_case, choose_tone_curve, judged_first
 
 BOARD = BoardSpec.parse("chessboard:9x6:0.02")
 
@@ -144,8 +144,9 @@ def test_the_curve_is_judged_on_its_views_and_the_edges_on_all():
     from types import SimpleNamespace
 
     many = [SimpleNamespace(name=f"v{k}", square_px=10.0 + k) for k in range(40)]
-    names = curve_names(many)
+    ordered, names = judged_first(many)
     assert len(names) == MAX_VIEWS and {"v0", "v39"} <= names
+    assert {case.name for case in ordered[:MAX_VIEWS]} == names and len(ordered) == len(many)
     cases = _cases("linear")
     judged = {case.name for case, _ in cases[::2]}
     choice = choose_tone_curve(cases, BOARD, ENDOSCOPE, judged)

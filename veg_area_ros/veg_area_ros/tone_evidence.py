@@ -181,9 +181,11 @@ def chosen_cases(views: Iterable, board: BoardSpec, camera: BrownCamera) -> list
                           MAX_TREND_VIEWS)
 
 
-def curve_names(cases: list[BoardCase]) -> set[str]:
-    """The names of the cases the tone curve is judged on: at most MAX_VIEWS evenly over their sizes."""
-    return {case.name for case in spread_by_size(cases)}
+def judged_first(cases: list[BoardCase]) -> tuple[list[BoardCase], set[str]]:
+    """(the cases with those the tone curve is judged on first, their names): at most MAX_VIEWS evenly over the
+    sizes. Read in this order, the others are read under the curve taken only (judged_tone_curve)."""
+    judged = {case.name for case in spread_by_size(cases)}
+    return sorted(cases, key=lambda case: case.name not in judged), judged
 
 
 @dataclass
@@ -210,11 +212,10 @@ class KeptFrames:
 
     def judge(self, views: Iterable, camera: BrownCamera) -> ToneChoice:
         """The tone curve judged on the kept frames of `views` (calibration.View)."""
-        cases = chosen_cases([view for view in views if view.name in self.frames], self.board, camera)
-        judged = curve_names(cases)
-        # the judged views first: the others are then read under the curve taken only (judged_tone_curve)
+        cases, judged = judged_first(chosen_cases([view for view in views if view.name in self.frames],
+                                                  self.board, camera))
         pairs = ((case, cv2.imdecode(np.frombuffer(self.frames[case.name], np.uint8), cv2.IMREAD_GRAYSCALE))
-                 for case in sorted(cases, key=lambda case: case.name not in judged))
+                 for case in cases)
         choice = choose_tone_curve(pairs if len(cases) >= MIN_VIEWS else iter(()), self.board, camera, judged)
         if self.over_budget:
             choice.reason += f" ({self.over_budget} views past the first {len(self.frames)} kept no frame)"

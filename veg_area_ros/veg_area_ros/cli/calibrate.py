@@ -275,19 +275,22 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, cam
     from collections import Counter
 
     from ..frames import iter_frames, shown_name
-    from ..tone_evidence import MIN_VIEWS, choose_tone_curve, chosen_cases, curve_names
+    from ..tone_evidence import MIN_VIEWS, choose_tone_curve, chosen_cases, judged_first
 
     named = Counter(view.name for view in found.views)  # a name two files share cannot be read again surely
     cases = chosen_cases([view for view in found.views if named[view.name] == 1], board, camera)
     if len(cases) < MIN_VIEWS:  # said as such, without reading any frame again
         return choose_tone_curve(iter(()), board, camera)
     wanted = {case.name: case for case in cases}
-    sources = set(wanted) | {name.rsplit("#", 1)[0] for name in wanted}  # images, and videos' frames NAME#N
-    judged = curve_names(cases)
-    judged_sources = judged | {name.rsplit("#", 1)[0] for name in judged}
+
+    def sources(names) -> set[str]:  # images, and videos' frames NAME#N
+        return set(names) | {name.rsplit("#", 1)[0] for name in names}
+
+    judged = judged_first(cases)[1]
+    read, read_first = sources(wanted), sources(judged)
     say(f"tone curve: measuring the board's black area in {len(cases)} views, near and far")
     # the judged views' files first: the others are then read under the curve taken only
-    ordered = sorted((f for f in files if shown_name(f) in sources), key=lambda f: shown_name(f) not in judged_sources)
+    ordered = sorted((f for f in files if shown_name(f) in read), key=lambda f: shown_name(f) not in read_first)
 
     def views():
         for frame in iter_frames(ordered, step, grey=True, spread=spread):
