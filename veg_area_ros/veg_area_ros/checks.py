@@ -232,11 +232,6 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
     if located.missing:
         said.append(f"targets missing: marker(s) {located.missing} not found; the scale comes from the others "
                     "and the ROI places the missing ones by their fit")
-    if located.by_corners:
-        said.append(f"marker(s) {located.by_corners} placed by their corners alone: their sides could not be read "
-                    "(too small, at the frame's edge, or something dark over the white round them), and such corners "
-                    "move with the edges' sub-pixel phase, their centres by up to 0.25 px on sharp frames; the scale "
-                    "may be off by more than its std (give the markers a clear white margin)")
     if weights.roi_cut_share > ROI_CUT_SHARE:
         reach = settings.view.camera.reach_px() if settings.view.camera is not None else None
         said.append(f"the ROI reaches beyond the image: {100 * weights.roi_cut_share:.1f} % of it has no pixel "

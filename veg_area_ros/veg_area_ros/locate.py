@@ -17,8 +17,7 @@ import numpy as np
 
 from .classify import to_light
 from .idealize import IdealView
-from .marker_sides import corners_by_sides
-from .markers import DetectedMarker, marker_cells, marker_centre, track_markers
+from .markers import DetectedMarker, marker_centre, track_markers
 from .scale import PlaneScale
 from .targets import TargetsError, TargetsSpec
 
@@ -36,7 +35,6 @@ class Located:
     missing: list[int]
     holes: list[np.ndarray]  # marker squares (enlarged) to cut out of the default ROI
     offsets: list[np.ndarray]  # found markers' corners relative to their centre
-    by_corners: list[int] = field(default_factory=list)  # markers whose sides could not be read: tracked corners
 
     @property
     def target_pixels(self) -> dict[str, np.ndarray]:
@@ -90,8 +88,7 @@ class Locator:
     def locate(self, frame: np.ndarray, tracking: Tracking) -> Located:
         """Markers found in the raw frame (all of it: idealization pushes the periphery of a barrel-distorted
         frame out of view), their corners mapped into the idealized image and the centre intersected there;
-        hand-picked points; the scale fit. Each marker's corners are then placed by its sides
-        (`marker_sides`), or kept as tracked where those cannot be read (`Located.by_corners`)."""
+        hand-picked points; the scale fit."""
         targets = self.targets
         located = Located(None, [], [], [], [], [])
         if targets.markers:
@@ -108,14 +105,7 @@ class Locator:
                 return last[1]  # no marker moved: the same corners give the same fit
             located.missing = [marker_id for marker_id in targets.markers if marker_id not in tracking.markers]
             raw_corners = np.array([tracking.markers[marker_id].corners for marker_id in found]).reshape(-1, 2)
-            grey = (frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)).astype(np.float32)
-            cells = marker_cells(targets.dictionary)
             for marker_id, corners in zip(found, self.view.to_ideal(raw_corners).reshape(-1, 4, 2), strict=True):
-                by_sides = corners_by_sides(grey, corners, cells, self.view.to_raw)
-                if by_sides is None:
-                    located.by_corners.append(marker_id)
-                else:
-                    corners = by_sides
                 centre = marker_centre(corners)
                 located.pixels.append(centre)
                 located.labels.append(f"marker {marker_id}")

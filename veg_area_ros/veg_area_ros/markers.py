@@ -61,11 +61,6 @@ def _detector(dictionary: str) -> cv2.aruco.ArucoDetector:
     return cv2.aruco.ArucoDetector(_dictionary(dictionary), parameters)
 
 
-def marker_cells(dictionary: str) -> int:
-    """A marker's cells across, its black border included."""
-    return _dictionary(dictionary).markerSize + 2
-
-
 @lru_cache(maxsize=256)
 def _code_cells(dictionary: str, marker_id: int) -> tuple[np.ndarray, np.ndarray]:
     """Which cells of the marker (with its one-cell black border) are black, and which white."""
