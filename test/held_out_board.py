@@ -101,17 +101,27 @@ def _row(photo: board_photos.BoardPhoto, calibration) -> PhotoRow:
     return PhotoRow(photo.name, photo.clipped_share, errors, stds, bare, warnings)
 
 
+def well_exposed(rows: list[PhotoRow]) -> list[PhotoRow]:
+    return [row for row in rows if row.clipped_share < WELL_EXPOSED]
+
+
+def scatter(errors: np.ndarray, stds: np.ndarray) -> tuple[float, float, float]:
+    """(the photos' spread, the worst photo's distance from their mean, the largest such distance in the photo's
+    own std), from their relative errors and stds."""
+    centred = errors - errors.mean()
+    return float(np.std(errors, ddof=1)), float(np.max(np.abs(centred))), float(np.max(np.abs(centred) / stds))
+
+
 def summarise(rows: list[PhotoRow]) -> dict[str, ModeSummary]:
-    well = [row for row in rows if row.clipped_share < WELL_EXPOSED]
+    well = well_exposed(rows)
     summary = {}
     for mode in MODES:
         errors = np.array([row.errors[mode] for row in well])
-        z = (errors - errors.mean()) / np.array([row.stds[mode] for row in well])
-        bare = (errors - errors.mean()) / np.array([row.stds_without_calliper[mode] for row in well])
-        summary[mode] = ModeSummary(float(errors.mean()), float(np.std(errors, ddof=1)),
-                                    float(np.max(np.abs(errors - errors.mean()))),
-                                    float(np.median([row.stds[mode] for row in well])), float(np.max(np.abs(z))),
-                                    float(np.max(np.abs(bare))), int(np.sum(np.abs(z) <= 3)))
+        stds = np.array([row.stds[mode] for row in well])
+        spread, worst, largest = scatter(errors, stds)
+        summary[mode] = ModeSummary(float(errors.mean()), spread, worst, float(np.median(stds)), largest,
+                                    scatter(errors, np.array([row.stds_without_calliper[mode] for row in well]))[2],
+                                    int(np.sum(np.abs((errors - errors.mean()) / stds) <= 3)))
     return summary
 
 
@@ -126,8 +136,8 @@ def draw_photos(ax, modes: dict[str, tuple[np.ndarray, np.ndarray]],
         errors, stds = modes[mode]
         centred = 100 * (errors - errors.mean())
         x = np.arange(len(errors)) + offset
-        figures[mode] = (100 * float(np.std(errors, ddof=1)), float(np.max(np.abs(centred))),
-                         float(np.max(np.abs(centred) / (100 * stds))))
+        spread, worst, largest = scatter(errors, stds)
+        figures[mode] = (100 * spread, 100 * worst, largest)
         ax.errorbar(x, centred, yerr=100 * stds, fmt="o", ms=4, capsize=2, color=colour,
                     label=f"{mode}: sd {figures[mode][0]:.2f} %, worst {figures[mode][1]:.2f} %")
         if without_calliper is not None:
@@ -144,7 +154,7 @@ def plot(rows: list[PhotoRow], title: str, path: Path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    well = [row for row in rows if row.clipped_share < WELL_EXPOSED]
+    well = well_exposed(rows)
     named = {"default": "subpixel", "count": "count"}
     figure, ax = plt.subplots(figsize=(max(6.0, 0.22 * len(well) + 2), 4.2))
     draw_photos(ax, {shown: (np.array([row.errors[mode] for row in well]), np.array([row.stds[mode] for row in well]))
@@ -177,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     for row in rows:
         print(f"{row.name}  clipped {100 * row.clipped_share:5.2f} %  "
               + "  ".join(f"{mode} {100 * row.errors[mode]:+.3f} ± {100 * row.stds[mode]:.3f} %" for mode in MODES))
-    well = sum(row.clipped_share < WELL_EXPOSED for row in rows)
+    well = len(well_exposed(rows))
     print(f"{len(rows)} photos measured, {well} with under {100 * WELL_EXPOSED:g} % of the board's pixels clipped:")
     for mode, s in summary.items():
         print(f"  {mode:8s} mean {100 * s.mean:+.3f} %, spread {100 * s.spread:.3f} %, worst {100 * s.worst:.3f} % "
