@@ -33,6 +33,9 @@ class AreaResult:
     # a lens model that folds inside the frame holds inside this radius (idealized px) around the image's centre
     model_reach_px: float | None = None
     target_pixels: dict[str, np.ndarray] = field(default_factory=dict)  # "marker 3" / "point 0" -> idealized px
+    # the markers' centre localisation std measured from their corners' squareness (px per coordinate), None
+    # where not measured; the scale's std uses it where it exceeds the targets file's pixel_std
+    marker_std_px: float | None = None
     weight_error_bound: float = 0.0  # relative bound on Af from quantizing the pixel weights
     area_mode: str = "count"
     tone_curve: str = "linear"  # how the band's values were read as light (classify.TONE_CURVES)
@@ -73,7 +76,8 @@ class AreaResult:
             "plane_offset_std_m2": self.plane_offset_std_m2, "calibration_std_m2": self.calibration_std_m2,
             "levels": self.levels.to_dict() if self.levels is not None else None,
             "edge_length_px": self.edge_length_px,
-            "missing_targets": list(self.missing_targets), "sweep": [list(s) for s in self.sweep],
+            "missing_targets": list(self.missing_targets), "marker_std_px": self.marker_std_px,
+            "target_pixel_stds_px": self.scale.pixel_stds().tolist(), "sweep": [list(s) for s in self.sweep],
             "weight_error_bound": self.weight_error_bound,
             "light": None if self.flat_field is None else {
                 "evened_by": self.flat_field.source, "variation": self.flat_field.variation,

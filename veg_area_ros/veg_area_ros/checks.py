@@ -40,6 +40,9 @@ BORDER_TOUCH_SHARE = 0.01  # object pixels on the ROI's border, as a share of th
 SWEEP_UNSETTLED = 0.02  # Af moving this much (relative) per sweep step around the threshold: no stable edge
 EDGE_ZONE = 0.15  # an edge's pixels: between the two levels' outer 15 % (noise stays out at any contrast)
 BLUR_RATIO = 2.0  # the object's edges this much (and a pixel) wider than the markers': blurred on its own
+# markers' centres measured to err more than this (px per coordinate; target_error): said, beside the std that
+# holds it. A real webcam's printed markers: median 0.17 px, one frame in ten past 0.45 (motion blur)
+LOOSE_MARKERS_PX = 0.5
 DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
 # glare: pixels brighter than the brighter class's level by this share of the contrast (or this many of its
 # spreads, where noise is larger), over this share of the ROI. Real photos: a glossy print's sheen 0.6-1.1 % of
@@ -232,6 +235,10 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
     if located.missing:
         said.append(f"targets missing: marker(s) {located.missing} not found; the scale comes from the others "
                     "and the ROI places the missing ones by their fit")
+    if located.marker_std_px is not None and located.marker_std_px > LOOSE_MARKERS_PX:
+        said.append(f"markers located loosely: their corners miss squares on the plane by {located.marker_std_px:.2f} "
+                    "px at their centres (blur, noise, a dim or bent print); the scale's std holds it, Af is less "
+                    "certain")
     if weights.roi_cut_share > ROI_CUT_SHARE:
         reach = settings.view.camera.reach_px() if settings.view.camera is not None else None
         said.append(f"the ROI reaches beyond the image: {100 * weights.roi_cut_share:.1f} % of it has no pixel "

@@ -19,6 +19,7 @@ from .classify import to_light
 from .idealize import IdealView
 from .markers import DetectedMarker, marker_centre, track_markers
 from .scale import PlaneScale
+from .target_error import marker_centre_std
 from .targets import TargetsError, TargetsSpec
 
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
@@ -35,6 +36,9 @@ class Located:
     missing: list[int]
     holes: list[np.ndarray]  # marker squares (enlarged) to cut out of the default ROI
     offsets: list[np.ndarray]  # found markers' corners relative to their centre
+    # the markers' centre localisation std measured from their corners' squareness on the plane (px per
+    # coordinate; target_error), None where the scale gives no plane (two targets) or no marker was found
+    marker_std_px: float | None = None
 
     @property
     def target_pixels(self) -> dict[str, np.ndarray]:
@@ -91,6 +95,7 @@ class Locator:
         hand-picked points; the scale fit."""
         targets = self.targets
         located = Located(None, [], [], [], [], [])
+        found_corners: list[np.ndarray] = []
         if targets.markers:
             if self.light_table is not None:
                 frame = cv2.LUT(frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY), self.light_table)
@@ -111,6 +116,7 @@ class Locator:
                 located.labels.append(f"marker {marker_id}")
                 located.offsets.append(corners - centre)
                 located.holes.append(centre + MARKER_EXCLUSION * located.offsets[-1])
+                found_corners.append(corners)
         planes = [targets.markers[int(label.split()[1])] for label in located.labels]
         for k, ((_, plane), pixel) in enumerate(zip(targets.points, self.hand_pixels, strict=True)):
             located.pixels.append(pixel)
@@ -133,6 +139,13 @@ class Locator:
         located.scale = PlaneScale.fit(np.array(located.pixels), np.array(planes), targets.distance_std_m,
                                        targets.pixel_std, offset,
                                        self.view.ideal_matrix if offset is not None else None)
+        if found_corners and located.scale.kind != "distance":
+            located.marker_std_px = marker_centre_std(np.array(found_corners), planes[:len(found_corners)],
+                                                      located.scale.matrix)
+            # the targets file's std is the floor: a few markers' corners can form squares by chance
+            stds = located.scale.pixel_stds()
+            stds[:len(found_corners)] = max(targets.pixel_std, located.marker_std_px)
+            located.scale.pixel_std = stds
         tracking.last_scale = located.scale
         if targets.markers:
             tracking.last_located = tracked, located

@@ -29,14 +29,14 @@ class PlaneScale:
     matrix: np.ndarray  # 3x3 pixel -> targets' plane (similarity, affine or homography)
     metres_per_pixel: float  # at the centre of the targets, on the object's plane
     distance_std_m: float = 0.0005
-    pixel_std: float = 0.1
+    pixel_std: float | np.ndarray = 0.1  # targets' localisation std per coordinate, px: one for all, or one each
     plane_offset_m: float | None = None  # None: the object lies in the targets' plane, no pose needed
     camera_matrix: np.ndarray | None = None  # the idealized image's pinhole K (needed for an offset)
     area_matrix: np.ndarray | None = None  # 3x3 pixel -> object's plane, when it is not the targets' plane
 
     @classmethod
     def fit(cls, pixels: np.ndarray, planes: np.ndarray, distance_std_m: float = 0.0005,
-            pixel_std: float = 0.1, plane_offset_m: float | None = None,
+            pixel_std: float | np.ndarray = 0.1, plane_offset_m: float | None = None,
             camera_matrix: np.ndarray | None = None) -> PlaneScale:
         pixels = np.asarray(pixels, float).reshape(-1, 2)
         planes = np.asarray(planes, float).reshape(-1, 2)
@@ -84,14 +84,19 @@ class PlaneScale:
         """Σ of the metric areas of the given pixel centres."""
         return float(self.pixel_area(uv).sum()) if len(uv) else 0.0
 
-    def relative_area_std_at(self, uv: np.ndarray) -> float:
-        """Relative standard deviation of the metric area of a pixel at `uv` (idealized image) from the targets'
-        localisation (pixel_std per coordinate) and the calliper (distance_std_m / sqrt(2) per plane
-        coordinate), propagated to first order through the fit by central differences."""
+    def pixel_stds(self) -> np.ndarray:
+        """Each target's localisation std per coordinate (N,), px."""
+        return np.broadcast_to(np.asarray(self.pixel_std, float), (len(self.pixels),)).copy()
+
+    def relative_area_variances_at(self, uv: np.ndarray) -> tuple[np.ndarray, float]:
+        """What the targets give the relative variance of the metric area of a pixel at `uv` (idealized image),
+        propagated to first order through the fit by central differences: each target's share per px² of its
+        localisation variance (N,), and the calliper's (distance_std_m / sqrt(2) per plane coordinate)."""
         uv = np.asarray(uv, float).reshape(1, 2)
         base = self.pixel_area(uv)[0]
-        variance = 0.0
-        for name, sigma, step in (("pixels", self.pixel_std, 1e-3), ("planes", self.distance_std_m / np.sqrt(2), 1e-6)):
+        per_target = np.zeros(len(self.pixels))
+        calliper = 0.0
+        for name, sigma, step in (("pixels", 1.0, 1e-3), ("planes", self.distance_std_m / np.sqrt(2), 1e-6)):
             if sigma == 0:
                 continue
             values = getattr(self, name)
@@ -103,8 +108,17 @@ class PlaneScale:
                     pixels, planes = (moved, self.planes) if name == "pixels" else (self.pixels, moved)
                     shifted.append(PlaneScale.fit(pixels, planes, plane_offset_m=self.plane_offset_m,
                                                   camera_matrix=self.camera_matrix).pixel_area(uv)[0])
-                variance += ((shifted[0] - shifted[1]) / (2 * step) * sigma) ** 2
-        return float(np.sqrt(variance) / base)
+                share = ((shifted[0] - shifted[1]) / (2 * step) * sigma / base) ** 2
+                if name == "pixels":
+                    per_target[index[0]] += share
+                else:
+                    calliper += share
+        return per_target, float(calliper)
+
+    def relative_area_std_at(self, uv: np.ndarray) -> float:
+        """Relative standard deviation of the metric area of a pixel at `uv` (idealized image) from the targets'
+        localisation (`pixel_std` per coordinate) and the calliper."""
+        return relative_area_std(self.relative_area_variances_at(uv), self.pixel_stds())
 
     def relative_area_change_per_metre_at(self, uv: np.ndarray) -> float:
         """d ln(pixel area)/d(plane offset) at `uv`, 1/m: how an error in the object's plane offset moves Af
@@ -115,6 +129,13 @@ class PlaneScale:
         areas = [PlaneScale.fit(self.pixels, self.planes, plane_offset_m=self.plane_offset_m + sign * step,
                                 camera_matrix=self.camera_matrix).pixel_area(uv)[0] for sign in (1, -1)]
         return float(abs(np.log(areas[0] / areas[1])) / (2 * step))
+
+
+def relative_area_std(variances: tuple[np.ndarray, float], pixel_stds: np.ndarray) -> float:
+    """Af's relative std from the targets, given `PlaneScale.relative_area_variances_at` and each target's
+    localisation std."""
+    per_target, calliper = variances
+    return float(np.sqrt(per_target @ np.square(pixel_stds) + calliper))
 
 
 SQUARE_TOLERANCE = 0.08  # a marker's sides and diagonals on the plane may differ this much (relative) from a square
@@ -150,7 +171,9 @@ def marker_layout_problem(scale: PlaneScale, corners: dict[int, np.ndarray], mar
         if spread > allowed:
             return (f"marker {marker_id} maps to a {lengths.min() * 1000:.3g}–{lengths.max() * 1000:.3g} mm "
                     f"quadrilateral, not a square (off by {spread:.0%}): marker ids or coordinates in the "
-                    f"targets file do not match the board (permuted or mistyped?)")
+                    f"targets file do not match the board (permuted or mistyped?)"
+                    + (", or the plane is tilted more than three targets' affine scale can follow (a fourth "
+                       "target gives a homography)" if scale.kind == "affine" else ""))
         handedness.append(np.sign(edges[0, 0] * edges[1, 1] - edges[0, 1] * edges[1, 0]))
         allowed = max(SIDE_TOLERANCE, 4 * CORNER_STD_PX / max(side_px, 1.0))
         if marker_side_m is not None and abs(mean / marker_side_m - 1) > allowed:

@@ -24,7 +24,7 @@ from .classify import ClassifyError, polygon_roi
 from .idealize import OUTSIDE_PX, IdealView
 from .locate import Located
 from .region import Region, beyond_image, centroid
-from .scale import PlaneScale
+from .scale import PlaneScale, relative_area_std
 from .targets import TargetsSpec
 
 WEIGHT_LEVELS = 256  # one uint8 level image, so one OpenCV 2-D histogram per frame
@@ -130,13 +130,20 @@ class Weights:
     pixels: np.ndarray  # target positions the weights were built with
     corners: np.ndarray  # ROI polygon corners (idealized px): where a homography's change is extreme
     centre: np.ndarray  # ROI centroid (idealized px)
-    relative_scale_std: float
+    # the targets' share of Af's relative variance (per target per px² of localisation, and the calliper's),
+    # so that each frame's localisation std scales it (relative_scale_std)
+    scale_variances: tuple[np.ndarray, float]
     relative_offset_std: float  # relative std of Af from the object plane offset's uncertainty
     calibration: AreaSensitivity | None = None  # how the calibration's uncertainty moves the ROI's footprints
     _border: np.ndarray | None = None
     marker_edge_px: float | None = None  # the printed markers' edge width in this layout (px)
     marker_edge_found: bool = False
     roi_cut_share: float = 0.0  # of the ROI polygon where the idealized image has no raw pixel (Region.in_ideal)
+
+    def relative_scale_std(self, scale: PlaneScale | None = None) -> float:
+        """Af's relative std from the targets, with `scale`'s localisation stds (a frame these weights are
+        carried to; by default the fit they were built with)."""
+        return relative_area_std(self.scale_variances, (scale or self.scale).pixel_stds())
 
     def border(self) -> np.ndarray:
         """The ROI's one-pixel border ring (its outline and the markers' holes), once per layout."""
@@ -266,7 +273,7 @@ class Weighting:
                           * self.targets.object_plane_offset_std_m)
         weights = Weights(window, roi, levels, level_area, float(np.max(np.abs(level_area[level] - exact) / exact)),
                           roi_ideal, located.scale, list(located.labels), np.array(located.pixels), polygon, centre,
-                          located.scale.relative_area_std_at(centre), offset_std, roi_cut_share=cut)
+                          located.scale.relative_area_variances_at(centre), offset_std, roi_cut_share=cut)
         last = memory.weights
         if (last is not None and last.labels == weights.labels and last.roi.shape == weights.roi.shape
                 and np.max(np.abs(last.pixels - weights.pixels)) <= KEPT_WITHIN_PX):
@@ -305,7 +312,7 @@ class Weighting:
             points = np.vstack([weights.centre, weights.corners])
             ratio = located.scale.pixel_area(points) / weights.scale.pixel_area(points)
             uneven = float(np.max(np.abs(ratio / ratio[0] - 1)))
-            if uneven <= max(SCALE_TOLERANCE, CARRY_SHARE * weights.relative_scale_std):
+            if uneven <= max(SCALE_TOLERANCE, CARRY_SHARE * weights.relative_scale_std(located.scale)):
                 memory.carried = located.scale, (weights, float(ratio[0]), uneven)
                 return memory.carried[1]
         memory.weights = self._build(shape, located, memory)
