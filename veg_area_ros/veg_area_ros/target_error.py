@@ -18,6 +18,7 @@ import numpy as np
 
 # a square's corners about its centre, as complex numbers in ArUco's order (clockwise in the image)
 _UNIT_SQUARE = np.array([-1 - 1j, 1 - 1j, 1 + 1j, -1 + 1j]) / 2
+_NORM = float(np.sum(np.abs(_UNIT_SQUARE) ** 2))
 # each marker's 8 corner coordinates less its rotation and size on the plane (its centre is the fit's)
 DEGREES_OF_FREEDOM_PER_MARKER = 6
 
@@ -31,22 +32,20 @@ def marker_centre_std(ideal_corners: np.ndarray, planes: np.ndarray, to_plane: n
     planes = np.asarray(planes, float).reshape(-1, 2)
     if not len(corners):
         return None
-    to_pixels = np.linalg.inv(to_plane)
-    squared_px = 0.0
-    for marker, plane in zip(corners, planes, strict=True):
-        on_plane = cv2.perspectiveTransform(marker.reshape(-1, 1, 2), to_plane).reshape(4, 2) - plane
-        offsets = on_plane[:, 0] + 1j * on_plane[:, 1]
-        # the square's size and rotation fitted; either handedness (the plane's y may point up or down)
-        missed = min(float(np.sum(np.abs(offsets - np.vdot(unit, offsets) / np.vdot(unit, unit) * unit) ** 2))
-                     for unit in (_UNIT_SQUARE, np.conj(_UNIT_SQUARE)))
-        squared_px += missed * _pixels_per_square_metre(to_pixels, plane)
+    on_plane = cv2.perspectiveTransform(corners.reshape(-1, 1, 2), to_plane).reshape(-1, 4, 2) - planes[:, None]
+    offsets = on_plane[..., 0] + 1j * on_plane[..., 1]  # (N, 4)
+    # each square's size and rotation fitted; either handedness (the plane's y may point up or down)
+    missed = np.min([np.sum(np.abs(offsets - (offsets @ unit.conj() / _NORM)[:, None] * unit) ** 2, axis=1)
+                     for unit in (_UNIT_SQUARE, np.conj(_UNIT_SQUARE))], axis=0)
+    squared_px = float(missed @ _pixels_per_square_metre(np.linalg.inv(to_plane), planes))
     corner_std = np.sqrt(squared_px / (DEGREES_OF_FREEDOM_PER_MARKER * len(corners)))
     return float(corner_std / np.sqrt(2))
 
 
-def _pixels_per_square_metre(to_pixels: np.ndarray, plane: np.ndarray, step: float = 1e-4) -> float:
-    """The plane -> image map's area ratio at a plane point (px² per m²)."""
-    points = (plane + np.array([[0.0, 0.0], [step, 0.0], [0.0, step]])).reshape(-1, 1, 2)
-    p0, p1, p2 = cv2.perspectiveTransform(points, to_pixels).reshape(3, 2)
-    (ax, ay), (bx, by) = p1 - p0, p2 - p0
-    return abs(ax * by - ay * bx) / step**2
+def _pixels_per_square_metre(to_pixels: np.ndarray, planes: np.ndarray, step: float = 1e-4) -> np.ndarray:
+    """The plane -> image map's area ratio at plane points (N, 2): px² per m²."""
+    steps = np.array([[0.0, 0.0], [step, 0.0], [0.0, step]])
+    points = (planes[:, None] + steps).reshape(-1, 1, 2)
+    p0, p1, p2 = np.moveaxis(cv2.perspectiveTransform(points, to_pixels).reshape(-1, 3, 2), 1, 0)
+    (ax, ay), (bx, by) = (p1 - p0).T, (p2 - p0).T
+    return np.abs(ax * by - ay * bx) / step**2
