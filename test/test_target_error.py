@@ -115,9 +115,10 @@ def test_the_measured_std_follows_the_rendered_markers_true_error(degrade):
 
 
 def test_loose_markers_widen_the_scale_std_and_say_so():
-    """One marker's print bent (its image sheared by 12 % about its centre): its corners no longer form a square
-    on the plane, the measured std passes 0.5 px, the scale's std takes it for the markers (the targets file's
-    0.1 px stays their floor) and the result says so. The same frame unbent keeps the file's 0.1 px."""
+    """Two markers' prints bent (their images sheared by 12 % about their centres): their corners no longer form
+    squares on the plane, the measured std passes 0.5 px, the scale's std takes it for the markers (the targets
+    file's 0.1 px stays their floor), and the result says so, as it alone makes Af uncertain by over 0.25 %. The
+    same frame unbent keeps the file's 0.1 px and says nothing."""
     frame = render_scene(ENDOSCOPE, CUBE, 0.6, None, roll_deg=4.0, seed=1)
     measurer = AreaMeasurer(ENDOSCOPE, targets(), Classifier(threshold="otsu"))
     plain = measurer.measure(frame)
@@ -125,14 +126,15 @@ def test_loose_markers_widen_the_scale_std_and_say_so():
     assert plain.summary()["target_pixel_stds_px"] == [0.1] * 4
     assert not [w for w in plain.warnings if w.startswith("markers located loosely")]
 
-    marker = detect_markers(frame, CUBE.dictionary)[0]
-    x0, y0 = np.floor(marker.corners.min(axis=0)).astype(int) - 6
-    x1, y1 = np.ceil(marker.corners.max(axis=0)).astype(int) + 6
-    patch = frame[y0:y1, x0:x1]
-    centre = marker.centre - (x0, y0)
-    shear = np.array([[1.0, 0.12, -0.12 * centre[1]], [0.0, 1.0, 0.0]])
     bent = frame.copy()
-    bent[y0:y1, x0:x1] = cv2.warpAffine(patch, shear, patch.shape[1::-1], borderMode=cv2.BORDER_REPLICATE)
+    for marker_id in (0, 2):
+        marker = detect_markers(frame, CUBE.dictionary)[marker_id]
+        x0, y0 = np.floor(marker.corners.min(axis=0)).astype(int) - 6
+        x1, y1 = np.ceil(marker.corners.max(axis=0)).astype(int) + 6
+        patch = frame[y0:y1, x0:x1]
+        centre = marker.centre - (x0, y0)
+        shear = np.array([[1.0, 0.12, -0.12 * centre[1]], [0.0, 1.0, 0.0]])
+        bent[y0:y1, x0:x1] = cv2.warpAffine(patch, shear, patch.shape[1::-1], borderMode=cv2.BORDER_REPLICATE)
     measurer.carried.tracking.forget()
     result = measurer.measure(bent)
     assert result.marker_std_px > 0.5, result.marker_std_px
@@ -142,7 +144,8 @@ def test_loose_markers_widen_the_scale_std_and_say_so():
     weights = measurer.carried.weights.weights
     assert relative == pytest.approx(relative_area_std(weights.scale_variances, stds), rel=0.01)  # and carrying
     assert relative > 1.5 * relative_area_std(weights.scale_variances, np.full(4, 0.1))  # beside the calliper's
-    assert [w for w in result.warnings if w.startswith("markers located loosely")], result.warnings
+    said = [w for w in result.warnings if w.startswith("markers located loosely")]
+    assert said and "Af uncertain by 0.3" in said[0], result.warnings
     assert result.summary()["marker_std_px"] == result.marker_std_px
 
 
@@ -211,3 +214,16 @@ def test_three_markers_on_a_steeply_tilted_plane_are_refused_for_their_affine_sc
     assert sorted(detect_markers(frame, CUBE.dictionary)) == [0, 1, 3]
     with pytest.raises(TargetsError, match=r"not a square .*mistyped.*affine scale can follow.*fourth target"):
         AreaMeasurer(ENDOSCOPE, targets(), Classifier(threshold="otsu")).measure(frame)
+
+
+def test_without_a_calibration_the_lens_bends_the_markers_and_the_result_says_so():
+    """The endoscope's barrel lens left in the image (measured without a calibration, as the paper's uncorrected
+    column): its markers are no squares on the plane's fit, and the std read from them is many times what
+    the same frame idealized by the true camera gives; the warning names the missing calibration."""
+    frame = render_scene(ENDOSCOPE, CUBE, 0.7, None, roll_deg=4.0, seed=2)
+    raw = AreaMeasurer(None, targets(), Classifier(threshold="otsu")).measure(frame)
+    ideal = AreaMeasurer(ENDOSCOPE, targets(), Classifier(threshold="otsu")).measure(frame)
+    assert raw.marker_std_px > 5 * ideal.marker_std_px, (raw.marker_std_px, ideal.marker_std_px)
+    said = [w for w in raw.warnings if w.startswith("markers located loosely")]
+    assert said and "without a calibration, the lens's distortion bends them" in said[0], raw.warnings
+    assert not [w for w in ideal.warnings if w.startswith("markers located loosely")]

@@ -142,18 +142,17 @@ class AreaMeasurer:
         levels = levels_for(lit, wanted, light, carried.light)
         mask = self.classifier.mask(lit.band, weights.roi, lit.threshold)
         terms = area_terms(lit, weights, factor, carry_error, self.classifier, subpixel, self.threshold_delta, levels,
-                           weights.relative_calibration_std(mask), weights.relative_scale_std(located.scale))
+                           weights.relative_calibration_std(mask), located.scale)
         result = AreaResult(
             area_m2=terms.area, area_std_m2=terms.std, pixel_count=terms.count, threshold=lit.threshold,
             calibrated=self.camera is not None, scale=located.scale, scale_std_m2=terms.scale_std,
             threshold_std_m2=terms.threshold_std, missing_targets=list(located.missing), sweep=terms.sweep,
-            target_pixels=located.target_pixels, marker_std_px=located.marker_std_px,
-            weight_error_bound=weights.error_bound + carry_error,
+            target_pixels=located.target_pixels, weight_error_bound=weights.error_bound + carry_error,
             area_mode=self.area_mode, tone_curve=self.classifier.tone_curve, levels=terms.levels,
             subpixel_applied=terms.applied, discretisation_std_m2=terms.edge.discretisation,
             levels_std_m2=terms.edge.levels, plane_offset_std_m2=terms.offset_std,
             calibration_std_m2=terms.calibration_std, edge_length_px=terms.edge.length_px,
-            count_area_m2=terms.counted, flat_field=lit.flat)
+            count_area_m2=terms.counted, flat_field=lit.flat, marker_std_px=located.marker_std_px)
         if self.edge_trend is not None and terms.applied and terms.count:
             white = max(terms.levels.object, terms.levels.background)
             correction = edge_correction(self.edge_trend, white, self.classifier.object, mask, weights.roi,

@@ -21,6 +21,7 @@ import numpy as np
 
 from .classify import Classifier, Levels, to_light
 from .light_levels import LitFrame
+from .scale import PlaneScale, relative_area_std
 from .weights import Weights
 
 
@@ -62,12 +63,12 @@ def thresholds_read(threshold: float, delta: float, classifier: Classifier, subp
 
 def area_terms(lit: LitFrame, weights: Weights, factor: float, carried: float, classifier: Classifier,
                subpixel: bool, delta: float, levels: dict[float, Levels | None],
-               relative_calibration_std: float = 0.0, relative_scale_std: float | None = None) -> AreaTerms:
+               relative_calibration_std: float = 0.0, scale: PlaneScale | None = None) -> AreaTerms:
     """Af at the lit frame's threshold in sub-pixel mode (`subpixel`) or counted, its terms, and the sweep of
     thresholds `delta` apart; `carried` is the relative error of carrying the weights to this frame's fit;
     `levels` the levels at `thresholds_read`; `relative_calibration_std` the calibration's own over the
-    object's pixels (`Weights.relative_calibration_std`); `relative_scale_std` the targets' for this frame's fit
-    (`Weights.relative_scale_std`; by default the fit the weights were built with)."""
+    object's pixels (`Weights.relative_calibration_std`); `scale` this frame's fit, whose targets' localisation
+    stds the scale term takes (by default the fit the weights were built with)."""
     levels_at = levels.__getitem__
     # area (m²) and number of the ROI's pixels at every band value, from one 2-D histogram
     roi_area = lit.histogram @ weights.level_area * factor
@@ -137,8 +138,7 @@ def area_terms(lit: LitFrame, weights: Weights, factor: float, carried: float, c
         if np.hypot(edge.levels, threshold_std) > np.hypot(counting.discretisation, counting_threshold_std):
             applied, edge, area, threshold_std = False, counting, counted, counting_threshold_std
     sweep = [(float(level), measured(level)[0 if applied else 1]) for level in _sweep(threshold, delta)]
-    if relative_scale_std is None:
-        relative_scale_std = weights.relative_scale_std()
+    relative_scale_std = relative_area_std(weights.scale_variances, (scale or weights.scale).pixel_stds())
     scale_std = area * float(np.hypot(relative_scale_std, carried))  # carrying errs like the scale
     offset_std = area * weights.relative_offset_std
     calibration_std = area * relative_calibration_std

@@ -25,6 +25,7 @@ from .idealize import IdealView
 from .light_levels import INTERIOR_PX
 from .locate import Located
 from .markers import DetectedMarker
+from .scale import relative_area_std
 from .weights import Weights
 
 ROI_CUT_SHARE = 1e-3  # of the ROI without a pixel behind it: said (the remap's border is never counted)
@@ -40,9 +41,10 @@ BORDER_TOUCH_SHARE = 0.01  # object pixels on the ROI's border, as a share of th
 SWEEP_UNSETTLED = 0.02  # Af moving this much (relative) per sweep step around the threshold: no stable edge
 EDGE_ZONE = 0.15  # an edge's pixels: between the two levels' outer 15 % (noise stays out at any contrast)
 BLUR_RATIO = 2.0  # the object's edges this much (and a pixel) wider than the markers': blurred on its own
-# markers' centres measured to err more than this (px per coordinate; target_error): said, beside the std that
-# holds it. A real webcam's printed markers: median 0.17 px, one frame in ten past 0.45 (motion blur)
-LOOSE_MARKERS_PX = 0.5
+# the markers' measured localisation (target_error) alone making Af this uncertain (relative): said, beside the
+# std that holds it. Rendered: the endoscope's markers at 0.6 m at the 0.1 px floor 0.045 %, dim, noisy and
+# blurred ones (0.22 px) 0.10 %; a DSLR's blurred by 7 px at 0.7 m (0.9-1.5 px) 0.08-0.13 %
+LOOSE_MARKERS_SHARE = 0.0025
 DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
 # glare: pixels brighter than the brighter class's level by this share of the contrast (or this many of its
 # spreads, where noise is larger), over this share of the ROI. Real photos: a glossy print's sheen 0.6-1.1 % of
@@ -66,6 +68,14 @@ class CheckSettings:
     view: IdealView
     calibration_conditions: dict | None  # the calibration file's medium and distance
     calibration_uncertainty_known: bool = True  # the calibration records its uncertainty (it is in Af's std)
+
+
+def _loose_markers_share(located: Located, weights: Weights) -> float:
+    """Af's relative std from the markers' measured localisation alone (0 where it was not measured)."""
+    if located.marker_std_px is None:
+        return 0.0
+    markers = np.array([label.startswith("marker ") for label in located.labels])
+    return relative_area_std((weights.scale_variances[0], 0.0), np.where(markers, located.scale.pixel_stds(), 0.0))
 
 
 def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, band: np.ndarray, mask: np.ndarray,
@@ -235,10 +245,13 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
     if located.missing:
         said.append(f"targets missing: marker(s) {located.missing} not found; the scale comes from the others "
                     "and the ROI places the missing ones by their fit")
-    if located.marker_std_px is not None and located.marker_std_px > LOOSE_MARKERS_PX:
+    loose = _loose_markers_share(located, weights)
+    if loose > LOOSE_MARKERS_SHARE:
+        causes = "blur, noise, a dim or bent print" if settings.view.calibrated else (
+            "measured without a calibration, the lens's distortion bends them; or blur, noise, a dim or bent print")
         said.append(f"markers located loosely: their corners miss squares on the plane by {located.marker_std_px:.2f} "
-                    "px at their centres (blur, noise, a dim or bent print); the scale's std holds it, Af is less "
-                    "certain")
+                    f"px at their centres ({causes}), which alone makes Af uncertain by {100 * loose:.2f} % (in "
+                    "its std)")
     if weights.roi_cut_share > ROI_CUT_SHARE:
         reach = settings.view.camera.reach_px() if settings.view.camera is not None else None
         said.append(f"the ROI reaches beyond the image: {100 * weights.roi_cut_share:.1f} % of it has no pixel "
