@@ -17,7 +17,7 @@ from veg_area_ros.classify import Classifier
 from veg_area_ros.cli import main as veg_area
 from veg_area_ros.idealize import IdealView
 from veg_area_ros.markers import detect_markers, marker_centre
-from veg_area_ros.scale import relative_area_std
+from veg_area_ros.scale import PlaneScale, relative_area_std
 from veg_area_ros.sim.synthetic import ENDOSCOPE, SCENE_MARKERS, cube_scene, look_at_pose, render_scene
 from veg_area_ros.target_error import marker_centre_std
 from veg_area_ros.targets import TargetsError, TargetsSpec
@@ -68,12 +68,7 @@ def test_corner_noise_is_read_back_from_the_markers_squares(count, tilt, flip):
         for _ in range(300):
             corners, truths = noisy_markers(homography, centres, sigma, rng, rng.uniform(0, 90, count))
             found = np.array([marker_centre(c) for c in corners])
-            if count == 3:
-                to_plane = np.vstack([cv2.getAffineTransform(found.astype(np.float32), centres.astype(np.float32)),
-                                      [0, 0, 1]])
-            else:
-                to_plane = cv2.findHomography(found, centres, 0)[0]
-            estimates.append(marker_centre_std(corners, centres, to_plane))
+            estimates.append(marker_centre_std(corners, centres, PlaneScale.fit(found, centres).matrix))
             errors.append(found - truths)
         if sigma == 0:
             assert max(estimates) < 1e-4
@@ -197,8 +192,8 @@ def test_on_a_real_webcams_markers_the_measured_std_follows_their_error_against_
             error = found - truth
             error -= error.mean(axis=0)  # a shift of all four moves no area
             actual.append(np.sqrt(np.mean(np.square(error)) * 4 / 3))
-            to_plane = cv2.findHomography(found, planes, 0)[0]
-            measured.append(marker_centre_std(np.array([ideal[i] for i in four]), planes, to_plane))
+            measured.append(marker_centre_std(np.array([ideal[i] for i in four]), planes,
+                                              PlaneScale.fit(found, planes).matrix))
     assert len(actual) >= 150, len(actual)
     actual_rms, measured_rms = np.sqrt(np.mean(np.square(actual))), np.sqrt(np.mean(np.square(measured)))
     assert actual_rms > 2 * 0.1, actual_rms

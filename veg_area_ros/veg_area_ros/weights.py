@@ -131,7 +131,7 @@ class Weights:
     corners: np.ndarray  # ROI polygon corners (idealized px): where a homography's change is extreme
     centre: np.ndarray  # ROI centroid (idealized px)
     # the targets' share of Af's relative variance (per target per px² of localisation, and the calliper's),
-    # so that each frame's localisation std scales it (relative_scale_std)
+    # so that each frame's localisation stds scale it (scale.relative_area_std)
     scale_variances: tuple[np.ndarray, float]
     relative_offset_std: float  # relative std of Af from the object plane offset's uncertainty
     calibration: AreaSensitivity | None = None  # how the calibration's uncertainty moves the ROI's footprints
@@ -139,11 +139,6 @@ class Weights:
     marker_edge_px: float | None = None  # the printed markers' edge width in this layout (px)
     marker_edge_found: bool = False
     roi_cut_share: float = 0.0  # of the ROI polygon where the idealized image has no raw pixel (Region.in_ideal)
-
-    def relative_scale_std(self, scale: PlaneScale | None = None) -> float:
-        """Af's relative std from the targets, with `scale`'s localisation stds (a frame these weights are
-        carried to; by default the fit they were built with)."""
-        return relative_area_std(self.scale_variances, (scale or self.scale).pixel_stds())
 
     def border(self) -> np.ndarray:
         """The ROI's one-pixel border ring (its outline and the markers' holes), once per layout."""
@@ -312,7 +307,8 @@ class Weighting:
             points = np.vstack([weights.centre, weights.corners])
             ratio = located.scale.pixel_area(points) / weights.scale.pixel_area(points)
             uneven = float(np.max(np.abs(ratio / ratio[0] - 1)))
-            if uneven <= max(SCALE_TOLERANCE, CARRY_SHARE * weights.relative_scale_std(located.scale)):
+            scale_std = relative_area_std(weights.scale_variances, located.scale.pixel_stds())
+            if uneven <= max(SCALE_TOLERANCE, CARRY_SHARE * scale_std):
                 memory.carried = located.scale, (weights, float(ratio[0]), uneven)
                 return memory.carried[1]
         memory.weights = self._build(shape, located, memory)
