@@ -127,6 +127,34 @@ def test_only_motion_jpeg_comes_as_packets(tmp_path):
     assert [f.position for f in decoded(iter(frames))] == list(range(5))
 
 
+def test_decoded_frames_get_their_grey_without_a_pool_and_packets_still_decode_in_order():
+    """Frames decoded already (FFmpeg's, at a camera's size) are greyed in the reader's thread, no decoding
+    pool started; JPEG packets go to the pool. Either way, and with the kinds mixed in one run (inputs of two
+    sizes), the frames come in order with the grey a plain loop gives."""
+    rng = np.random.default_rng(5)
+    images = [rng.integers(0, 256, (48, 64, 3), dtype=np.uint8) for _ in range(6)]
+    as_frame = [Frame(f"f#{k}", image, time_s=k / 30, position=k) for k, image in enumerate(images)]
+    as_packet = [Packet(f"f#{k}", cv2.imencode(".jpg", image)[1], k / 30, k) for k, image in enumerate(images)]
+    plain = [decode_with_grey(item) for item in as_packet]
+    pools = []
+
+    def watched(items):
+        for frame in decoded(iter(items)):
+            pools.append(any(t.name.startswith("ordered-map") for t in threading.enumerate()))
+            yield frame
+
+    frames = list(watched(as_frame))
+    assert [f.position for f in frames] == list(range(6)) and not any(pools)
+    assert all(np.array_equal(f.grey, cv2.cvtColor(f.image, cv2.COLOR_BGR2GRAY)) for f in frames)
+    pools.clear()
+    assert all(np.array_equal(a.grey, b.grey) for a, b in zip(watched(as_packet), plain, strict=True))
+    assert any(pools)
+    mixed = [as_frame[0], as_packet[1], as_frame[2], as_packet[3]]
+    for order in (mixed, mixed[::-1]):
+        assert [f.position for f in decoded(iter(order))] == [item.position for item in order]
+    assert list(decoded(iter([]))) == []
+
+
 def bumped_camera_frames(count: int, bump_at: int, seed: int) -> list[np.ndarray]:
     """A steady camera's frames of the cube under 4 DN of fresh noise, bumped at frame `bump_at` (2.6 px right,
     1.3 px up)."""

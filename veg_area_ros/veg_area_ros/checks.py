@@ -153,18 +153,20 @@ def _exposure(raw_band: np.ndarray, mask: np.ndarray, weights: Weights, factor: 
     interior = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * INTERIOR_PX + 1,) * 2)
     object_is_bright = classifier.object != "dark"
     found = {"matters": False, "affected_area_m2": 0.0}
-    for side, clipped in (("highlights", raw_band >= CLIP_HIGH), ("shadows", raw_band <= CLIP_LOW)):
-        clipped = clipped.astype(np.uint8) * 255
-        if not cv2.countNonZero(clipped & weights.roi):
+    for side, clipped in (("highlights", cv2.compare(raw_band, CLIP_HIGH, cv2.CMP_GE)),
+                          ("shadows", cv2.compare(raw_band, CLIP_LOW, cv2.CMP_LE))):
+        if not cv2.countNonZero(cv2.bitwise_and(clipped, weights.roi)):
             continue
-        touched = edge & cv2.dilate(clipped, reach)
-        share = cv2.countNonZero(touched) / edges
+        touched = cv2.bitwise_and(edge, cv2.dilate(clipped, reach))
+        touched_count = cv2.countNonZero(touched)
+        share = touched_count / edges
         # the class on the clipped side: the background for a dark object's highlights
         clipped_is_object = object_is_bright == (side == "highlights")
         members = mask if clipped_is_object else cv2.subtract(weights.roi, mask)
         pure = cv2.erode(members, interior)
-        level_share = cv2.countNonZero(pure & clipped) / max(cv2.countNonZero(pure), 1)
-        area = weights.mask_area(touched, factor)[0]
+        level_share = cv2.countNonZero(cv2.bitwise_and(pure, clipped)) / max(cv2.countNonZero(pure), 1)
+        # a white background's noise clips far from any edge on most frames: nothing touched, no area to sum
+        area = weights.mask_area(touched, factor)[0] if touched_count else 0.0
         matters = share >= CLIP_EDGE_SHARE
         found[side] = {"edge_share": share, "level_share": level_share, "affected_area_m2": area,
                        "clipped_class": "object" if clipped_is_object else "background",
