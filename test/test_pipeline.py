@@ -155,6 +155,25 @@ def test_decoded_frames_get_their_grey_without_a_pool_and_packets_still_decode_i
     assert list(decoded(iter([]))) == []
 
 
+@pytest.mark.parametrize("kind", ["frame", "packet"])
+def test_stopping_a_decoded_run_early_closes_its_source(kind):
+    closed = threading.Event()
+    image = np.zeros((48, 64, 3), np.uint8)
+    jpeg = cv2.imencode(".jpg", image)[1]
+
+    def source():
+        try:
+            for k in range(10**9):
+                yield Frame(f"f#{k}", image, position=k) if kind == "frame" else Packet(f"f#{k}", jpeg, None, k)
+        finally:
+            closed.set()
+
+    for frame in decoded(source()):
+        if frame.position == 3:
+            break
+    assert closed.wait(5)
+
+
 def bumped_camera_frames(count: int, bump_at: int, seed: int) -> list[np.ndarray]:
     """A steady camera's frames of the cube under 4 DN of fresh noise, bumped at frame `bump_at` (2.6 px right,
     1.3 px up)."""

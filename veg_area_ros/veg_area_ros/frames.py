@@ -455,12 +455,24 @@ def decoded(items: Iterator[Frame | Packet], workers: int = 2) -> Iterator[Frame
     first = next(items, None)
     if first is None:
         return
-    items = itertools.chain([first], items)
     if not isinstance(first, Packet):
-        yield from prefetched(map(decode_with_grey, items), depth=3)
+        yield from prefetched(_then(first, items, decode_with_grey), depth=3)
         return
-    for _, frame in ordered_map(decode_with_grey, prefetched(items), workers=workers, ahead=2 * workers):
+    for _, frame in ordered_map(decode_with_grey, prefetched(_then(first, items)), workers=workers,
+                                ahead=2 * workers):
         yield frame
+
+
+def _then(first, rest: Iterator, convert=None) -> Iterator:
+    """`first`, then `rest`, each through `convert`; closing this closes `rest` (a video's capture released when
+    a run stops early)."""
+    try:
+        for item in itertools.chain([first], rest):
+            yield item if convert is None else convert(item)
+    finally:
+        close = getattr(rest, "close", None)
+        if close is not None:
+            close()
 
 
 def _greyed(frames: Iterator[Frame], grey: bool) -> Iterator[Frame]:
