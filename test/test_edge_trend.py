@@ -4,6 +4,8 @@ uncertainty in the std. The real photos' case is in test_real_photos.py."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from helpers import recorded_conditions
@@ -50,7 +52,14 @@ def test_a_clear_trend_is_learned_with_its_error_and_a_weak_or_narrow_one_is_not
     assert kept is not None and not kept.learned and kept.slope_px_per_dn == 0
     assert kept.scatter_px == pytest.approx(np.sqrt(np.var(flat_offsets, ddof=1) - 0.002**2))
     assert "beyond their reported std" in scattered.reason
-    assert kept.offset_px(300.0) == (0.0, kept.scatter_px, False)  # no trend: nothing moved, nothing outside
+    # no trend: nothing moved; within the views' whites their scatter alone, beyond them the slope the views
+    # could not rule out, over the distance, and said
+    assert kept.slope_std > 0
+    assert kept.offset_px(215.0) == (0.0, kept.scatter_px, False)
+    assert kept.offset_px(300.0) == (0.0, pytest.approx(np.hypot(kept.slope_std * 60, kept.scatter_px)), True)
+    assert EdgeTrend.from_dict(kept.as_dict()).slope_std == pytest.approx(kept.slope_std, abs=1e-6)
+    # a file written before the std was kept (0): as then, nothing grows, nothing is said
+    assert replace(kept, slope_std=0.0).offset_px(300.0) == (0.0, kept.scatter_px, False)
     assert EdgeTrend.from_dict(kept.as_dict()).scatter_px == pytest.approx(kept.scatter_px, abs=1e-4)
     narrow = fit_edge_trend(list(offsets), list(215 + 0.1 * (whites - 215)), "linear")
     assert narrow.trend is None and "too alike in exposure" in narrow.reason

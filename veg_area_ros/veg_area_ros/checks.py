@@ -291,8 +291,8 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
     if trend and trend.get("outside"):
         low, high = trend["range_dn"]
         said.append(f"exposure outside the calibration's: whites at {trend['white_dn']:.0f} DN, its views' "
-                    f"{low:.0f}-{high:.0f} DN; the edges' trend with exposure taken at the nearer end, its std for "
-                    "the whole distance")
+                    f"{low:.0f}-{high:.0f} DN; how the edges follow exposure is taken at the nearer end, its std "
+                    "grows with the distance")
     return said
 
 

@@ -44,8 +44,10 @@ LOCAL_VIEWS = 8  # a frame's nearest views in white level: their mean residual a
 class EdgeTrend:
     """How far the black side of an edge reaches (px, positive: the black grows) per DN of the white level,
     around `reference_dn` (the views' mean white level), learned in the `tone_curve` the views were read with;
-    where no trend was `learned`, the slope is 0. `scatter_px`: how far the views' edges scatter about it beyond
-    what their own reported std says (0 where their std covers it), a term of every frame's std."""
+    where no trend was `learned`, the slope is 0 and `slope_std` what the views could not rule out (a frame
+    beyond their whites takes it over the distance; 0 in files written before it was kept). `scatter_px`: how
+    far the views' edges scatter about it beyond what their own reported std says (0 where their std covers
+    it), a term of every frame's std."""
 
     slope_px_per_dn: float
     slope_std: float
@@ -102,14 +104,19 @@ class EdgeTrend:
         scatter and their mean residual's std."""
         low, high = self.range_dn
         inside = low <= white_dn <= high
-        offset, slope_part = 0.0, 0.0
+        taken = min(max(white_dn, low), high)
+        offset = 0.0
         if self.learned:
-            taken = min(max(white_dn, low), high)
             offset = self.slope_px_per_dn * (taken - self.reference_dn)
             slope_part = (self.slope_std * abs(white_dn - self.reference_dn)
                           + abs(self.slope_px_per_dn) * abs(white_dn - taken))
+        else:
+            # no trend within the views' whites (their scatter covers them); beyond them the edges may follow
+            # exposure as fast as the views could not rule out
+            slope_part = self.slope_std * abs(white_dn - taken)
         if not self.local:
-            return offset, math.hypot(slope_part, self.scatter_px), self.learned and not inside
+            extrapolated = not inside and (self.learned or self.slope_std > 0)
+            return offset, math.hypot(slope_part, self.scatter_px), extrapolated
         mean, mean_std, scatter = self.nearest_residuals(white_dn)
         return offset + mean, math.hypot(slope_part, scatter, mean_std), not inside
 
@@ -186,8 +193,8 @@ def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: 
         learned = abs(slope) > DECISIVE_SIGMA * slope_std
         reason = (f"the edges follow exposure: {described}" if learned else
                   f"not learned: the edges do not clearly follow exposure ({described})")
-    if not learned:
-        slope = slope_std = 0.0
+    if not learned:  # its std kept: how fast the edges may follow exposure beyond the views' whites
+        slope = 0.0
     design = np.column_stack([np.ones(n), gain])
     coef, *_ = np.linalg.lstsq(design, offsets - slope * (whites - centre), rcond=None)
     residual = offsets - slope * (whites - centre) - design @ coef

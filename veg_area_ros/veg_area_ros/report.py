@@ -212,11 +212,8 @@ def plot_edge_trend(tone, path: str | Path) -> Path:
     if choice is not None and choice.trend is not None:
         trend = choice.trend
         line = np.linspace(*trend.range_dn, 50)
-        middle = float(np.mean(offsets)) + trend.slope_px_per_dn * (line - trend.reference_dn)
-        spread = trend.slope_std * np.abs(line - trend.reference_dn)
-        if trend.local:  # what a frame at each white level is moved by, with its std
-            moved = np.array([trend.offset_px(float(white)) for white in line])
-            middle, spread = float(np.mean(offsets)) + moved[:, 0], moved[:, 1]
+        moved = np.array([trend.offset_px(float(white)) for white in line])  # a frame at each level: move, std
+        middle, spread = float(np.mean(offsets)) + moved[:, 0], moved[:, 1]
         label = "trend recorded, with the nearest views' residuals" if trend.local else "trend recorded"
         ax.plot(line, middle, "-", color="tab:orange", label=label)
         ax.fill_between(line, middle - spread, middle + spread, color="tab:orange", alpha=0.2, label="its ±1 std")
