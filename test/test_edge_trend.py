@@ -44,9 +44,16 @@ def test_a_clear_trend_is_learned_with_its_error_and_a_weak_or_narrow_one_is_not
     assert EdgeTrend.from_dict(trend.as_dict()) == EdgeTrend.from_dict(trend.as_dict())
     flat_offsets = list(0.05 + rng.normal(0, 0.01, whites.size))
     flat = fit_edge_trend(flat_offsets, list(whites), "linear")
-    assert flat.trend is None and "do not clearly follow" in flat.reason
-    # their std covers their scatter: nothing recorded; it does not: the scatter beyond it, as a std term
-    assert fit_edge_trend(flat_offsets, list(whites), "linear", [0.02] * whites.size).trend is None
+    assert "do not clearly follow" in flat.reason and "recorded for frames whiter or darker" in flat.reason
+    # nothing learned, no scatter: recorded only to bound frames beyond the views' whites (nothing moves within)
+    bound = flat.trend
+    assert bound is not None and not bound.learned and bound.scatter_px == 0 and not bound.local
+    assert bound.slope_px_per_dn == 0 and 0 < bound.slope_std < 0.001
+    assert bound.offset_px(200.0) == (0.0, 0.0, False)
+    assert bound.offset_px(260.0) == (0.0, pytest.approx(20 * bound.slope_std), True)
+    assert bound.offset_px(170.0)[2] and EdgeTrend.from_dict(bound.as_dict()).slope_std > 0
+    # their std covers their scatter: no scatter term; it does not: the scatter beyond it, as a std term
+    assert fit_edge_trend(flat_offsets, list(whites), "linear", [0.02] * whites.size).trend.scatter_px == 0
     scattered = fit_edge_trend(flat_offsets, list(whites), "linear", [0.002] * whites.size)
     kept = scattered.trend
     assert kept is not None and not kept.learned and kept.slope_px_per_dn == 0
@@ -161,7 +168,7 @@ def test_a_few_blurred_views_neither_hide_the_sharp_ones_scatter_nor_add_to_it()
     scatter = excess_scatter(residuals, stds, len(offsets) - 1)
     assert np.sum(residuals**2 / (np.square(stds) + scatter**2)) == pytest.approx(len(offsets) - 1, rel=1e-6)
     within = 0.7 * np.array(stds) * np.resize([1.0, -1.0], 15)  # each view 0.7 of its own std off
-    assert fit_edge_trend(list(within), whites, "linear", stds).trend is None
+    assert fit_edge_trend(list(within), whites, "linear", stds).trend.scatter_px == 0
     assert excess_scatter(within - within.mean(), stds, 14) == 0.0
 
 
@@ -257,5 +264,8 @@ def test_a_linear_cameras_views_at_many_exposures_teach_no_trend():
     offsets = [e.offset_px for e in choice.edges[choice.curve]]
     assert len(whites) >= 8 and max(whites) - min(whites) > 50, whites
     assert np.max(np.abs(offsets)) < 0.03, offsets
-    assert choice.edge_trend.trend is None and "do not clearly follow" in choice.edge_trend.reason
-    assert "edge_trend" not in choice.metadata() and "edge_trend_evidence" in choice.metadata()
+    assert not choice.edge_trend.trend.learned and "do not clearly follow" in choice.edge_trend.reason
+    assert not choice.as_dict()["edge_trend"]["learned"]
+    # recorded without a slope or scatter: a frame within the views' whites is not moved, one beyond is said
+    recorded = choice.metadata()["edge_trend"]
+    assert not recorded["learned"] and recorded["slope_px_per_dn"] == 0 and recorded["scatter_px"] == 0

@@ -163,7 +163,8 @@ class ToneChoice:
                 "slopes": {c: {k: round(float(v), 4) for k, v in s.items()} for c, s in self.slopes.items()},
                 "left_out": len(self.left_out),
                 "edge_trend": (None if self.edge_trend is None else
-                               {"learned": self.edge_trend.trend is not None, "reason": self.edge_trend.reason})}
+                               {"learned": self.edge_trend.trend is not None and self.edge_trend.trend.learned,
+                                "reason": self.edge_trend.reason})}
 
 
 def spread_by_size(cases: list[BoardCase], count: int = MAX_VIEWS) -> list[BoardCase]:
