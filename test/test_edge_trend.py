@@ -244,6 +244,20 @@ def test_the_correction_moves_af_by_the_offset_over_the_boundary_and_only_where_
                            calibration_conditions={"edge_trend": far.as_dict()}).measure(frame)
     assert outside.edge_trend["offset_px"] == pytest.approx(-0.04, abs=1e-4)
     assert any(w.startswith("exposure outside the calibration's") for w in outside.warnings), outside.warnings
+    # no trend, no scatter, only the slope the views could not rule out: within their whites Af and its std as
+    # without it, nothing said; whiter than every view by 20 DN, Af unmoved, its std grown by 20 slope stds, said
+    for centre, grown in ((white, False), (white - 40, True)):
+        bound = EdgeTrend(0.0, 0.002, centre, (centre - 20, centre + 20), 8, 0.01, "linear", False)
+        bounded = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120),
+                               calibration_conditions={**recorded_conditions(ENDOSCOPE, "air"),
+                                                       "edge_trend": bound.as_dict()}).measure(frame)
+        assert bounded.area_m2 == plain.area_m2 and not bounded.edge_trend["applied"]
+        said = any(w.startswith("exposure outside the calibration's") for w in bounded.warnings)
+        assert said == grown and bounded.edge_trend["outside"] == grown, bounded.warnings
+        beyond = white - bounded.edge_trend["range_dn"][1]  # the file keeps the range to 0.1 DN
+        expected = 0.002 * beyond * shift["boundary_px"] * metres_per_px2 if grown else 0.0
+        assert bounded.edge_trend_std_m2 == pytest.approx(expected, rel=1e-3, abs=1e-15)
+        assert bounded.area_std_m2 == pytest.approx(np.hypot(plain.area_std_m2, expected))
 
 
 def test_a_linear_cameras_views_at_many_exposures_teach_no_trend():
