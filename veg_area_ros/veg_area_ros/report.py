@@ -214,7 +214,8 @@ def plot_edge_trend(tone, path: str | Path) -> Path:
         line = np.linspace(*trend.range_dn, 50)
         moved = np.array([trend.offset_px(float(white)) for white in line])  # a frame at each level: move, std
         middle, spread = float(np.mean(offsets)) + moved[:, 0], moved[:, 1]
-        label = "trend recorded, with the nearest views' residuals" if trend.local else "trend recorded"
+        label = ("trend recorded, with the nearest views' residuals" if trend.local else
+                 "trend recorded" if trend.learned else "no trend learned: nothing moved")
         ax.plot(line, middle, "-", color="tab:orange", label=label)
         ax.fill_between(line, middle - spread, middle + spread, color="tab:orange", alpha=0.2, label="its ±1 std")
     ax.axhline(0, color="grey", lw=0.8)
