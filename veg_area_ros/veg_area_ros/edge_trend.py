@@ -205,17 +205,16 @@ def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: 
         reason += (f"; the views' edges scatter {math.sqrt(variance):.3f} px about it, {scatter:.3f} px beyond "
                    "their reported std: a term of every frame's std")
     gain_part = tuple(float(v) for v in gain[:, 0] * coef[1]) if gain.size else ()
-    if not learned and scatter == 0:
+    bound_only = not learned and scatter == 0
+    if bound_only:
         if slope_std == 0:  # too few or too alike views to bound a slope: nothing to record
             return TrendChoice(None, reason, gain_part)
         # nothing moves a frame within the views' whites; recorded so that a frame beyond them takes the slope's
         # std over the distance and is said to lie outside
         reason += (f"; recorded for frames whiter or darker than the views ({reach[0]:.0f}-{reach[1]:.0f} DN): "
                    "their std grows with the distance")
-        return TrendChoice(EdgeTrend(0.0, slope_std, centre, reach, n, math.sqrt(variance), tone_curve, False),
-                           reason, gain_part)
     residuals = ()
-    if stds_px is not None and len(stds_px) == n and n >= LOCAL_MIN_VIEWS:
+    if not bound_only and stds_px is not None and len(stds_px) == n and n >= LOCAL_MIN_VIEWS:
         residuals = tuple(sorted(zip(whites.tolist(), residual.tolist(), (float(s) for s in stds_px), strict=True)))
         reason += (f"; each frame also takes the residuals of the {LOCAL_VIEWS} views nearest its white level "
                    f"({n} views measured)")
