@@ -390,7 +390,8 @@ def test_recording_starts_and_stops_from_the_page(console):
     assert "MB" in console["recording_text"]
     assert "closed" in console["steps"]["record_stop"], console["recorder_log"]
     counts = console["bag_counts"]
-    assert counts.get("/image_raw", 0) > 5 and counts.get("/projected_area", 0) > 5, counts
+    assert counts.get("/image_raw", 0) > 5 and counts.get("/projected_area", 0) > 5, \
+        (counts, console["results_while_recording"])
 
 
 @needs_browser
