@@ -29,6 +29,21 @@ def test_bad_specs_say_what_is_wrong(text):
     assert text.split(":")[0] in str(info.value) or "board" in str(info.value)
 
 
+@pytest.mark.parametrize("text,words", [
+    ("chessboard:9x6:25", "millimetres given as metres"),  # a 25 mm square typed as 25
+    ("charuco:5x7:40:30:DICT_4X4_50", "millimetres given as metres"),
+    ("circles:4x11:20", "millimetres given as metres"),
+    ("chessboard:9x6:0.0001", "smaller than a board"),
+])
+def test_a_board_size_in_the_wrong_unit_is_refused(text, words):
+    with pytest.raises(BoardSpecError, match=words):
+        BoardSpec.parse(text)
+    # the same boards in metres pass, and so does OpenCV's sample board with its unpublished square as 1
+    BoardSpec.parse(text.replace(":25", ":0.025").replace(":40:30:", ":0.04:0.03:").replace(":20", ":0.02")
+                    .replace("0.0001", "0.001"))
+    BoardSpec.parse("chessboard:9x6:1")
+
+
 @pytest.mark.parametrize("spec,tolerance", [
     ("chessboard:9x6:0.03", 0.1),
     ("charuco:7x5:0.04:0.03:DICT_4X4_50", 0.15),

@@ -192,3 +192,26 @@ def test_a_unit_slip_in_the_runs_is_refused_with_the_likely_unit(tmp_path, slip,
     assert not (tmp_path / "runs.vogel.png").exists()
     write(columns)
     assert run_cli("vogel", str(table), "--json").returncode == 0
+
+
+def test_a_spreadsheet_table_in_a_decimal_comma_locale_is_read_and_empty_cells_are_named(tmp_path):
+    """Excel in a decimal-comma locale saves ';'-separated rows with 0,25: read as the same numbers (before:
+    "needs columns ...; it has 'velocity_m_s;force_n;area_m2', None"). An empty cell was read as 0 and blamed
+    on units; it is named. A --plot that is not a .png is refused (it was written as a PNG named 'none')."""
+    velocity = [0.1, 0.2, 0.3, 0.45]
+    rows = [(u, 0.5 * WATER_DENSITY * u**2 * 0.01 * 1.1, 0.01) for u in velocity]
+    comma = tmp_path / "runs.csv"
+    comma.write_text("velocity_m_s,force_n,area_m2\n" + "".join(f"{u},{f},{a}\n" for u, f, a in rows))
+    expected = json.loads(run_cli("vogel", str(comma), "--json").stdout)["per_run"]
+    for name, separator in (("semicolon.csv", ";"), ("tabs.tsv", "\t")):
+        table = tmp_path / name
+        table.write_text(separator.join(("velocity_m_s", "force_n", "area_m2")) + "\n" + "".join(
+            separator.join(f"{v!r}".replace(".", ",") for v in row) + "\n" for row in rows), encoding="utf-8-sig")
+        done = run_cli("vogel", str(table), "--json")
+        assert done.returncode == 0, done.stderr
+        assert [r["cd"] for r in json.loads(done.stdout)["per_run"]] == pytest.approx([r["cd"] for r in expected])
+    comma.write_text("velocity_m_s,force_n,area_m2\n0.1,0.06,0.01\n0.2,,0.01\n0.3,0.5,0.01\n")
+    empty = run_cli("vogel", str(comma))
+    assert empty.returncode == 1 and "line 3: no force_n (an empty cell)" in empty.stderr, empty.stderr
+    wrong = run_cli("vogel", str(tmp_path / "semicolon.csv"), "--plot", str(tmp_path / "none"))
+    assert wrong.returncode == 2 and "ending in .png" in wrong.stderr and not (tmp_path / "none").exists()

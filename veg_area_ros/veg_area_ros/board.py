@@ -16,6 +16,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .targets import MAX_TARGET_SPAN_M, MIN_TARGET_SPAN_M
+
 KINDS = ("chessboard", "charuco", "circles")
 
 
@@ -81,7 +83,14 @@ class BoardSpec:
                 raise BoardSpecError(f"unknown ArUco dictionary {parts[4]!r} in {text!r}")
             if not 0 < marker < square:
                 raise BoardSpecError(f"the marker must be smaller than the square in {text!r}")
-        return cls(kind, cols, rows, square, marker, dictionary, symmetric)
+        spec = cls(kind, cols, rows, square, marker, dictionary, symmetric)
+        span = float(np.max(np.ptp(spec.object_points()[:, :2], axis=0)))
+        if not MIN_TARGET_SPAN_M <= span <= MAX_TARGET_SPAN_M:  # the same range as targets: the board scales them
+            raise BoardSpecError(
+                f"board {text!r} spans {span:.3g} m; sizes are in metres ({MIN_TARGET_SPAN_M * 1000:g} mm to "
+                f"{MAX_TARGET_SPAN_M:g} m): " + ("millimetres given as metres?" if span > MAX_TARGET_SPAN_M
+                                                 else "smaller than a board a camera resolves"))
+        return spec
 
     def __str__(self) -> str:
         if self.kind == "charuco":

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import bisect
 import csv
+import io
 import math
+import re
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -198,15 +200,31 @@ def read_table(path: str | Path) -> list[dict]:
         raise DragError(f"{path}: {special}")
     try:
         with path.open(newline="", encoding="utf-8-sig") as handle:
-            rows = list(csv.DictReader(handle))
+            text = handle.read()
     except OSError as exc:
         raise DragError(f"{path}: cannot read ({exc.strerror})") from exc
     except UnicodeDecodeError as exc:  # a spreadsheet's "CSV" in a legacy code page
         raise DragError(f"{path}: not UTF-8 text (byte {exc.start}); save it as 'CSV UTF-8'") from exc
+    rows = _table_rows(text)
     needed = {"velocity_m_s", "force_n", "area_m2"}
     if not rows or not needed <= set(rows[0]):
-        has = f"it has {', '.join(repr(c) for c in rows[0])}" if rows else "it has no data row"
+        has = f"it has {', '.join(repr(c) for c in rows[0] if c is not None)}" if rows else "it has no data row"
         raise DragError(f"{path}: needs columns {', '.join(sorted(needed))}; {has}")
+    return rows
+
+
+DECIMAL_COMMA = re.compile(r"[-+]?\d*,\d+([eE][-+]?\d+)?")
+
+
+def _table_rows(text: str) -> list[dict]:
+    """A table's rows as comma-separated, or as a spreadsheet in a decimal-comma locale saves it: separated by
+    ';' (or tabs), with numbers such as 0,25."""
+    header = text.splitlines()[0] if text.strip() else ""
+    delimiter = max((",", ";", "\t"), key=header.count)
+    rows = list(csv.DictReader(io.StringIO(text, newline=""), delimiter=delimiter))
+    if delimiter != ",":
+        rows = [{key: (value.replace(",", ".") if isinstance(value, str) and DECIMAL_COMMA.fullmatch(value.strip())
+                       else value) for key, value in row.items()} for row in rows]
     return rows
 
 
@@ -224,6 +242,9 @@ def run_table(rows: list[dict], density: float = WATER_DENSITY, source: str = "r
     table = []
     for line, row in enumerate(rows, 2):
         try:
+            empty = [key for key in ("velocity_m_s", "force_n", "area_m2") if row.get(key) is None or str(row[key]).strip() == ""]
+            if empty:
+                raise DragError(f"no {' and no '.join(empty)} (an empty cell): fill it in or delete the run")
             values = {key: float(row.get(key) or 0.0) for key in ("velocity_m_s", "force_n", "area_m2",
                                                                  "velocity_std_m_s", "force_std_n", "area_std_m2")}
             rho = float(row.get("density") or density)

@@ -210,6 +210,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                   [*job.inputs, job.calibration if job.calibration.lower() not in ("none", "bag") else None,
                    job.targets, job.background], "measured")
     single_overlay = job.overlay and Path(job.overlay).suffix.lower() in IMAGE_SUFFIXES
+    if job.idealized and Path(job.idealized).suffix.lower() in IMAGE_SUFFIXES and not Path(job.idealized).is_dir():
+        raise CliError(f"--idealized {job.idealized} names an image, but it is a folder: the idealized frames and "
+                       "their camera (ideal_camera.yaml) are written into it; give a folder name", EXIT_USAGE)
     sources = [*job.inputs, *files, job.calibration if job.calibration.lower() not in ("none", "bag") else None,
                job.targets, job.background]
     if csv_path is not None and csv_path.suffix.lower() == ".png":
