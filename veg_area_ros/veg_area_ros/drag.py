@@ -242,7 +242,8 @@ def run_table(rows: list[dict], density: float = WATER_DENSITY, source: str = "r
     table = []
     for line, row in enumerate(rows, 2):
         try:
-            empty = [key for key in ("velocity_m_s", "force_n", "area_m2") if row.get(key) is None or str(row[key]).strip() == ""]
+            empty = [key for key in ("velocity_m_s", "force_n", "area_m2")
+                     if row.get(key) is None or str(row[key]).strip() == ""]
             if empty:
                 raise DragError(f"no {' and no '.join(empty)} (an empty cell): fill it in or delete the run")
             values = {key: float(row.get(key) or 0.0) for key in ("velocity_m_s", "force_n", "area_m2",

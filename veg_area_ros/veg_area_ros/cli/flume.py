@@ -47,10 +47,10 @@ def cmd_vogel(args: argparse.Namespace) -> int:
     bags = [Path(i) for i in args.inputs if is_bag(Path(i))]
     if (bags and len(bags) != len(args.inputs)) or (not bags and len(args.inputs) != 1):
         raise CliError("give one experiment table (CSV), or rosbag2 bags (one run each)", EXIT_USAGE)
-    if args.plot is not None and Path(args.plot).suffix.lower() != ".png":  # it is drawn as PNG whatever the name
-        raise CliError(f"--plot {args.plot}: the plot is a PNG image; give a name ending in .png", EXIT_USAGE)
     plot = Path(args.plot) if args.plot else Path(args.inputs[0].rstrip("/")).with_suffix(".vogel.png")
     check_outputs([("--plot", str(plot), True)], args.inputs, "fitted")
+    if args.plot is not None and Path(args.plot).suffix.lower() != ".png":  # it is drawn as PNG whatever the name
+        raise CliError(f"--plot {args.plot}: the plot is a PNG image; give a name ending in .png", EXIT_USAGE)
     check_writable([("--plot", plot, False)], "fitted")
     try:
         if bags:
