@@ -16,7 +16,14 @@ import cv2
 import numpy as np
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, no options
-CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1}
+# bytes per pixel of each 8-bit encoding of sensor_msgs/image_encodings (8UC1/8UC3 read as cv_bridge reads them)
+CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1, "8UC1": 1, "8UC3": 3, "bgra8": 4, "rgba8": 4, "8UC4": 4,
+            "bayer_rggb8": 1, "bayer_bggr8": 1, "bayer_gbrg8": 1, "bayer_grbg8": 1, "yuv422": 2, "yuv422_yuy2": 2}
+# to BGR; OpenCV names a Bayer pattern by its second row's second and third pixels, ROS by the first two rows'
+TO_BGR = {"rgb8": cv2.COLOR_RGB2BGR, "bgra8": cv2.COLOR_BGRA2BGR, "8UC4": cv2.COLOR_BGRA2BGR,
+          "rgba8": cv2.COLOR_RGBA2BGR, "bayer_rggb8": cv2.COLOR_BayerBG2BGR, "bayer_bggr8": cv2.COLOR_BayerRG2BGR,
+          "bayer_gbrg8": cv2.COLOR_BayerGR2BGR, "bayer_grbg8": cv2.COLOR_BayerGB2BGR,
+          "yuv422": cv2.COLOR_YUV2BGR_UYVY, "yuv422_yuy2": cv2.COLOR_YUV2BGR_YUY2}
 
 
 class ImageMessageError(ValueError):
@@ -67,10 +74,15 @@ def unstamped(buffer) -> bytes:
 
 def frame_pixels(data, height: int, width: int, encoding: str, step: int) -> np.ndarray:
     """A BGR (H, W, 3) or grey (H, W) uint8 frame from an Image's fields: a view of `data` when the rows are
-    packed bgr8/mono8 (no copy), a copy for rgb8 or padded rows. ImageMessageError says what is wrong."""
+    packed bgr8/mono8 (no copy), a converted copy for the other 8-bit encodings (RGB, with alpha, a camera's raw
+    Bayer mosaic, YUV 4:2:2) or padded rows. ImageMessageError says what is wrong."""
     channels = CHANNELS.get(encoding)
     if channels is None:
-        raise ImageMessageError(f"encoding {encoding!r} is not supported (use {', '.join(CHANNELS)})")
+        depth = " (16-bit and float images are not measured: publish an 8-bit encoding)" \
+            if any(mark in encoding for mark in ("16", "32", "64")) else ""
+        raise ImageMessageError(f"encoding {encoding!r} is not supported{depth}; these are: {', '.join(CHANNELS)}")
+    if encoding.startswith("yuv422") and width % 2:
+        raise ImageMessageError(f"a {encoding} image needs an even width, not {width}")
     if width == 0 or height == 0:
         raise ImageMessageError(f"empty image ({width}x{height})")
     if step < width * channels:
@@ -79,9 +91,11 @@ def frame_pixels(data, height: int, width: int, encoding: str, step: int) -> np.
     if data.size != step * height:
         raise ImageMessageError(f"data holds {data.size} bytes, {height} rows of step {step} need {step * height}")
     rows = data.reshape(height, step)[:, : width * channels]
-    image = rows.reshape(height, width, channels) if channels == 3 else rows
-    if encoding == "rgb8":
-        image = image[..., ::-1]
+    image = rows.reshape(height, width, channels) if channels in (3, 4) else rows
+    if encoding.startswith("yuv422"):
+        image = rows.reshape(height, width, 2)
+    if encoding in TO_BGR:
+        return cv2.cvtColor(np.ascontiguousarray(image), TO_BGR[encoding])
     return np.ascontiguousarray(image)
 
 
