@@ -572,3 +572,44 @@ def test_a_calibration_report_on_a_full_disk_is_said(tmp_path):
                            "--output full/left.yaml", "--report full/report")
     assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
     assert "could not be written (No space left on device, a full disk?)" in done.stderr, done.stderr
+
+
+def test_a_scientific_cameras_16_bit_files_are_read_at_the_depth_their_values_use(tmp_path):
+    """A 12-bit camera's frame saved as a 16-bit PNG or TIFF (values up to 4095) was read as 16-bit data: 16 grey
+    levels, 'clipped shadows' on every edge and a std 20x too large; a 10-bit one found no targets. Each is read
+    at its depth (the low bits below 8 significant ones dropped, as OpenCV drops them from 16-bit data), gives
+    the 8-bit frame's Af exactly and says the assumed depth in its row; a full 16-bit file is read as before,
+    without a word; a floating-point file is refused with its reason."""
+    write_calibration(tmp_path / "camera.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7, noise_sigma=2)
+    rng = np.random.default_rng(3)
+    files = {"eight.png": frame}
+    for bits, suffix in ((10, "png"), (12, "tif"), (14, "png"), (16, "png")):
+        extra = rng.integers(0, 2 ** (bits - 8), frame.shape)  # the camera's finer levels below the 8 kept
+        files[f"depth{bits}.{suffix}"] = (frame.astype(np.uint16) << (bits - 8)) + extra.astype(np.uint16)
+    files["float.tif"] = frame.astype(np.float32) / 255
+    for name, image in files.items():
+        assert cv2.imwrite(str(tmp_path / name), image)
+    rows = {}
+    for name in files:
+        done = run_cli("measure", name, "--calibration", "camera.yaml", "--targets", "targets.yaml", "--json",
+                       "--csv", f"{name}.csv", cwd=tmp_path)
+        rows[name] = ([json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")], done)
+    reference = rows["eight.png"][0][0]
+    for bits, name in ((10, "depth10.png"), (12, "depth12.tif"), (14, "depth14.png"), (16, "depth16.png")):
+        (row,), done = rows[name]
+        assert done.returncode == 0, done.stderr
+        assert row["area_m2"] == reference["area_m2"] and row["area_std_m2"] == reference["area_std_m2"], name
+        said = f"16-bit image read as {bits}-bit data"
+        warnings = " ".join(row["warnings"])
+        assert (said in warnings) == (bits < 16), (name, warnings)
+        assert "clipped shadows" not in warnings
+    _, done = rows["float.tif"]
+    assert done.returncode == 1 and "floating point" in done.stderr and "save it with 8 or 16 bits" in done.stderr
+    # a grey reading (what a board's detection takes) judges the depth on the colours: the same picture
+    from veg_area_ros.frames import read_image
+
+    colour, _ = read_image(tmp_path / "depth12.tif")
+    grey, _ = read_image(tmp_path / "depth12.tif", grey=True)
+    assert np.array_equal(grey, cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY)) and np.array_equal(colour, frame)

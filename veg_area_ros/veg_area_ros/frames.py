@@ -42,6 +42,7 @@ class Frame:
     grey: np.ndarray | None = None  # a colour image in grey, where made beside the decoding (`with_grey`)
     camera_info_problem: str = ""  # a bag frame's: why its camera's camera_info is not given (another camera's)
     camera_metadata: str | None = None  # a bag frame's camera_info/metadata recorded beside its camera_info
+    notes: tuple[str, ...] = ()  # what reading it assumed (a 16-bit file's depth), for the result's warnings
 
     def __post_init__(self) -> None:
         if self.image is None and self.lost == 0:
@@ -90,10 +91,30 @@ def header_size(data: bytes) -> tuple[int, int] | None:
     return None
 
 
-def read_image(path: Path, grey: bool = False) -> tuple[np.ndarray | None, str]:
+SENSOR_DEPTHS = (10, 12, 14, 16)  # bits a camera's 16-bit file may hold
+
+
+def to_8_bit(image: np.ndarray) -> tuple[np.ndarray, str]:
+    """A 16-bit image as 8 bits, and what was assumed ('' when nothing was). A scientific camera's 10-, 12- or
+    14-bit values in a 16-bit file read as 16-bit data leave 4 to 64 grey levels (a 12-bit frame read as
+    'clipped shadows' throughout, a 10-bit one found no targets): the depth is the smallest of SENSOR_DEPTHS
+    that holds the largest value, said in the note unless it is 16 (read as OpenCV and cv_bridge read it)."""
+    if image.dtype == np.uint8:
+        return image, ""
+    top = int(image.max())
+    depth = 8 if top < 256 else next(d for d in SENSOR_DEPTHS if top < 2**d)
+    scaled = (image >> (depth - 8)).astype(np.uint8)  # the low bits dropped, as OpenCV's own 16-to-8 bits
+    if depth == 16:
+        return scaled, ""
+    return scaled, (f"16-bit image read as {depth}-bit data: its values reach {top}, so each is divided by "
+                    f"{2 ** (depth - 8)} (not 256); a darker frame of the same camera would be read brighter")
+
+
+def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -> tuple[np.ndarray | None, str]:
     """Decode an image file (`grey`: to one channel, which for a JPEG skips its colour entirely); a truncated
     JPEG is refused rather than measured half-grey, and a header that declares an absurd size is refused
-    before decoding; a device or pipe is refused unread."""
+    before decoding; a device or pipe is refused unread. A 16-bit file is read at the depth its values use
+    (`to_8_bit`), what was assumed appended to `notes`; a floating-point one is refused."""
     problem = special_file(path)
     if problem:
         return None, problem
@@ -112,8 +133,19 @@ def read_image(path: Path, grey: bool = False) -> tuple[np.ndarray | None, str]:
             return None, f"is {width}x{height} pixels, too small to hold a board or targets"
     mode = cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR
     if data[:2] != JPEG_START:
-        image = cv2.imdecode(np.frombuffer(data, np.uint8), mode)
-        return (None, "is not an image OpenCV can decode") if image is None else (image, "")
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), mode | cv2.IMREAD_ANYDEPTH)
+        if image is None:
+            return None, "is not an image OpenCV can decode"
+        if image.dtype == np.uint8:
+            return image, ""
+        if image.dtype != np.uint16:
+            return None, f"is a {image.dtype} image (floating point); save it with 8 or 16 bits per channel"
+        if grey:  # the depth judged on the colours, as a colour reading of the same file judges it
+            image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH)
+        image, note = to_8_bit(image)
+        if note and notes is not None:
+            notes.append(note)
+        return (cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if grey else image), ""
     if not data.rstrip(b"\0\r\n ").endswith(b"\xff\xd9"):
         return None, "is a truncated JPEG (no end-of-image marker)"
     problem = jpeg_structure_problem(data)
@@ -408,13 +440,15 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
         elif suffix in VIDEO_SUFFIXES:
             yield from _greyed(iter_video(path, video_step, start, stop, spread, encoded), grey)
         elif suffix in IMAGE_SUFFIXES:
-            image, problem = read_image(path, grey)
-            yield Frame(shown_name(path), image, problem)
+            notes: list[str] = []
+            image, problem = read_image(path, grey, notes)
+            yield Frame(shown_name(path), image, problem, notes=tuple(notes))
         else:
             # unknown extension: try as an image, then as a video, before giving up
-            image, problem = read_image(path, grey)
+            notes = []
+            image, problem = read_image(path, grey, notes)
             if image is not None:
-                yield Frame(shown_name(path), image)
+                yield Frame(shown_name(path), image, notes=tuple(notes))
             elif video_frame_count(path) > 0:
                 yield from _greyed(iter_video(path, video_step), grey)
             else:

@@ -245,9 +245,12 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     if job.background:
         from ..frames import read_image
 
-        background, problem = read_image(Path(job.background))
+        background_notes: list[str] = []
+        background, problem = read_image(Path(job.background), notes=background_notes)
         if background is None:
             raise CliError(f"--background {job.background}: {problem}", EXIT_USAGE)
+        for note in background_notes:
+            say(f"--background {job.background}: {note}")
 
     def new_measurer(camera, recorded_conditions: dict | None = None):
         try:  # the exact port model for frames of the port file's camera, not its plumb_bob stand-in
@@ -351,6 +354,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                         measurer = new_measurer(camera, bag_conditions(camera, recorded_metadata))
                 result = measurer.measure(frame.image, keep_images=bool(job.overlay or job.idealized),
                                           grey=frame.grey)
+                result.warnings.extend(frame.notes)
                 if frame.name.rsplit("#", 1)[0] in other_camera:
                     result.warnings.append(other_camera[frame.name.rsplit("#", 1)[0]])
             except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
