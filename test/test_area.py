@@ -191,5 +191,14 @@ def test_classifier_settings_and_empty_roi_are_refused():
             Classifier(**bad)
     with pytest.raises(ClassifyError, match="empty"):
         polygon_roi((480, 640), np.array([[10, 10], [10, 10], [10, 10]]))
+    # corners out of order (a figure-eight): was 'empty' when its lobes cancelled, and measured one lobe's
+    # outline against both lobes' pixels when they did not
+    for crossed in ([[100, 100], [500, 400], [500, 100], [100, 400]], [[100, 100], [300, 300], [300, 100], [100, 200]]):
+        with pytest.raises(ClassifyError, match=r"edges cross .*in order around the region"):
+            polygon_roi((480, 640), np.array(crossed, float))
+    in_order = polygon_roi((480, 640), np.array([[100, 100], [500, 100], [500, 400], [100, 400]], float))
+    assert int(np.count_nonzero(in_order)) == 400 * 300
+    touching = np.array([[0, 0], [10, 0], [10, 10], [5, 0.0001], [0, 10]], float)  # a notch, no crossing
+    assert polygon_roi((480, 640), touching).any()
     with pytest.raises(ClassifyError, match="colour"):
         Classifier(object="green").index_image(np.zeros((4, 4), np.uint8))

@@ -392,8 +392,37 @@ def check_polygon(polygon) -> np.ndarray:
             raise ClassifyError("the region of interest's corners all lie within 1 px of the origin: they look "
                                 "like fractions of the image, and a region of interest is in pixels (of the "
                                 "idealized image)")
-        raise ClassifyError("the region of interest is empty (its corners enclose less than one pixel)")
+        crossing = crossing_edges(polygon) if np.all(np.isfinite(polygon)) else None
+        if crossing is None:
+            raise ClassifyError("the region of interest is empty (its corners enclose less than one pixel)")
+    crossing = crossing_edges(polygon)
+    if crossing is not None:  # its outline and the pixels filled inside it would disagree on what is inside
+        first, second = crossing
+        raise ClassifyError(f"the region of interest's edges cross (edge {first + 1} and edge {second + 1} of "
+                            f"{len(polygon)}): give its corners in order around the region")
     return polygon
+
+
+def crossing_edges(polygon: np.ndarray) -> tuple[int, int] | None:
+    """The first two edges of a closed polygon that cross each other (indices, edge k runs from corner k to
+    k + 1), or None: edges that only touch, or neighbours sharing a corner, do not count."""
+    start = polygon
+    end = np.roll(polygon, -1, axis=0)
+    count = len(polygon)
+
+    def side(a, b, c):  # the sign of c's side of the line a -> b, for every pair at once
+        along, to = b - a, c - a
+        return np.sign(along[..., 0] * to[..., 1] - along[..., 1] * to[..., 0])
+
+    p, q = start[:, None], end[:, None]
+    r, t = start[None, :], end[None, :]
+    crosses = (side(p, q, r) * side(p, q, t) < 0) & (side(r, t, p) * side(r, t, q) < 0)
+    index = np.arange(count)
+    apart = np.abs(index[:, None] - index[None, :])
+    neighbours = (apart <= 1) | (apart == count - 1)
+    crosses &= ~neighbours & (index[:, None] < index[None, :])
+    found = np.argwhere(crosses)
+    return (int(found[0][0]), int(found[0][1])) if len(found) else None
 
 
 def _clip(polygon: np.ndarray, axis: int, limit: float, keep_below: bool) -> np.ndarray:
