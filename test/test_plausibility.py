@@ -422,6 +422,18 @@ def test_a_video_whose_name_is_not_utf8_is_measured(tmp_path):
     rows = list(csv.DictReader((tmp_path / os.fsdecode(b"run\xff_area.csv")).open(encoding="utf-8")))
     assert [row["frame"] for row in rows] == ["run\ufffd.avi#0", "run\ufffd.avi#1", "run\ufffd.avi#2"]
     assert (tmp_path / os.fsdecode(b"run\xff_area.png")).stat().st_size > 1000
+    # in a batch, whose summary names each input (a traceback after the work before), and on a terminal whose
+    # encoding has no '±' or 'm²' (an ASCII locale: a traceback at the first result line before)
+    cv2.imwrite(str(tmp_path / "still.png"), frame)
+    for environment in ({}, {"LC_ALL": "C", "PYTHONUTF8": "0"}):
+        done = subprocess.run([sys.executable, "-m", "veg_area_ros.cli", "measure", odd, "still.png",
+                               "--calibration", "cal.yaml", "--targets", "targets.yaml", "--threshold", "120",
+                               "--output-dir", "batch"], cwd=tmp_path, capture_output=True, timeout=300,
+                              env={**os.environ, "PYTHONPATH": str(SOURCE), **environment})
+        assert done.returncode == 0 and b"Traceback" not in done.stderr, done.stderr
+        summary = list(csv.DictReader((tmp_path / "batch" / "batch_summary.csv").open(encoding="utf-8")))
+        assert [row["input"] for row in summary] == ["run\ufffd.avi", "still.png"], summary
+        assert b"still.png: Af = " in done.stdout
 
 
 @pytest.mark.parametrize("points, said", [

@@ -118,6 +118,12 @@ def _replacing(path: Path, tmp: str) -> Iterator[None]:
         raise
 
 
+def utf8(text: str) -> bytes:
+    """Text as UTF-8, where a file name's bytes that are no UTF-8 (kept by Python as surrogates) become U+FFFD,
+    as the CSV rows show them: a summary naming such an input failed with a traceback after the work."""
+    return text.encode("utf-8", "surrogateescape").decode("utf-8", "replace").encode("utf-8")
+
+
 def write_atomic(path: str | os.PathLike, content: str | bytes) -> None:
     """Write `content` (text as UTF-8, or bytes) via a temporary file in the same folder and rename, so readers
     never see half a file; the file gets the mode the umask gives any new file (mkstemp's own is 0600), and a
@@ -125,7 +131,7 @@ def write_atomic(path: str | os.PathLike, content: str | bytes) -> None:
     path = Path(path)
     fd, tmp = _temporary_beside(path, make_folder=True)
     with _replacing(path, tmp), os.fdopen(fd, "wb") as handle:
-        handle.write(content.encode("utf-8") if isinstance(content, str) else content)
+        handle.write(utf8(content) if isinstance(content, str) else content)
         handle.flush()
         os.fchmod(handle.fileno(), 0o666 & ~_umask())
         os.fsync(handle.fileno())

@@ -15,6 +15,7 @@ replace a better calibration, 130 interrupted (what was done so far is kept).
 from __future__ import annotations
 
 import argparse
+import codecs
 import contextlib
 import os
 import signal
@@ -70,10 +71,22 @@ def joined_negative_values(argv: Sequence[str]) -> list[str]:
     return joined
 
 
+def _shown_anyway(error: UnicodeError) -> tuple[str | bytes, int]:
+    """A file name that is no UTF-8 is shown with its own bytes, as ls does; a character the terminal's
+    encoding lacks (± or m² on an ASCII locale) as its escape, never a traceback after the work."""
+    try:
+        return codecs.lookup_error("surrogateescape")(error)
+    except UnicodeError:
+        return codecs.lookup_error("backslashreplace")(error)
+
+
+codecs.register_error("veg_area_shown", _shown_anyway)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    for stream in (sys.stdout, sys.stderr):  # a file name that is no UTF-8 is shown with its own bytes, as ls does
+    for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(AttributeError, ValueError):
-            stream.reconfigure(errors="surrogateescape")
+            stream.reconfigure(errors="veg_area_shown")
     args = build_parser().parse_args(joined_negative_values(sys.argv[1:] if argv is None else argv))
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminate_as_interrupt)
