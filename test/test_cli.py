@@ -94,6 +94,30 @@ def test_a_symmetric_grid_searched_as_asymmetric_says_what_to_write(tmp_path):
     assert "medium 'unspecified'" in result.stderr
 
 
+@pytest.mark.parametrize("printed, given, said", [
+    ("chessboard:9x6:0.03", "chessboard:10x7:0.03", "chessboard:9x6:0.03 is found in 3 of the 3 frames tried: a "
+     "chessboard's size counts its inner corners, one fewer than its squares"),
+    ("charuco:7x5:0.04:0.03:DICT_4X4_50", "charuco:5x7:0.04:0.03:DICT_4X4_50",
+     "charuco:7x5:0.04:0.03:DICT_4X4_50 is found in 3 of the 3 frames tried: a ChArUco board's size is its squares "
+     "across, then down"),
+    ("charuco:7x5:0.04:0.03:DICT_4X4_50", "charuco:7x5:0.04:0.03:DICT_6X6_250",
+     "the frames hold 4X4 markers (ids up to 16), not DICT_6X6_250's: try DICT_4X4_50"),
+    ("charuco:7x5:0.04:0.03:DICT_4X4_50", "charuco:6x5:0.04:0.03:DICT_4X4_100",
+     "DICT_4X4_100 markers are found but no 6x5 board: check the squares across and down"),
+])
+def test_a_board_found_nowhere_says_which_board_the_images_hold(tmp_path, printed, given, said):
+    """The usual mistakes in a board spec (squares counted for inner corners, a ChArUco board's sides swapped,
+    another ArUco dictionary) found no board and said only that; the board the frames hold is named."""
+    from helpers import render_views
+
+    _, _, images = render_views(seed=5, count=3, spec=printed)
+    for k, image in enumerate(images):
+        cv2.imwrite(str(tmp_path / f"view{k}.png"), image)
+    result = run_cli("calibrate", str(tmp_path), "--board", given, "-o", str(tmp_path / "c.yaml"), "--medium", "air")
+    assert_clean_failure(result, 1, said)
+    assert not (tmp_path / "c.yaml").exists()
+
+
 def test_empty_folder(tmp_path):
     (tmp_path / "empty").mkdir()
     result = run_cli("calibrate", str(tmp_path / "empty"), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))

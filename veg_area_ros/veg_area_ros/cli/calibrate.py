@@ -173,6 +173,21 @@ def _board_and_files(args: argparse.Namespace):
         raise CliError(str(exc)) from exc
 
 
+HINT_FRAMES = 3  # frames a board spec's likely mistakes are tried on when it is found in none
+
+
+def _hint(board, files: list[Path], step: int) -> str:
+    """What board a few of the frames hold instead of `board`, said with the mistake, or ''."""
+    from itertools import islice
+
+    from ..board_hint import board_hint
+    from ..frames import iter_frames
+
+    greys = [frame.image for frame in islice((f for f in iter_frames(files, step, grey=True, spread=True)
+                                               if f.image is not None), HINT_FRAMES)]
+    return board_hint(board, greys)
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from ..calib_io import CalibrationFileError, fit_metadata, read_calibration, write_calibration
     from ..calibration import CalibrationError, calibrate
@@ -217,13 +232,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if not found.views:
         if found.image_size is None:
             raise CliError(f"no readable image among the inputs ({len(found.unreadable)} unreadable)")
-        hint = ""
-        if board.kind == "circles":
-            hint = (f" (looked for {'a symmetric' if board.symmetric else 'an asymmetric'} grid; for the other "
-                    f"kind write circles:{board.cols}x{board.rows}:{board.square:g}"
-                    f"{'' if board.symmetric else ':symmetric'})")
-        raise CliError(f"no {board} board found in any of {found.seen} images{hint}; supported boards: chessboard, "
-                       "charuco, circles (asymmetric, or :symmetric)")
+        raise CliError(f"no {board} board found in any of {found.seen} images{_hint(board, files, step)}; "
+                       "supported boards: chessboard, charuco, circles (asymmetric, or :symmetric)")
     try:
         result = calibrate(found.views, found.image_size, robust_loss=args.loss,
                            outlier_sigma=None if args.no_outlier_rejection else args.outlier_sigma, progress=say,
