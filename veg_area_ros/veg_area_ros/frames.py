@@ -139,7 +139,8 @@ def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -
         if image.dtype == np.uint8:
             return image, ""
         if image.dtype != np.uint16:
-            return None, f"is a {image.dtype} image (floating point); save it with 8 or 16 bits per channel"
+            kind = "floating point" if image.dtype.kind == "f" else f"{8 * image.dtype.itemsize}-bit integers"
+            return None, f"is a {image.dtype} image ({kind}); save it with 8 or 16 bits per channel"
         if grey:  # the depth judged on the colours, as a colour reading of the same file judges it
             image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH)
         image, note = to_8_bit(image)
