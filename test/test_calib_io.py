@@ -269,6 +269,92 @@ def test_a_broken_ost_ini_is_refused_with_its_reason(tmp_path, edit, problem):
         read_calibration(path)
 
 
+# as OpenCV 4's calibration sample writes it (cv::FileStorage, '%YAML:1.0', which a YAML parser refuses)
+OPENCV_SAMPLE = """%YAML:1.0
+---
+calibration_time: "Sat 05 Dec 2026 07:58:00 UTC"
+nr_of_frames: 13
+image_width: 640
+image_height: 480
+board_width: 9
+board_height: 6
+square_size: 2.5e-02
+fix_aspect_ratio: 1.
+flags: 2
+camera_matrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 520., 0., 326., 0., 522.08, 236.5, 0., 0., 1. ]
+distortion_coefficients: !!opencv-matrix
+   rows: 5
+   cols: 1
+   dt: d
+   data: [ -0.32, 0.12, 1.2e-03, -8.0e-04, -0.02 ]
+avg_reprojection_error: 0.41
+"""
+# OpenCV's interactive calibrator (opencv_interactive-calibration) names them otherwise
+OPENCV_INTERACTIVE = """%YAML:1.0
+---
+calibrationDate: "Sat Dec  5 07:58:00 2026"
+framesCount: 20
+cameraResolution: [ 640, 480 ]
+cameraMatrix: !!opencv-matrix
+   rows: 3
+   cols: 3
+   dt: d
+   data: [ 520., 0., 326., 0., 522.08, 236.5, 0., 0., 1. ]
+dist_coeffs: !!opencv-matrix
+   rows: 1
+   cols: 5
+   dt: d
+   data: [ -0.32, 0.12, 1.2e-03, -8.0e-04, -0.02 ]
+avg_reprojection_error: 0.41
+"""
+
+
+def test_opencvs_own_calibration_files_are_read(tmp_path):
+    """OpenCV's calibration sample and interactive calibrator, and a script's cv2.FileStorage (YAML or XML), save
+    K and the distortion as '!!opencv-matrix': "not valid YAML at line 6" or "not a camera_info calibration"
+    before; read as the same camera the camera_info file holds. A file whose model cannot be told or whose size
+    is missing is refused with what to add."""
+    import cv2
+
+    files = {"sample.yml": OPENCV_SAMPLE, "interactive.yaml": OPENCV_INTERACTIVE}
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    K = np.array([[520.0, 0, 326.0], [0, 522.08, 236.5], [0, 0, 1]])
+    for name in ("script.yml", "script.xml"):
+        storage = cv2.FileStorage(str(tmp_path / name), cv2.FILE_STORAGE_WRITE)
+        storage.write("image_width", 640)
+        storage.write("image_height", 480)
+        storage.write("camera_matrix", K)
+        storage.write("distortion_coefficients", np.array([[-0.32, 0.12, 0.0012, -0.0008, -0.02]]))
+        storage.release()
+        files[name] = ""
+    for name in files:
+        camera = read_calibration(tmp_path / name).camera
+        assert (camera.width, camera.height, camera.fx, camera.fy, camera.xp, camera.yp) == \
+            (640, 480, 520.0, 522.08, 326.0, 236.5), name
+        assert (camera.k1, camera.k2, camera.p1, camera.p2, camera.k3) == (-0.32, 0.12, 0.0012, -0.0008, -0.02), name
+        assert camera.model == "plumb_bob" and camera == read_calibration(tmp_path / "sample.yml").camera
+    eight = OPENCV_SAMPLE.replace("rows: 5", "rows: 8").replace("-0.02 ]", "-0.02, 0.01, 0.002, 0.001 ]")
+    (tmp_path / "rational.yml").write_text(eight)
+    assert read_calibration(tmp_path / "rational.yml").camera.model == "rational_polynomial"
+    for edit, problem in [
+        (lambda t: t.replace("rows: 5", "rows: 4").replace(", -0.02 ]", " ]"), "k1 k2 p1 p2 or cv2.fisheye's"),
+        (lambda t: t.replace("image_width: 640\n", ""), "without the image size: add image_width"),
+        (lambda t: t.replace("camera_matrix:", "intrinsics:"), "without 'camera_matrix'"),
+        (lambda t: t.replace("rows: 5", "rows: 14").replace("-0.02 ]", "-0.02" + ", 0." * 9 + " ]"),
+         "14 distortion coefficients"),
+        (lambda t: t.replace("   rows: 3\n   cols: 3", "   rows: 3\n   cols: [3"), "not a readable OpenCV"),
+        (lambda t: t.replace("   rows: 3\n   cols: 3", "   rows: 30000\n   cols: 30000"), "declares 30000x30000"),
+    ]:
+        (tmp_path / "broken.yml").write_text(edit(OPENCV_SAMPLE))
+        with pytest.raises(CalibrationFileError, match=problem):
+            read_calibration(tmp_path / "broken.yml")
+
+
 def test_an_empty_distortion_list_is_refused_as_a_missing_one_is(tmp_path):
     """`distortion_coefficients: {data: []}` was read as no distortion (Af +6 % on the endoscope) while a
     missing key was refused."""

@@ -223,9 +223,85 @@ def ost_ini_content(text: str, path: Path) -> dict[str, Any]:
     return content
 
 
+# what OpenCV's calibration sample, its interactive calibrator and common scripts name the fields
+OPENCV_KEYS = {"camera_matrix": ("camera_matrix", "cameraMatrix", "K", "intrinsic_matrix"),
+               "distortion_coefficients": ("distortion_coefficients", "distCoeffs", "dist_coeffs", "D")}
+OPENCV_SIZE_KEYS = ("cameraResolution", "image_size", "imageSize")  # [width, height]
+
+
+def is_opencv_storage(text: str) -> bool:
+    """Whether a calibration file is OpenCV's FileStorage (YAML with '!!opencv-matrix' or '%YAML:1.0', or XML)."""
+    head = text.lstrip()[:200]
+    return head.startswith("%YAML:") or "!!opencv-matrix" in text or "<opencv_storage>" in head
+
+
+def opencv_storage_content(text: str, path: Path) -> dict[str, Any]:
+    """The camera_info fields of a calibration saved with OpenCV's FileStorage (YAML or XML): the camera matrix,
+    the distortion coefficients and the image size under the names OpenCV's tools use. OpenCV files do not name
+    the model: 5 coefficients are plumb_bob and 8 rational_polynomial; 4 (OpenCV's k1 k2 p1 p2, or cv2.fisheye's
+    k1-k4) are refused unless a `distortion_model` entry says which."""
+    import cv2
+
+    try:
+        storage = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except (cv2.error, SystemError) as exc:  # a parse error comes as either, by where OpenCV's parser stops
+        cause = exc.__cause__ if isinstance(exc, SystemError) and exc.__cause__ is not None else exc
+        reason = (str(cause).strip().splitlines() or ["a parse error"])[-1]
+        raise CalibrationFileError(f"{path}: not a readable OpenCV FileStorage file ({reason})") from exc
+
+    def node(*names: str):
+        return next(((name, storage.getNode(name)) for name in names if not storage.getNode(name).empty()),
+                    (names[0], None))
+
+    content: dict[str, Any] = {"camera_name": "camera"}
+    for field_name, names in OPENCV_KEYS.items():
+        name, entry = node(*names)
+        if entry is None or not entry.isMap():
+            raise CalibrationFileError(f"{path}: an OpenCV calibration file without '{name}' (a matrix)")
+        shape = [entry.getNode(side).real() if entry.getNode(side).isReal() or entry.getNode(side).isInt() else -1
+                 for side in ("rows", "cols")]
+        if not all(1 <= side <= 16 for side in shape):  # checked before OpenCV allocates what a file declares
+            raise CalibrationFileError(f"{path}: '{name}' declares {shape[0]:g}x{shape[1]:g} numbers; a camera "
+                                       "matrix is 3x3 and distortion at most 1x14")
+        try:
+            values = entry.mat()
+        except cv2.error as exc:
+            raise CalibrationFileError(f"{path}: '{name}' is not a matrix OpenCV can read "
+                                       f"({str(exc).strip().splitlines()[-1]})") from exc
+        if values is None:
+            raise CalibrationFileError(f"{path}: '{name}' is not a matrix OpenCV can read")
+        content[field_name] = {"rows": values.shape[0], "cols": values.shape[1], "data": values.ravel().tolist()}
+    _, width = node("image_width")
+    _, height = node("image_height")
+    if width is not None and height is not None:
+        content["image_width"], content["image_height"] = width.real(), height.real()
+    else:
+        _, size = node(*OPENCV_SIZE_KEYS)
+        if size is None or not size.isSeq() or size.size() != 2:
+            raise CalibrationFileError(f"{path}: an OpenCV calibration file without the image size: add "
+                                       "image_width and image_height (the frames' size it was fitted on)")
+        content["image_width"], content["image_height"] = size.at(0).real(), size.at(1).real()
+    for key in ("image_width", "image_height"):
+        value = content[key]
+        content[key] = int(value) if float(value).is_integer() else value
+    _, model = node("distortion_model")
+    count = len(content["distortion_coefficients"]["data"])
+    if model is not None and model.isString():
+        content["distortion_model"] = model.string()
+    elif count in (5, 8):
+        content["distortion_model"] = "plumb_bob" if count == 5 else "rational_polynomial"
+    elif count == 4:
+        raise CalibrationFileError(f"{path}: 4 distortion coefficients in an OpenCV file are OpenCV's k1 k2 p1 p2 "
+                                   "or cv2.fisheye's k1-k4: add distortion_model: plumb_bob or equidistant")
+    else:
+        raise CalibrationFileError(f"{path}: {count} distortion coefficients: OpenCV's models read here have 5 "
+                                   "(plumb_bob) or 8 (rational_polynomial); the thin-prism and tilted ones are not")
+    return content
+
+
 def read_calibration(path: str | os.PathLike) -> CalibrationFile:
-    """Read a camera_info YAML (or ROS 1's `ost.ini`); any problem raises CalibrationFileError naming the file
-    and the problem."""
+    """Read a camera_info YAML (or ROS 1's `ost.ini`, or OpenCV's FileStorage YAML or XML); any problem raises
+    CalibrationFileError naming the file and the problem."""
     path = Path(path)
     try:
         text = read_text(path)
@@ -237,6 +313,15 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
         raise CalibrationFileError(f"{path}: cannot be read ({exc})") from exc
     if is_ost_ini(path, text):
         return from_camera_info_dict(ost_ini_content(text, path), path)
+    if is_opencv_storage(text):
+        import cv2
+
+        try:
+            content = opencv_storage_content(text, path)
+        except cv2.error as exc:  # what the checks inside did not foresee
+            reason = (str(exc).strip().splitlines() or ["an error"])[-1]
+            raise CalibrationFileError(f"{path}: not a readable OpenCV FileStorage file ({reason})") from exc
+        return from_camera_info_dict(content, path)
     try:
         content = load_text(text)
     except StrictYamlError as exc:
