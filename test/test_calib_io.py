@@ -382,3 +382,40 @@ def test_a_calibrations_metadata_travels_beside_camera_info_and_applies_to_that_
     for broken in ("", "[]", '{"calibration": {}}', '{"calibration": {}, "metadata": 3}'):
         with pytest.raises(ValueError, match="not a calibration metadata message"):
             metadata_for(ENDOSCOPE, broken)
+
+
+KALIBR_CAMCHAIN = """cam0:
+  cam_overlaps: []
+  camera_model: pinhole
+  distortion_coeffs: [-0.32, 0.12, 0.0012, -0.0008]
+  distortion_model: radtan
+  intrinsics: [520.0, 522.08, 326.0, 236.5]
+  resolution: [640, 480]
+  rostopic: /endoscope/image_raw
+"""
+
+
+def test_kalibrs_camchain_is_read_for_its_one_camera(tmp_path):
+    """Kalibr (the robotics field's multi-camera calibrator) writes camchain YAML: read for a pinhole camera with
+    radtan (plumb_bob with k3 = 0), equidistant or no distortion; two cameras, or its omnidirectional model,
+    refused with their names (it was "'image_width' must be a positive integer, found None")."""
+    path = tmp_path / "camchain.yaml"
+    path.write_text(KALIBR_CAMCHAIN)
+    calibration = read_calibration(path)
+    camera = calibration.camera
+    assert (camera.width, camera.height, camera.fx, camera.fy, camera.xp, camera.yp) == (640, 480, 520.0, 522.08,
+                                                                                         326.0, 236.5)
+    assert (camera.model, camera.k1, camera.k2, camera.p1, camera.p2, camera.k3) == ("plumb_bob", -0.32, 0.12,
+                                                                                     0.0012, -0.0008, 0.0)
+    assert calibration.camera_name == "/endoscope/image_raw"
+    path.write_text(KALIBR_CAMCHAIN.replace("radtan", "equidistant"))
+    assert read_calibration(path).camera.model == "equidistant"
+    for text, problem in [
+        (KALIBR_CAMCHAIN + KALIBR_CAMCHAIN.replace("cam0", "cam1"), r"2 cameras \(cam0, cam1\)"),
+        (KALIBR_CAMCHAIN.replace("camera_model: pinhole", "camera_model: omni"), "omni camera with radtan"),
+        (KALIBR_CAMCHAIN.replace(", -0.0008]", "]"), "radtan distortion has 4 coefficients, found 3"),
+        (KALIBR_CAMCHAIN.replace("  resolution: [640, 480]\n", ""), "resolution"),
+    ]:
+        path.write_text(text)
+        with pytest.raises(CalibrationFileError, match=problem):
+            read_calibration(path)

@@ -14,7 +14,6 @@ import datetime as dt
 import json
 import math
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -28,6 +27,15 @@ from .camera_model import BrownCamera, check_plausible
 from .camera_uncertainty import CameraCovariance
 from .files import write_atomic
 from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
+from .foreign_calibrations import (
+    ForeignCalibrationError,
+    is_kalibr_camchain,
+    is_opencv_storage,
+    is_ost_ini,
+    kalibr_content,
+    opencv_storage_content,
+    ost_ini_content,
+)
 from .strict_yaml import StrictYamlError, dump_portable, load_text, read_text
 
 METADATA_KEY = "veg_area_ros"
@@ -168,140 +176,9 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
     return calibration
 
 
-OST_INI_KEYS = {"camera matrix": ("camera_matrix", 3, 3), "distortion": ("distortion_coefficients", 1, None),
-                "rectification": ("rectification_matrix", 3, 3), "projection": ("projection_matrix", 3, 4)}
-
-
-def is_ost_ini(path: Path, text: str) -> bool:
-    """Whether a calibration file is ROS 1 cameracalibrator's INI (`ost.ini`, '# oST version 5.0 parameters')."""
-    return path.suffix.lower() == ".ini" or re.search(r"^\s*\[image\]\s*$", text, re.MULTILINE) is not None
-
-
-def ost_ini_content(text: str, path: Path) -> dict[str, Any]:
-    """The camera_info fields of ROS 1 cameracalibrator's `ost.ini`: an [image] section (width, height) and one
-    camera section (camera matrix, distortion, rectification, projection), each key on its own line and its
-    numbers on the lines below. A stereo pair's file (two camera sections) is refused with their names."""
-    sections: list[tuple[str, dict[str, list[float]]]] = []
-    key = None
-    for number, raw in enumerate(text.splitlines(), 1):
-        line = raw.strip()
-        if not line or line.startswith(("#", ";")):
-            continue
-        if line.startswith("[") and line.endswith("]"):
-            sections.append((line[1:-1].strip(), {}))
-            key = None
-            continue
-        if not sections:
-            raise CalibrationFileError(f"{path}: not an ost.ini calibration: line {number} comes before any [section]")
-        try:
-            values = [float(word) for word in line.split()]
-        except ValueError:
-            key = line.lower()
-            sections[-1][1][key] = []
-            continue
-        if key is None:
-            raise CalibrationFileError(f"{path}: line {number} of ost.ini holds numbers under no key")
-        sections[-1][1][key].extend(values)
-    image = {k: v for name, entries in sections if name == "image" for k, v in entries.items()}
-    cameras = [(name, entries) for name, entries in sections if name != "image"]
-    if len(cameras) != 1:
-        names = ", ".join(name for name, _ in cameras) or "none"
-        raise CalibrationFileError(f"{path}: an ost.ini with {len(cameras)} camera sections ({names}); "
-                                   "measuring needs one camera's (a stereo pair's file holds two: split it)")
-    name, entries = cameras[0]
-    content: dict[str, Any] = {"camera_name": name}
-    for side in ("width", "height"):
-        values = image.get(side, [])
-        if len(values) != 1 or not float(values[0]).is_integer():
-            raise CalibrationFileError(f"{path}: ost.ini's [image] needs one whole '{side}', found {values}")
-        content[f"image_{side}"] = int(values[0])
-    for ini_key, (field_name, rows, cols) in OST_INI_KEYS.items():
-        if ini_key in entries:
-            data = entries[ini_key]
-            content[field_name] = {"rows": rows, "cols": cols or len(data), "data": data}
-    content["distortion_model"] = "plumb_bob" if len(entries.get("distortion", [])) <= 5 else "rational_polynomial"
-    return content
-
-
-# what OpenCV's calibration sample, its interactive calibrator and common scripts name the fields
-OPENCV_KEYS = {"camera_matrix": ("camera_matrix", "cameraMatrix", "K", "intrinsic_matrix"),
-               "distortion_coefficients": ("distortion_coefficients", "distCoeffs", "dist_coeffs", "D")}
-OPENCV_SIZE_KEYS = ("cameraResolution", "image_size", "imageSize")  # [width, height]
-
-
-def is_opencv_storage(text: str) -> bool:
-    """Whether a calibration file is OpenCV's FileStorage (YAML with '!!opencv-matrix' or '%YAML:1.0', or XML)."""
-    head = text.lstrip()[:200]
-    return head.startswith("%YAML:") or "!!opencv-matrix" in text or "<opencv_storage>" in head
-
-
-def opencv_storage_content(text: str, path: Path) -> dict[str, Any]:
-    """The camera_info fields of a calibration saved with OpenCV's FileStorage (YAML or XML): the camera matrix,
-    the distortion coefficients and the image size under the names OpenCV's tools use. OpenCV files do not name
-    the model: 5 coefficients are plumb_bob and 8 rational_polynomial; 4 (OpenCV's k1 k2 p1 p2, or cv2.fisheye's
-    k1-k4) are refused unless a `distortion_model` entry says which."""
-    import cv2
-
-    try:
-        storage = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
-    except (cv2.error, SystemError) as exc:  # a parse error comes as either, by where OpenCV's parser stops
-        cause = exc.__cause__ if isinstance(exc, SystemError) and exc.__cause__ is not None else exc
-        reason = (str(cause).strip().splitlines() or ["a parse error"])[-1]
-        raise CalibrationFileError(f"{path}: not a readable OpenCV FileStorage file ({reason})") from exc
-
-    def node(*names: str):
-        return next(((name, storage.getNode(name)) for name in names if not storage.getNode(name).empty()),
-                    (names[0], None))
-
-    content: dict[str, Any] = {"camera_name": "camera"}
-    for field_name, names in OPENCV_KEYS.items():
-        name, entry = node(*names)
-        if entry is None or not entry.isMap():
-            raise CalibrationFileError(f"{path}: an OpenCV calibration file without '{name}' (a matrix)")
-        shape = [entry.getNode(side).real() if entry.getNode(side).isReal() or entry.getNode(side).isInt() else -1
-                 for side in ("rows", "cols")]
-        if not all(1 <= side <= 16 for side in shape):  # checked before OpenCV allocates what a file declares
-            raise CalibrationFileError(f"{path}: '{name}' declares {shape[0]:g}x{shape[1]:g} numbers; a camera "
-                                       "matrix is 3x3 and distortion at most 1x14")
-        try:
-            values = entry.mat()
-        except cv2.error as exc:
-            raise CalibrationFileError(f"{path}: '{name}' is not a matrix OpenCV can read "
-                                       f"({str(exc).strip().splitlines()[-1]})") from exc
-        if values is None:
-            raise CalibrationFileError(f"{path}: '{name}' is not a matrix OpenCV can read")
-        content[field_name] = {"rows": values.shape[0], "cols": values.shape[1], "data": values.ravel().tolist()}
-    _, width = node("image_width")
-    _, height = node("image_height")
-    if width is not None and height is not None:
-        content["image_width"], content["image_height"] = width.real(), height.real()
-    else:
-        _, size = node(*OPENCV_SIZE_KEYS)
-        if size is None or not size.isSeq() or size.size() != 2:
-            raise CalibrationFileError(f"{path}: an OpenCV calibration file without the image size: add "
-                                       "image_width and image_height (the frames' size it was fitted on)")
-        content["image_width"], content["image_height"] = size.at(0).real(), size.at(1).real()
-    for key in ("image_width", "image_height"):
-        value = content[key]
-        content[key] = int(value) if float(value).is_integer() else value
-    _, model = node("distortion_model")
-    count = len(content["distortion_coefficients"]["data"])
-    if model is not None and model.isString():
-        content["distortion_model"] = model.string()
-    elif count in (5, 8):
-        content["distortion_model"] = "plumb_bob" if count == 5 else "rational_polynomial"
-    elif count == 4:
-        raise CalibrationFileError(f"{path}: 4 distortion coefficients in an OpenCV file are OpenCV's k1 k2 p1 p2 "
-                                   "or cv2.fisheye's k1-k4: add distortion_model: plumb_bob or equidistant")
-    else:
-        raise CalibrationFileError(f"{path}: {count} distortion coefficients: OpenCV's models read here have 5 "
-                                   "(plumb_bob) or 8 (rational_polynomial); the thin-prism and tilted ones are not")
-    return content
-
-
 def read_calibration(path: str | os.PathLike) -> CalibrationFile:
-    """Read a camera_info YAML (or ROS 1's `ost.ini`, or OpenCV's FileStorage YAML or XML); any problem raises
-    CalibrationFileError naming the file and the problem."""
+    """Read a camera_info YAML (or ROS 1's `ost.ini`, OpenCV's FileStorage YAML or XML, Kalibr's camchain); any
+    problem raises CalibrationFileError naming the file and the problem."""
     path = Path(path)
     try:
         text = read_text(path)
@@ -311,17 +188,13 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
         raise CalibrationFileError(f"{path}: {exc}") from exc
     except (OSError, UnicodeDecodeError) as exc:
         raise CalibrationFileError(f"{path}: cannot be read ({exc})") from exc
-    if is_ost_ini(path, text):
-        return from_camera_info_dict(ost_ini_content(text, path), path)
-    if is_opencv_storage(text):
-        import cv2
-
-        try:
-            content = opencv_storage_content(text, path)
-        except cv2.error as exc:  # what the checks inside did not foresee
-            reason = (str(exc).strip().splitlines() or ["an error"])[-1]
-            raise CalibrationFileError(f"{path}: not a readable OpenCV FileStorage file ({reason})") from exc
-        return from_camera_info_dict(content, path)
+    try:
+        if is_ost_ini(path, text):
+            return from_camera_info_dict(ost_ini_content(text), path)
+        if is_opencv_storage(text):
+            return from_camera_info_dict(opencv_storage_content(text), path)
+    except ForeignCalibrationError as exc:
+        raise CalibrationFileError(f"{path}: {exc}") from exc
     try:
         content = load_text(text)
     except StrictYamlError as exc:
@@ -330,6 +203,11 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
         where = getattr(exc, "problem_mark", None)
         line = f" at line {where.line + 1}" if where else ""
         raise CalibrationFileError(f"{path}: not valid YAML{line}") from exc
+    if is_kalibr_camchain(content):
+        try:
+            content = kalibr_content(content)
+        except ForeignCalibrationError as exc:
+            raise CalibrationFileError(f"{path}: {exc}") from exc
     return from_camera_info_dict(content, path)
 
 

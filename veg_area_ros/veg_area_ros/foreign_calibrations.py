@@ -1,0 +1,194 @@
+"""Calibration files other tools write, as the camera_info fields `calib_io` reads: ROS 1 cameracalibrator's
+`ost.ini`, OpenCV's FileStorage (its calibration sample's, its interactive calibrator's, a script's; YAML or XML)
+and Kalibr's camchain YAML. Each gives one camera's fields or a ForeignCalibrationError saying what is wrong."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+import cv2
+
+
+class ForeignCalibrationError(ValueError):
+    """Another tool's file that is not one camera's calibration; `calib_io` adds the file's name."""
+
+
+OST_INI_KEYS = {"camera matrix": ("camera_matrix", 3, 3), "distortion": ("distortion_coefficients", 1, None),
+                "rectification": ("rectification_matrix", 3, 3), "projection": ("projection_matrix", 3, 4)}
+
+
+def is_ost_ini(path: Path, text: str) -> bool:
+    """Whether a calibration file is ROS 1 cameracalibrator's INI (`ost.ini`, '# oST version 5.0 parameters')."""
+    return path.suffix.lower() == ".ini" or re.search(r"^\s*\[image\]\s*$", text, re.MULTILINE) is not None
+
+
+def ost_ini_content(text: str) -> dict[str, Any]:
+    """The camera_info fields of ROS 1 cameracalibrator's `ost.ini`: an [image] section (width, height) and one
+    camera section (camera matrix, distortion, rectification, projection), each key on its own line and its
+    numbers on the lines below. A stereo pair's file (two camera sections) is refused with their names."""
+    sections: list[tuple[str, dict[str, list[float]]]] = []
+    key = None
+    for number, raw in enumerate(text.splitlines(), 1):
+        line = raw.strip()
+        if not line or line.startswith(("#", ";")):
+            continue
+        if line.startswith("[") and line.endswith("]"):
+            sections.append((line[1:-1].strip(), {}))
+            key = None
+            continue
+        if not sections:
+            raise ForeignCalibrationError(f"not an ost.ini calibration: line {number} comes before any [section]")
+        try:
+            values = [float(word) for word in line.split()]
+        except ValueError:
+            key = line.lower()
+            sections[-1][1][key] = []
+            continue
+        if key is None:
+            raise ForeignCalibrationError(f"line {number} of ost.ini holds numbers under no key")
+        sections[-1][1][key].extend(values)
+    image = {k: v for name, entries in sections if name == "image" for k, v in entries.items()}
+    cameras = [(name, entries) for name, entries in sections if name != "image"]
+    if len(cameras) != 1:
+        names = ", ".join(name for name, _ in cameras) or "none"
+        raise ForeignCalibrationError(f"an ost.ini with {len(cameras)} camera sections ({names}); "
+                                      "measuring needs one camera's (a stereo pair's file holds two: split it)")
+    name, entries = cameras[0]
+    content: dict[str, Any] = {"camera_name": name}
+    for side in ("width", "height"):
+        values = image.get(side, [])
+        if len(values) != 1 or not float(values[0]).is_integer():
+            raise ForeignCalibrationError(f"ost.ini's [image] needs one whole '{side}', found {values}")
+        content[f"image_{side}"] = int(values[0])
+    for ini_key, (field_name, rows, cols) in OST_INI_KEYS.items():
+        if ini_key in entries:
+            data = entries[ini_key]
+            content[field_name] = {"rows": rows, "cols": cols or len(data), "data": data}
+    content["distortion_model"] = "plumb_bob" if len(entries.get("distortion", [])) <= 5 else "rational_polynomial"
+    return content
+
+
+# what OpenCV's calibration sample, its interactive calibrator and common scripts name the fields
+OPENCV_KEYS = {"camera_matrix": ("camera_matrix", "cameraMatrix", "K", "intrinsic_matrix"),
+               "distortion_coefficients": ("distortion_coefficients", "distCoeffs", "dist_coeffs", "D")}
+OPENCV_SIZE_KEYS = ("cameraResolution", "image_size", "imageSize")  # [width, height]
+
+
+def is_opencv_storage(text: str) -> bool:
+    """Whether a calibration file is OpenCV's FileStorage (YAML with '!!opencv-matrix' or '%YAML:1.0', or XML)."""
+    head = text.lstrip()[:200]
+    return head.startswith("%YAML:") or "!!opencv-matrix" in text or "<opencv_storage>" in head
+
+
+def opencv_storage_content(text: str) -> dict[str, Any]:
+    """`_opencv_fields`, with what OpenCV itself raises on a file its checks did not foresee said as one line."""
+    try:
+        return _opencv_fields(text)
+    except cv2.error as exc:
+        reason = (str(exc).strip().splitlines() or ["an error"])[-1]
+        raise ForeignCalibrationError(f"not a readable OpenCV FileStorage file ({reason})") from exc
+
+
+def _opencv_fields(text: str) -> dict[str, Any]:
+    """The camera_info fields of a calibration saved with OpenCV's FileStorage (YAML or XML): the camera matrix,
+    the distortion coefficients and the image size under the names OpenCV's tools use. OpenCV files do not name
+    the model: 5 coefficients are plumb_bob and 8 rational_polynomial; 4 (OpenCV's k1 k2 p1 p2, or cv2.fisheye's
+    k1-k4) are refused unless a `distortion_model` entry says which."""
+    try:
+        storage = cv2.FileStorage(text, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    except (cv2.error, SystemError) as exc:  # a parse error comes as either, by where OpenCV's parser stops
+        cause = exc.__cause__ if isinstance(exc, SystemError) and exc.__cause__ is not None else exc
+        reason = (str(cause).strip().splitlines() or ["a parse error"])[-1]
+        raise ForeignCalibrationError(f"not a readable OpenCV FileStorage file ({reason})") from exc
+
+    def node(*names: str):
+        return next(((name, storage.getNode(name)) for name in names if not storage.getNode(name).empty()),
+                    (names[0], None))
+
+    content: dict[str, Any] = {"camera_name": "camera"}
+    for field_name, names in OPENCV_KEYS.items():
+        name, entry = node(*names)
+        if entry is None or not entry.isMap():
+            raise ForeignCalibrationError(f"an OpenCV calibration file without '{name}' (a matrix)")
+        shape = [entry.getNode(side).real() if entry.getNode(side).isReal() or entry.getNode(side).isInt() else -1
+                 for side in ("rows", "cols")]
+        if not all(1 <= side <= 16 for side in shape):  # checked before OpenCV allocates what a file declares
+            raise ForeignCalibrationError(f"'{name}' declares {shape[0]:g}x{shape[1]:g} numbers; a camera "
+                                          "matrix is 3x3 and distortion at most 1x14")
+        try:
+            values = entry.mat()
+        except cv2.error as exc:
+            raise ForeignCalibrationError(f"'{name}' is not a matrix OpenCV can read "
+                                          f"({str(exc).strip().splitlines()[-1]})") from exc
+        if values is None:
+            raise ForeignCalibrationError(f"'{name}' is not a matrix OpenCV can read")
+        content[field_name] = {"rows": values.shape[0], "cols": values.shape[1], "data": values.ravel().tolist()}
+    _, width = node("image_width")
+    _, height = node("image_height")
+    if width is not None and height is not None:
+        content["image_width"], content["image_height"] = width.real(), height.real()
+    else:
+        _, size = node(*OPENCV_SIZE_KEYS)
+        if size is None or not size.isSeq() or size.size() != 2:
+            raise ForeignCalibrationError("an OpenCV calibration file without the image size: add "
+                                          "image_width and image_height (the frames' size it was fitted on)")
+        content["image_width"], content["image_height"] = size.at(0).real(), size.at(1).real()
+    for key in ("image_width", "image_height"):
+        value = content[key]
+        content[key] = int(value) if float(value).is_integer() else value
+    _, model = node("distortion_model")
+    count = len(content["distortion_coefficients"]["data"])
+    if model is not None and model.isString():
+        content["distortion_model"] = model.string()
+    elif count in (5, 8):
+        content["distortion_model"] = "plumb_bob" if count == 5 else "rational_polynomial"
+    elif count == 4:
+        raise ForeignCalibrationError("4 distortion coefficients in an OpenCV file are OpenCV's k1 k2 p1 p2 "
+                                      "or cv2.fisheye's k1-k4: add distortion_model: plumb_bob or equidistant")
+    else:
+        raise ForeignCalibrationError(f"{count} distortion coefficients: OpenCV's models read here have 5 "
+                                      "(plumb_bob) or 8 (rational_polynomial); the thin-prism and tilted ones are not")
+    return content
+
+
+KALIBR_DISTORTION = {"radtan": ("plumb_bob", 4), "equidistant": ("equidistant", 4), "none": ("plumb_bob", 0)}
+
+
+def is_kalibr_camchain(content: Any) -> bool:
+    """Whether a YAML document is Kalibr's camchain (cam0: {camera_model, intrinsics, ...})."""
+    return (isinstance(content, dict) and "camera_matrix" not in content
+            and any(isinstance(value, dict) and "intrinsics" in value for value in content.values()))
+
+
+def kalibr_content(content: dict) -> dict[str, Any]:
+    """The camera_info fields of Kalibr's camchain YAML for its one camera: a pinhole camera (intrinsics fu fv
+    pu pv, resolution) with radtan (k1 k2 p1 p2: plumb_bob), equidistant (fisheye k1-k4) or no distortion.
+    Several cameras, and Kalibr's omnidirectional and double-sphere models, are refused with their names."""
+    cameras = {name: value for name, value in content.items() if isinstance(value, dict) and "intrinsics" in value}
+    if len(cameras) != 1:
+        raise ForeignCalibrationError(f"a Kalibr camchain with {len(cameras)} cameras ({', '.join(cameras)}); "
+                                      "measuring needs one camera's: keep its block alone in the file")
+    name, camera = next(iter(cameras.items()))
+    model, distortion = camera.get("camera_model", "pinhole"), camera.get("distortion_model", "none")
+    if model != "pinhole" or distortion not in KALIBR_DISTORTION:
+        raise ForeignCalibrationError(f"Kalibr's {model} camera with {distortion} distortion is not read here "
+                                      "(pinhole with radtan, equidistant or none is)")
+    try:
+        fu, fv, pu, pv = (float(value) for value in camera["intrinsics"])
+        width, height = camera["resolution"]
+        coefficients = [float(value) for value in camera.get("distortion_coeffs") or []]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ForeignCalibrationError(f"{name} needs intrinsics [fu, fv, pu, pv], resolution [width, height] "
+                                      "and distortion_coeffs") from exc
+    ros_model, count = KALIBR_DISTORTION[distortion]
+    if len(coefficients) != count:
+        raise ForeignCalibrationError(f"{name}'s {distortion} distortion has {count} coefficients, "
+                                      f"found {len(coefficients)}")
+    if ros_model == "plumb_bob":
+        coefficients = (coefficients + [0.0] * 5)[:5]  # radtan is k1 k2 p1 p2; k3 = 0
+    return {"camera_name": str(camera.get("rostopic") or name), "image_width": width, "image_height": height,
+            "distortion_model": ros_model,
+            "camera_matrix": {"rows": 3, "cols": 3, "data": [fu, 0.0, pu, 0.0, fv, pv, 0.0, 0.0, 1.0]},
+            "distortion_coefficients": {"rows": 1, "cols": len(coefficients), "data": coefficients}}
