@@ -1132,7 +1132,8 @@ def scenario_guidance(options: dict, nodes: Nodes) -> dict:
     images = render_board_views(ENDOSCOPE, BOARD_SPEC, poses(16, **arguments[sequence]), port=PORT,
                                 rng=np.random.default_rng(1), noise_sigma=2.0, supersample=2)
     served = Path("guided.yaml").resolve()
-    nodes.start("calibration_node", camera_info_url=f"file://{served}", min_views=12)
+    board = {"board": options["board"]} if "board" in options else {}  # the node's spec, if not the printed board
+    nodes.start("calibration_node", camera_info_url=f"file://{served}", min_views=12, **board)
     rclpy.init()
     probe = Node("probe")
     progress: list[dict] = []
@@ -1157,6 +1158,7 @@ def scenario_guidance(options: dict, nodes: Nodes) -> dict:
     out["progress"] = progress[-1] if progress else None
     out["feedback_before_subscribing"] = progress[-1].get("feedback_published") if progress else None
     out["rejected_lines"] = [p["message"] for p in progress if p["message"].startswith("view rejected")]
+    out["no_board_lines"] = [p["message"] for p in progress if p["message"].startswith("no ")]
     out["fitted"] = served.exists()
 
     # ~/feedback: nothing before anyone subscribes (the node counts what it published), then frames

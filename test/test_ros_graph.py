@@ -400,6 +400,19 @@ def test_the_calibration_node_guides_the_operator_and_fits_only_on_enough_variet
     assert all(result["alive_at_end"].values()) and result["exit_codes"] == {"calibration_node": 0}
 
 
+def test_a_calibration_node_given_the_wrong_board_says_which_board_it_sees(tmp_path):
+    """The node's board counted in squares (10x7) while the 9x6 inner-corner board is shown: no view was ever
+    kept and nothing said why. After 30 frames without a board the spec's usual mistakes are tried once, and
+    ~/progress names the board the frames hold; nothing is fitted."""
+    result = run_scenario("guidance", tmp_path, timeout=300, sequence="varied", board="chessboard:10x7:0.04")
+    assert result["progress"]["views_kept"] == 0 and not result["fitted"]
+    said = result["no_board_lines"]
+    assert len(said) == 1, said  # once, not at every frame
+    assert said[0].startswith("no chessboard:10x7:0.04 board in the first 30 frames; chessboard:9x6:0.04 is found "
+                              "in 3 of the 3 frames tried: a chessboard's size counts its inner corners"), said
+    assert all(result["alive_at_end"].values()) and result["exit_codes"] == {"calibration_node": 0}
+
+
 def test_the_node_replaces_a_calibration_on_evidence_not_rms(tmp_path):
     """The trap in the node: a served 5-view fit (lower RMS) does not block the 16-view one ~/calibrate makes,
     which is written; a node serving that one keeps it against a fit of a few of the views (those of the first

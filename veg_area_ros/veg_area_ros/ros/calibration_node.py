@@ -18,7 +18,8 @@ from std_srvs.srv import Trigger
 
 from veg_area_msgs.msg import CalibrationProgress
 
-from ..board import BoardSpec, BoardSpecError, detect_scaled
+from ..board import BoardSpec, BoardSpecError, detect_scaled, to_grey
+from ..board_hint import board_hint
 from ..calib_io import (
     camera_info_url_to_path,
     fit_metadata,
@@ -41,6 +42,9 @@ from .messages import ImageMessageError, camera_to_info, image_bytes, info_to_ca
 from .params import declare, read_start_file
 from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
 from .run import run_nodes
+
+HINT_AFTER_FRAMES = 30  # frames without a board before the spec's usual mistakes are tried (once)
+HINT_FRAMES = 3
 
 
 class CalibrationNode(Node):
@@ -77,6 +81,9 @@ class CalibrationNode(Node):
         self.frames_looked = 0
         self._skipped_said, self._skipped_said_at = 0, -math.inf  # the skipped count last reported, and when
         self.feedback_published = 0  # ~/feedback images: drawn only while someone subscribes
+        self.frames_without_board = 0  # looked at before any view was found
+        self.hint_frames: list = []  # a few of them, for the board spec's usual mistakes
+        self.hinted = False
         self.camera: BrownCamera | None = None
         self.rms: float = math.inf
         self.served_metadata: dict = {}  # what the served calibration records of its fit: judged against
@@ -158,6 +165,8 @@ class CalibrationNode(Node):
         if not collecting and not watched:
             return  # a served fit: views are collected again only after ~/calibrate is called
         detection = detect_scaled(self.board, image)
+        if detection is None and collecting and not self.views:
+            self._no_board_yet(image)
         verdict = None
         if detection is not None and collecting:
             verdict = self.guide.offer(detection, image)
@@ -176,6 +185,20 @@ class CalibrationNode(Node):
                 self.feedback_published += 1
         if verdict is not None and verdict.kept and self.auto_calibrate and self.guide.enough():
             self._fit()
+
+    def _no_board_yet(self, image) -> None:
+        """Frames while no view was ever found: a few kept, and after HINT_AFTER_FRAMES the board spec's usual
+        mistakes tried on them, once, the board found said on ~/progress (a wrong spec looked like an empty view)."""
+        self.frames_without_board += 1
+        if self.frames_without_board % (HINT_AFTER_FRAMES // HINT_FRAMES) == 0 and not self.hinted:
+            self.hint_frames = [*self.hint_frames[-(HINT_FRAMES - 1):], to_grey(image)]
+        if self.frames_without_board >= HINT_AFTER_FRAMES and not self.hinted:
+            self.hinted = True
+            hint = board_hint(self.board, self.hint_frames)
+            text = (f"no {self.board} board in the first {self.frames_without_board} frames"
+                    + (hint if hint else ": is the board in view, and is the spec (parameter board) the board's?"))
+            self.get_logger().warning(text)
+            self._report(text)
 
     def _coverage(self) -> float:
         """The kept views' share of an 8x6 grid over the image: the figure the fit and its file report."""
