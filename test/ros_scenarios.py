@@ -1154,7 +1154,15 @@ def scenario_guidance(options: dict, nodes: Nodes) -> dict:
         for _ in range(3):
             publisher.publish(image_to_msg(image, probe.get_clock().now().to_msg(), "camera"))
             spin(0.25)
-    spin(15 if sequence == "varied" else 3)  # a fit takes seconds
+    spin(15 if sequence == "varied" and "board" not in options else 3)  # a fit takes seconds
+    if "board" in options:  # the same views on until the node has looked at 30 (a busy machine skips some)
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (progress and progress[-1]["frames_looked"] >= 32) and not any(
+                p["message"].startswith("no ") for p in progress):
+            publisher.publish(image_to_msg(images[len(progress) % len(images)], probe.get_clock().now().to_msg(),
+                                           "camera"))
+            spin(0.25)
+        spin(3)
     out["progress"] = progress[-1] if progress else None
     out["feedback_before_subscribing"] = progress[-1].get("feedback_published") if progress else None
     out["rejected_lines"] = [p["message"] for p in progress if p["message"].startswith("view rejected")]
