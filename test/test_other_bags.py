@@ -223,6 +223,79 @@ def test_camera_drivers_encodings_are_measured_as_their_colour_frames(workspace,
         assert errors[pattern] < 1 and min(e for read, e in errors.items() if read != pattern) > 10, errors
 
 
+def test_a_ros1_bag_is_measured_as_the_same_frames_in_a_rosbag2_bag(workspace, scenes):
+    """A lab's older recordings are ROS 1 bags (`rosbag record`, written here by rosbags' rosbag1 writer): they
+    were "neither an image nor a video". Read as rosbags-convert converts them (the header's seq dropped,
+    CameraInfo's D K R P), each frame gives the rosbag2 bag's Af exactly, with the bag's camera_info; a flume
+    run's force, velocity and Af topics in ROS 1 bags give vogel the same runs as rosbag2 bags."""
+    from rosbags.rosbag1 import Writer as Ros1Writer
+
+    ros1 = get_typestore(Stores.ROS1_NOETIC)
+    kinds = ros1.types
+    fields = camera_info_fields(ENDOSCOPE)
+
+    def header(k: int):
+        return kinds["std_msgs/msg/Header"](seq=k, stamp=kinds["builtin_interfaces/msg/Time"](sec=100 + k, nanosec=0),
+                                            frame_id="left")
+
+    bag = workspace / "left.bag"
+    with Ros1Writer(bag) as writer:
+        info = writer.add_connection("/left/camera_info", "sensor_msgs/msg/CameraInfo", typestore=ros1)
+        image = writer.add_connection("/left/image_raw", "sensor_msgs/msg/Image", typestore=ros1)
+        for k, frame in enumerate(scenes["left"]):
+            writer.write(info, (100 + k) * 10**9, ros1.serialize_ros1(kinds["sensor_msgs/msg/CameraInfo"](
+                header=header(k), height=480, width=640, distortion_model=fields["distortion_model"],
+                D=np.array(fields["d"], float), K=np.array(fields["k"], float), R=np.array(fields["r"], float),
+                P=np.array(fields["p"], float), binning_x=0, binning_y=0,
+                roi=kinds["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
+                                                              do_rectify=False)), "sensor_msgs/msg/CameraInfo"))
+            writer.write(image, (100 + k) * 10**9 + 1, ros1.serialize_ros1(kinds["sensor_msgs/msg/Image"](
+                header=header(k), height=480, width=640, encoding="bgr8", is_bigendian=0, step=1920,
+                data=frame.ravel()), "sensor_msgs/msg/Image"))
+    two = workspace / "left_ros2"
+    write_bag(two, "mcap", [
+        ("/left/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "left") for k in range(FRAMES)]),
+        ("/left/image_raw", "sensor_msgs/msg/Image", [_image(f, k, "left") for k, f in enumerate(scenes["left"])])])
+    from_ros1, done = _measure(workspace, bag, "--calibration", "bag")
+    assert done.returncode == 0 and len(from_ros1) == FRAMES, done.stderr
+    from_ros2, done = _measure(workspace, two, "--calibration", "bag")
+    assert [r["area_m2"] for r in from_ros1] == [r["area_m2"] for r in from_ros2]
+    assert [(r["stamp_sec"], r["frame"]) for r in from_ros1] == [(100 + k, f"left.bag#{k}") for k in range(FRAMES)]
+    from veg_area_ros.bags import play_messages, play_topics  # `veg-area play` replays it as ROS 2 messages
+
+    assert {t.name: t.replay_qos().reliability for t in play_topics(bag)} == {"/left/camera_info": "best_effort",
+                                                                           "/left/image_raw": "best_effort"}
+    replayed = [data for topic, _, data in play_messages(bag, ["/left/image_raw"])]
+    assert replayed == [TYPES.serialize_cdr(_image(f, k, "left"), "sensor_msgs/msg/Image").tobytes()
+                        for k, f in enumerate(scenes["left"])]
+
+    runs = []
+    for run, velocity in enumerate((0.1, 0.2, 0.3, 0.45)):
+        area = 0.02 * velocity ** -0.3
+        force = 0.5 * 998.2 * velocity**2 * area * 1.1 * velocity ** -0.2
+        runs.append(workspace / f"run{run}.bag")
+        vector = kinds["geometry_msgs/msg/Vector3"]
+        with Ros1Writer(runs[-1]) as writer:
+            topics = {name: writer.add_connection(f"/{name}", msgtype, typestore=ros1) for name, msgtype in (
+                ("force", "geometry_msgs/msg/WrenchStamped"), ("velocity", "geometry_msgs/msg/TwistStamped"),
+                ("projected_area", "geometry_msgs/msg/Vector3Stamped"))}
+            for k in range(20):
+                messages = {
+                    "force": kinds["geometry_msgs/msg/WrenchStamped"](header=header(k), wrench=kinds[
+                        "geometry_msgs/msg/Wrench"](force=vector(x=force, y=0.0, z=0.0), torque=vector(x=0.0, y=0.0,
+                                                                                                       z=0.0))),
+                    "velocity": kinds["geometry_msgs/msg/TwistStamped"](header=header(k), twist=kinds[
+                        "geometry_msgs/msg/Twist"](linear=vector(x=velocity, y=0.0, z=0.0),
+                                                   angular=vector(x=0.0, y=0.0, z=0.0))),
+                    "projected_area": kinds["geometry_msgs/msg/Vector3Stamped"](
+                        header=header(k), vector=vector(x=area, y=0.01 * area, z=0.0))}
+                for name, message in messages.items():
+                    writer.write(topics[name], (100 + k) * 10**9, ros1.serialize_ros1(message, message.__msgtype__))
+    done = run_cli("vogel", *map(str, runs), "--json", "--plot", str(workspace / "v.png"))
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["exponent"] == pytest.approx(-0.5, abs=1e-9)
+
+
 def test_a_calibration_file_of_another_camera_is_said_in_each_result(workspace, scenes):
     """The bag's camera_info is the right endoscope's, the file the left one's: each result says so (Af was
     -8 % without a word); the right camera's own file is silent."""

@@ -24,7 +24,15 @@ from pathlib import Path
 from types import MappingProxyType
 
 import yaml
-from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.interfaces import (
+    ConnectionExtRosbag1,
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import CompressionMode, StoragePlugin
 from rosbags.rosbag2.storage_mcap import McapWriter
@@ -437,8 +445,16 @@ class BagFrame:
 def _open_reader(path: str | Path) -> Reader:
     if not Path(path).exists():
         raise BagError(f"{path}: no such bag (a rosbag2 bag is a folder with metadata.yaml)")
+    if not Path(path).is_dir() and Path(path).suffix.lower() == ".bag":  # ROS 1's rosbag record
+        from .ros1_bag import Ros1Bag
+
+        try:
+            return Ros1Bag(path, typestore())
+        except Exception as exc:  # rosbags raises its own error classes for every kind of broken bag
+            raise BagError(f"{path}: not a readable ROS 1 bag ({exc})") from exc
     if not Path(path).is_dir() and Path(path).suffix not in (".mcap", ".db3"):
-        raise BagError(f"{path}: not a rosbag2 bag (a bag is a folder with metadata.yaml, or its .mcap/.db3 file)")
+        raise BagError(f"{path}: not a rosbag2 bag (a bag is a folder with metadata.yaml, or its .mcap/.db3 file, "
+                       "or ROS 1's .bag)")
     try:
         reader = Reader(path)
         reader.open()
@@ -574,6 +590,10 @@ def play_topics(path: str | Path, names: list[str] | None = None) -> list[PlayTo
         present = sorted({connection.topic for connection in reader.connections})
         for connection in reader.connections:
             if names and connection.topic not in names and connection.topic.lstrip("/") not in names:
+                continue
+            if isinstance(connection.ext, ConnectionExtRosbag1):  # a ROS 1 bag's: TCP, latched or not
+                offered = [OfferedQos("reliable", "transient_local", "keep_last", 1)] if connection.ext.latching else []
+                topics[connection.topic] = PlayTopic(connection.topic, connection.msgtype, offered)
                 continue
             try:
                 profiles = connection.ext.offered_qos_profiles

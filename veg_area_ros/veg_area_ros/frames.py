@@ -50,10 +50,10 @@ class Frame:
 
 
 def is_bag(path: Path) -> bool:
-    """A rosbag2 folder (metadata.yaml, or .mcap/.db3 files) or a single .mcap file."""
+    """A rosbag2 folder (metadata.yaml, or .mcap/.db3 files), a single .mcap file or a ROS 1 .bag."""
     if path.is_dir():
         return (path / "metadata.yaml").is_file() or any(path.glob("*.mcap")) or any(path.glob("*.db3"))
-    return path.suffix.lower() == ".mcap"
+    return path.suffix.lower() in (".mcap", ".bag")
 
 
 def decodable_ahead(files: list[Path]) -> bool:

@@ -22,9 +22,9 @@ def add_parsers(sub) -> None:
     rec.add_argument("--storage", default="mcap", choices=["mcap", "sqlite3"])
     rec.set_defaults(func=cmd_record)
 
-    play = sub.add_parser("play", help="replay a rosbag2 bag at the recorded pace with the recorded QoS, as "
-                          "'ros2 bag play' does (ROS 2 node; stops at the end)")
-    play.add_argument("bag", help="the bag folder")
+    play = sub.add_parser("play", help="replay a rosbag2 bag (or a ROS 1 .bag, as ROS 2 messages) at the recorded "
+                          "pace with the recorded QoS, as 'ros2 bag play' does (ROS 2 node; stops at the end)")
+    play.add_argument("bag", help="the bag folder (or .mcap/.db3 file, or ROS 1 .bag)")
     play.add_argument("--topics", nargs="+", default=None, help="topics to replay (default: all)")
     play.add_argument("--rate", type=positive_float, default=1.0, help="pace, 1 = as recorded")
     play.add_argument("--delay", type=float, default=1.0, metavar="S",

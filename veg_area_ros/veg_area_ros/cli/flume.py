@@ -15,8 +15,8 @@ def add_parser(sub) -> None:
     vog = sub.add_parser("vogel", help="fit the Vogel exponent (Cd·Af ∝ U^psi) to an experiment table, with "
                          "its confidence interval and a log-log plot")
     vog.add_argument("inputs", nargs="+", metavar="TABLE_OR_BAGS",
-                     help="a CSV with velocity_m_s, force_n, area_m2 (optional density) per run, or rosbag2 bags "
-                          "recorded with force, velocity and projected_area, one run each")
+                     help="a CSV with velocity_m_s, force_n, area_m2 (optional density) per run, or rosbag2 (or "
+                          "ROS 1) bags recorded with force, velocity and projected_area, one run each")
     vog.add_argument("--force-axis", default="+x",
                      help="bags: force component along the flow, +x .. -z (a minus sign: --force-axis=-y; "
                           "default %(default)s)")
