@@ -12,7 +12,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .common import EXIT_REFUSED, EXIT_USAGE, CliError, check_outputs, check_writable, positive_float, progress
+from .common import (
+    EXIT_REFUSED,
+    EXIT_USAGE,
+    CliError,
+    check_outputs,
+    check_writable,
+    distance_m,
+    liquid_index,
+    positive_float,
+    progress,
+)
 
 if TYPE_CHECKING:
     from ..board import BoardSpec
@@ -38,7 +48,7 @@ def add_parser(sub) -> None:
     cal.add_argument("--report", metavar="DIR", help="write residual and coverage plots (PNG) here")
     cal.add_argument("--medium", default="unspecified", choices=["air", "water", "unspecified"],
                      help="medium of the calibration: say it (recorded as 'unspecified' otherwise)")
-    cal.add_argument("--distance", type=positive_float, default=None,
+    cal.add_argument("--distance", type=distance_m, default=None,
                      help="camera-to-board distance of the calibration, metres (recorded in the file)")
     cal.add_argument("--camera-name", default="camera")
     cal.add_argument("--model", choices=["auto", "plumb_bob", "rational_polynomial", "equidistant"],
@@ -61,9 +71,9 @@ def add_parser(sub) -> None:
                      help="an explicit flat port in front of the --lens air calibration: fitted (normal, distance) "
                           "from the underwater views given, or taken as measured when none are given")
     cal.add_argument("--lens", metavar="AIR_YAML", help="the lens's calibration in air (with --port)")
-    cal.add_argument("--water-index", type=positive_float, default=1.333, help="refractive index of the water")
+    cal.add_argument("--water-index", type=liquid_index, default=1.333, help="refractive index of the water")
     cal.add_argument("--fit-water-index", action="store_true", help="fit the water's index too (with --port)")
-    cal.add_argument("--absorbed-distance", type=positive_float, default=0.7, metavar="M",
+    cal.add_argument("--absorbed-distance", type=distance_m, default=0.7, metavar="M",
                      help="distance of the plane for the absorbed plumb_bob equivalent written for ROS tools")
     cal.set_defaults(func=cmd_calibrate)
 

@@ -56,6 +56,21 @@ def positive_float(text: str) -> float:
     return _number(text, float, lambda v: math.isfinite(v) and v > 0, "a positive number")
 
 
+MAX_DISTANCE_M = 100.0  # as the calibration node's calibration_distance_m
+
+
+def distance_m(text: str) -> float:
+    """A camera-to-board distance in metres (a value in millimetres is refused, not recorded as 700 m)."""
+    return _number(text, float, lambda v: math.isfinite(v) and 0 < v <= MAX_DISTANCE_M,
+                   f"a distance in metres, over 0 and at most {MAX_DISTANCE_M:g} (millimetres given as metres?)")
+
+
+def liquid_index(text: str) -> float:
+    """A liquid's refractive index: water 1.333, sea water 1.34, what a flume may hold up to 1.6; 1 is air's."""
+    return _number(text, float, lambda v: 1.2 <= v <= 1.6,
+                   "a liquid's refractive index from 1.2 to 1.6 (water 1.333; 1 is air's)")
+
+
 def positive_int(text: str) -> int:
     return _number(text, int, lambda v: v >= 1, "a whole number of 1 or more")
 
