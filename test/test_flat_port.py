@@ -189,6 +189,16 @@ def test_the_command_line_fits_writes_and_measures_with_a_port(tmp_path):
                           f"{UNDERWATER.glass_index}", "--lens", str(tmp_path / "air.yaml"), "-o",
                           str(tmp_path / "measured.yaml"))
     assert as_measured.returncode == 0, as_measured.stderr
+    # over an existing calibration only with --replace (it was written over in silence: a port is not judged
+    # against a board fit)
+    before = (tmp_path / "fitted.yaml").read_bytes()
+    again = ("calibrate", "--port", port_text, "--lens", str(tmp_path / "air.yaml"), "-o",
+             str(tmp_path / "fitted.yaml"))
+    refused = run_cli(*again)
+    assert refused.returncode == 3 and "use --replace" in refused.stderr, refused.stderr
+    assert (tmp_path / "fitted.yaml").read_bytes() == before
+    assert run_cli(*again, "--replace").returncode == 0 and (tmp_path / "fitted.yaml").read_bytes() != before
+    (tmp_path / "fitted.yaml").write_bytes(before)
     calibration = read_calibration(tmp_path / "fitted.yaml")
     assert calibration.port_camera() is not None and calibration.metadata["medium"] == "water"
     plain = yaml.safe_load((tmp_path / "fitted.yaml").read_text())

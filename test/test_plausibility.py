@@ -227,6 +227,12 @@ def test_a_spreadsheets_csv_with_a_bom_is_read(tmp_path):
      "--fit-water-index fits the water's index from underwater views through a port"),
     (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler", "tcp://127.0.0.1:9",
       "--overlay", "over"), "--overlay is not written by a --scheduler run"),
+    (("calibrate", "--port", "flat:0.02:0.006:1.49", "--lens", "lens.yaml", "-o", "p.yaml", "--distance", "0.5"),
+     "--distance do(es) not apply with --port/--lens"),
+    (("calibrate", "--port", "flat:0.02:0.006:1.49", "--lens", "lens.yaml", "-o", "p.yaml", "--medium", "air",
+      "--report", "plots"), "--medium air, --report do(es) not apply with --port/--lens"),
+    (("calibrate", "photos", "--board", "chessboard:9x6:1", "-o", "c.yaml", "--water-index", "1.34"),
+     "--water-index apply only with --port and --lens"),
     (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler",
       "tcp://127.0.0.1:eighty"), "the port 'eighty' is not a number from 1 to 65535"),
     (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler",
@@ -238,8 +244,8 @@ def test_a_spreadsheets_csv_with_a_bom_is_read(tmp_path):
 ])
 def test_numbers_and_options_that_cannot_apply_are_refused(tmp_path, args, message):
     """`demo --measurements 0` printed "Af over 0 frames: nan"; a confidence of 1.5, nan or 0 fitted;
-    --fit-water-index without a port's underwater views and --overlay with --scheduler were ignored without a
-    word."""
+    --fit-water-index without a port's underwater views, --overlay with --scheduler, the board fit's options
+    with --port and the port's options without it were ignored without a word."""
     from helpers import run_cli
 
     (tmp_path / "photos").mkdir()

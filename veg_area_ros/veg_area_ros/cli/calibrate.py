@@ -217,7 +217,23 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         if args.model is not None:
             raise CliError("--model does not apply with --port/--lens: the lens's model is its air calibration's "
                            "(--lens)", EXIT_USAGE)
+        unused = [option for option, given in (
+            ("--distance", args.distance is not None), ("--medium air", args.medium == "air"),
+            ("--report", args.report is not None), ("--loss", args.loss != "linear"),
+            ("--outlier-sigma", args.outlier_sigma != 4.0), ("--no-outlier-rejection", args.no_outlier_rejection))
+            if given]
+        if unused:  # the port's fit has none of these; its file is for water at --absorbed-distance
+            raise CliError(f"{', '.join(unused)} do(es) not apply with --port/--lens (the port's file is for water; "
+                           "its plane is --absorbed-distance)", EXIT_USAGE)
+        if output.exists() and not args.replace:
+            raise CliError(f"{output} exists: a port calibration is not judged against the one it holds; use "
+                           "--replace to write over it", EXIT_REFUSED)
         return _calibrate_port(args, say)
+    unused = [option for option, given in (("--water-index", args.water_index != 1.333),
+                                           ("--absorbed-distance", args.absorbed_distance != 0.7)) if given]
+    if unused:
+        raise CliError(f"{', '.join(unused)} apply only with --port and --lens (a lens behind a flat port)",
+                       EXIT_USAGE)
     if not args.inputs or not args.board:
         raise CliError("give the board (--board) and its images", EXIT_USAGE)
     board, files = _board_and_files(args)
