@@ -99,3 +99,14 @@ def test_a_bag_is_a_source_like_the_command_lines_input(tmp_path):
     frames = [source.read() for _ in range(3)]
     assert [f is None for f in frames] == [False, False, True]
     assert [int(f[0, 0, 0]) for f in frames[:2]] == [0, 50]
+
+
+def test_a_folder_of_a_scientific_cameras_16_bit_files_says_the_depth_once(tmp_path):
+    """The camera node publishes 8-bit frames: a 12-bit camera's 16-bit files are read at their depth (the same
+    grey levels as the 8-bit frame they hold) and the assumed depth is kept for the node to log, once per kind."""
+    frame = np.random.default_rng(0).integers(0, 256, (48, 64, 3)).astype(np.uint8)
+    for k in range(3):
+        cv2.imwrite(str(tmp_path / f"f{k}.png"), frame.astype(np.uint16) << 4)
+    source = open_source(str(tmp_path))
+    assert all(np.array_equal(source.read(), frame) for _ in range(3))
+    assert len(source.notes) == 1 and source.notes[0].startswith("f0.png: 16-bit image read as 12-bit data")

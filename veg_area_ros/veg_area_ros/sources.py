@@ -131,6 +131,8 @@ class FileSource:
         self._first_pass: list[np.ndarray | str] | None = [] if loop else None  # while it may be replayed
         self._replay: list[np.ndarray | str] | None = None
         self._next = 0
+        self.notes: list[str] = []  # what reading assumed (a 16-bit file's depth), each kind once, for the node
+        self._note_kinds: set[str] = set()
 
     def read(self) -> np.ndarray | None:
         if self._replay is not None:
@@ -158,6 +160,11 @@ class FileSource:
             if frame is None:
                 raise SourceError(f"{self.files[0]}: no frame after starting over")
         item = frame.image if frame.image is not None else f"{frame.name} {frame.problem}"
+        for note in frame.notes:
+            kind = note.split(":", 1)[0]
+            if kind not in self._note_kinds:
+                self._note_kinds.add(kind)
+                self.notes.append(f"{frame.name}: {note}")
         if self._first_pass is not None:
             self._first_pass.append(item)
             if len(self._first_pass) > LOOP_CACHE_FRAMES:

@@ -43,6 +43,7 @@ class CameraNode(Node):
                          choices=("air", "water"), read_only=True)
         self.stop_requested = False
         self.frames_published = 0
+        self.notes_said = 0  # of the source's notes
         self.image_pub = self.create_publisher(Image, "image_raw", IMAGE_QOS)
         self.info_pub = self.create_publisher(CameraInfo, "camera_info", LATCHED_QOS)
         # what camera_info cannot carry (tone curve, medium, distance), for an area node given camera_info only
@@ -77,6 +78,9 @@ class CameraNode(Node):
                 with contextlib.suppress(SourceError):  # still gone: the next tick retries
                     self.source.reopen()
             return
+        for note in getattr(self.source, "notes", ())[self.notes_said:]:  # a 16-bit file's assumed depth
+            self.get_logger().warning(f"{note} (the published frames are 8-bit)")
+            self.notes_said += 1
         if image is None:
             self.get_logger().info(f"end of {self.source_name} after {self.frames_published} frames; stopping")
             self.timer.cancel()
