@@ -209,6 +209,7 @@ CASES = {
     "record over a file": (["record", "-o", "cube.png"], "exists already"),
     "record under a file": (["record", "-o", "a_file/bag"], "a_file is a file"),
     "record a bad topic": (["record", "a//b", "-o", "new_bag"], "'//'"),
+    "record all and topics": (["record", "--all", "image_raw", "-o", "new_bag"], "not both"),
     "play a plain file": (["play", "cube.png"], "not a rosbag2 bag"),
     # outputs checked before the work, not after it
     "vogel plot under a file": (["vogel", "runs.csv", "--plot", "a_file/plot.png"], "a_file is a file"),

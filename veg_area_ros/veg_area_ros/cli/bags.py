@@ -46,6 +46,9 @@ def cmd_record(args: argparse.Namespace) -> int:
     from ..bags import topic_name_problem
     from ..ros.record_node import main as record_main
 
+    if args.all and args.topics:
+        raise CliError(f"--all records every topic on the graph; give the topics ({' '.join(args.topics)}) or "
+                       "--all, not both", EXIT_USAGE)
     for topic in args.topics:  # said before ROS starts, not as an RCLError from inside it
         problem = topic_name_problem(topic)
         if problem:
