@@ -173,9 +173,14 @@ class RecordNode(Node):
                 self.get_logger().warning(f"{topic}: not recorded in the first {gap:.2f} s after the command"
                                           f"{estimate} (subscribing waits for discovery)")
         never = [t for t in (self.resolve_topic_name(w) for w in self.wanted) if t not in self.recording]
-        if never or (self.everything and not self.recording):
-            self.get_logger().warning(f"never seen on the graph, not recorded: {', '.join(never) or 'any topic'} "
+        if never:
+            self.get_logger().warning(f"never seen on the graph, not recorded: {', '.join(never)} "
                                       "(a mistyped name? `ros2 topic list` shows what is published)")
+            self.exit_code = 1
+        elif self.everything and not self.recording:
+            domain = os.environ.get("ROS_DOMAIN_ID", "0")
+            self.get_logger().warning(f"no topic was seen on the graph (all): is anything publishing, on ROS_DOMAIN_ID "
+                                      f"{domain} and within ROS_AUTOMATIC_DISCOVERY_RANGE?")
             self.exit_code = 1
         empty = [t for t in self.recording if not self.recorder.counts.get(t) and not self.everything
                  and not self.recorder.write_problem]
