@@ -206,6 +206,8 @@ CASES = {
     "start time nan": (measure("--start-time", "nan"), "got nan"),
     "start after end": (measure("--start-time", "9", "--end-time", "3"), "lies after --end-time"),
     "time range without a bag": (measure("--end-time", "3"), "the inputs hold no bag"),
+    "image topic without a bag": (measure("--image-topic", "/left/image_raw"), "the inputs hold no bag"),
+    "video step on an image": (measure("--video-step", "5"), "the inputs are images"),
     "record over a file": (["record", "-o", "cube.png"], "exists already"),
     "record under a file": (["record", "-o", "a_file/bag"], "a_file is a file"),
     "record a bad topic": (["record", "a//b", "-o", "new_bag"], "'//'"),

@@ -115,6 +115,22 @@ def add_parser(sub) -> None:
     mea.set_defaults(func=cmd_measure)
 
 
+def _refuse_options_the_inputs_ignore(args: argparse.Namespace) -> None:
+    """--video-step where no input can be a video and --image-topic where none is a bag were ignored in silence."""
+    from ..frames import IMAGE_SUFFIXES, InputError, expand_inputs, is_bag
+
+    try:
+        files = expand_inputs(args.inputs)
+    except InputError:
+        return  # said with its reason where the inputs are read
+    if args.video_step > 1 and files and all(f.suffix.lower() in IMAGE_SUFFIXES for f in files):
+        raise CliError(f"--video-step {args.video_step} takes every Nth frame of a video; the inputs are images",
+                       EXIT_USAGE)
+    if args.image_topic and not any(is_bag(f) for f in files):
+        raise CliError(f"--image-topic {args.image_topic} picks a bag's image topic; the inputs hold no bag",
+                       EXIT_USAGE)
+
+
 def cmd_measure(args: argparse.Namespace) -> int:
     if args.jobs is not None and args.jobs < 0:
         raise CliError("--jobs must be 0 (every core) or more", EXIT_USAGE)
@@ -124,6 +140,7 @@ def cmd_measure(args: argparse.Namespace) -> int:
     if args.scheduler and args.jobs is not None:
         raise CliError("--jobs counts this machine's processes; with --scheduler the cluster's workers measure",
                        EXIT_USAGE)
+    _refuse_options_the_inputs_ignore(args)
     job = MeasureJob.from_args(args)
     folder = Path(args.output_dir or ".")
     if args.scheduler:
