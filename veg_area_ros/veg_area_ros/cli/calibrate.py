@@ -237,6 +237,11 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if not args.inputs or not args.board:
         raise CliError("give the board (--board) and its images", EXIT_USAGE)
     board, files = _board_and_files(args)
+    from ..frames import IMAGE_SUFFIXES
+
+    if args.video_step > 1 and all(f.suffix.lower() in IMAGE_SUFFIXES for f in files):
+        raise CliError(f"--video-step {args.video_step} takes every Nth frame of a video; the inputs are images",
+                       EXIT_USAGE)
 
     previous = None
     if output.exists() and not args.replace:
