@@ -202,7 +202,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     from ..calib_io import CalibrationFileError, fit_metadata, read_calibration, write_calibration
     from ..calibration import CalibrationError, calibrate
     from ..camera_model import implausibility
-    from ..frames import VIDEO_SUFFIXES, video_frame_count
+    from ..frames import IMAGE_SUFFIXES, VIDEO_SUFFIXES, video_frame_count
     from ..replacement import judge
 
     say = progress(args.quiet)
@@ -237,8 +237,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if not args.inputs or not args.board:
         raise CliError("give the board (--board) and its images", EXIT_USAGE)
     board, files = _board_and_files(args)
-    from ..frames import IMAGE_SUFFIXES
-
     if args.video_step > 1 and all(f.suffix.lower() in IMAGE_SUFFIXES for f in files):
         raise CliError(f"--video-step {args.video_step} takes every Nth frame of a video; the inputs are images",
                        EXIT_USAGE)
