@@ -160,6 +160,8 @@ def test_targets_file_as_the_issue_writes_it_and_duplicate_ids(tmp_path):
                     "  0: [-0.22, -0.16]\n  1: [0.22, -0.16]\n")
     spec = TargetsSpec.load(path)
     assert spec.markers[1] == pytest.approx([0.22, -0.16])
+    path.write_text("dictionary: 4X4_50\nmarkers:\n  0: [-0.22, -0.16]\n  1: [0.22, -0.16]\n")
+    assert TargetsSpec.load(path).dictionary == "DICT_4X4_50"  # as OpenCV's docs name it, without DICT_
     path.write_text("dictionary: DICT_4X4_50\nmarkers:\n  0: [-0.22, -0.16]\n  0: [0.22, -0.16]\n")
     with pytest.raises(TargetsError, match=r"targets.yaml: duplicate key 0 at line 4"):
         TargetsSpec.load(path)

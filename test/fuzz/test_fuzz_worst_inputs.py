@@ -139,6 +139,7 @@ def workspace(tmp_path_factory) -> Path:
     mistyped[ids[2]] = [markers[ids[2]][0] * 10, markers[ids[2]][1]]
     (folder / "mistyped.yaml").write_text(yaml.safe_dump(scene_targets_content(mistyped)))
     (folder / "a_file").write_text("not a folder")
+    (folder / "targets_5x5.yaml").write_text(yaml.safe_dump({**scene_targets_content(), "dictionary": "DICT_5X5_50"}))
     for name, factor in (("mm", 1e3), ("huge", 1e13), ("km", 1e-3)):  # coordinates in the wrong unit
         scaled = {k: [x * factor, y * factor] for k, (x, y) in markers.items()}
         (folder / f"targets_{name}.yaml").write_text(yaml.safe_dump(scene_targets_content(scaled)))
@@ -194,6 +195,8 @@ CASES = {
     "targets 1e13 too large": (measure(targets="targets_huge.yaml"), "millimetres given as metres"),
     "targets in kilometres": (measure(targets="targets_km.yaml"), "metres given as kilometres"),
     "no object, fixed threshold": (measure(image="empty.png"), "no object found"),
+    "targets of another dictionary": (measure(targets="targets_5x5.yaml"), "the frame holds 4X4 markers (ids up to "
+                                      "3), not DICT_5X5_50's: is the targets file's dictionary DICT_4X4_50?"),
     "no object, otsu": (measure("--threshold", "otsu", image="empty.png"), "no object found"),
     "roi at 1e9 px": (measure("--roi", "0,0,1e9,0,1e9,1e9"), "beyond any image"),
     # outputs over inputs

@@ -31,7 +31,7 @@ def _alternatives(board: BoardSpec) -> list[tuple[BoardSpec, str]]:
     return [(replace(board, symmetric=not board.symmetric), "circle grids come symmetric or asymmetric")]
 
 
-def _marker_family(grey: np.ndarray) -> tuple[str, int, int] | None:
+def marker_family(grey: np.ndarray) -> tuple[str, int, int] | None:
     """The ArUco family whose markers the frame holds (either way round in tone): (dictionary, markers, the
     largest id), or None."""
     best = None
@@ -73,7 +73,7 @@ def board_hint(board: BoardSpec, greys: Sequence[np.ndarray]) -> str:
     if board.kind != "charuco":
         return ""
     for grey in greys:
-        family = _marker_family(grey)
+        family = marker_family(grey)
         if family is None:
             continue
         name, count, largest = family
@@ -83,3 +83,16 @@ def board_hint(board: BoardSpec, greys: Sequence[np.ndarray]) -> str:
         return (f"; the frames hold {_family(name).removeprefix('DICT_')} markers (ids up to {largest}), not "
                 f"{board.dictionary}'s: try {_smallest_dictionary(name, largest)}")
     return ""
+
+
+def dictionary_hint(dictionary: str, grey: np.ndarray) -> str:
+    """Why a targets file's markers of `dictionary` may be found nowhere in this frame: the ArUco family the
+    frame holds instead, with the dictionary to write ('' when it holds none, or the same family)."""
+    found = marker_family(grey)
+    if found is None:
+        return ""
+    name, _, largest = found
+    if _family(name) == _family(dictionary) and largest < _capacity(dictionary):
+        return ""
+    return (f"; the frame holds {_family(name).removeprefix('DICT_')} markers (ids up to {largest}), not "
+            f"{dictionary}'s: is the targets file's dictionary {_smallest_dictionary(name, largest)}?")

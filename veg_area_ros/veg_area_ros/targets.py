@@ -78,6 +78,8 @@ class TargetsSpec:
         if not isinstance(content, dict):
             raise TargetsError("expected a mapping with 'markers' and/or 'points'")
         spec = cls(dictionary=str(content.get("dictionary", "")).upper())
+        if spec.dictionary and not spec.dictionary.startswith("DICT_"):  # '4X4_50', as OpenCV's docs name them
+            spec.dictionary = f"DICT_{spec.dictionary}"
         markers = content.get("markers") or {}
         if not isinstance(markers, dict):
             raise TargetsError("'markers' must map marker ids to [x, y]")

@@ -304,6 +304,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     log = RowLog(csv_path, CSV_COLUMNS, lambda row: not row["error"] and not _no_object(row)) \
         if csv_path is not None else None
     warned: dict[str, int] = {}
+    dictionary_hinted = False  # the other ArUco families tried once, on the first frame without a target
     unwritten: list[str] = []  # overlay or idealized images that could not be written
     stamps: list[tuple[float, float]] = []  # (stamp, since its bag's start) of the frames left out by the range
     starts: dict[str, float] = {}
@@ -358,6 +359,13 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                 if frame.name.rsplit("#", 1)[0] in other_camera:
                     result.warnings.append(other_camera[frame.name.rsplit("#", 1)[0]])
             except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
+                if (not dictionary_hinted and isinstance(exc, TargetsError) and str(exc).startswith("only 0 target(s)")
+                        and targets.dictionary and frame.image is not None):
+                    from ..board import to_grey
+                    from ..board_hint import dictionary_hint
+
+                    dictionary_hinted = True
+                    exc = TargetsError(f"{exc}{dictionary_hint(targets.dictionary, to_grey(frame.image))}")
                 row["error"] = str(exc)
                 say(f"[{index}/{total}] {frame.name}: not measured, {exc}")
             else:
