@@ -32,6 +32,8 @@ from std_msgs.msg import String
 
 from veg_area_msgs.msg import ProjectedArea
 
+from ..board import to_grey
+from ..board_hint import dictionary_hint
 from ..calib_io import metadata_for, read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, decode_compressed_image, decode_image, stamp_ns, unstamped
@@ -106,6 +108,7 @@ class AreaNode(Node):
         self.info_frame_id = ""  # the frame_id of the camera_info the calibration came from
         self.frames = FrameTally()
         self.frames_measured = 0
+        self.dictionary_hinted = False
         self._skipped_logged = 0
         self._lost_logged = 0
         self._tally_logged_at = -TALLY_LOG_PERIOD_S
@@ -422,7 +425,11 @@ class AreaNode(Node):
             self.warn("frame refused", str(exc))
             return
         except (TargetsError, ClassifyError, LightError) as exc:
-            self.warn("frame not measured", str(exc))
+            text = str(exc)
+            if not self.dictionary_hinted and text.startswith("only 0 target(s)") and self.targets.dictionary:
+                self.dictionary_hinted = True  # the other ArUco families tried once: a wrong dictionary finds none
+                text += dictionary_hint(self.targets.dictionary, to_grey(frame))
+            self.warn("frame not measured", text)
             return
         self.frames_measured += 1
         source = self._calibration_source()
