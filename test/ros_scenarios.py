@@ -1090,12 +1090,20 @@ def scenario_bad_start_files(options: dict, nodes: Nodes) -> dict:
         out["logs"] = logs
         out["measured_without_targets"] = len(infos)
         out["alive_before_fix"] = nodes.alive()
+        client = probe.create_client(SetParameters, "area_node/set_parameters")
+        client.wait_for_service(timeout_sec=20)
+        # first a targets file of another ArUco dictionary than the markers in view: the node says which it sees
+        other = Path("targets_5x5.yaml").resolve()
+        other.write_text(yaml.safe_dump({**scene_targets_content(), "dictionary": "DICT_5X5_50"}))
+        future = client.call_async(SetParameters.Request(
+            parameters=[Parameter("targets_file", value=str(other)).to_parameter_msg()]))
+        spin_until(future.done, 20)
+        out["dictionary_hint"] = spin_until(
+            lambda: said("area_node", "not DICT_5X5_50's: is the targets file's dictionary DICT_4X4_50?"), 30)
         targets = Path("targets.yaml").resolve()
         content = scene_targets_content()
         content["markers"][7] = [0.0, 0.16]  # listed, never in view: said in every result
         targets.write_text(yaml.safe_dump(content))
-        client = probe.create_client(SetParameters, "area_node/set_parameters")
-        client.wait_for_service(timeout_sec=20)
         future = client.call_async(SetParameters.Request(
             parameters=[Parameter("targets_file", value=str(targets)).to_parameter_msg()]))
         spin_until(future.done, 20)

@@ -307,6 +307,7 @@ def test_a_file_a_node_cannot_read_at_start_is_logged_and_the_node_runs_on(tmp_p
     assert result["measured_without_targets"] == 0
     assert all(result["alive_before_fix"].values()), result["alive_before_fix"]
     assert any(line.startswith("parameter background_file:") and "fitted in each frame" in line for line in area)
+    assert result["dictionary_hint"] is True, area  # targets of DICT_5X5_50 on 4X4 markers: which it sees, once
     assert result["targets_file_set"] is True and result["measured_after_fix"] is True
     # a warning is in the result itself (projected_area/info) and in the node's log
     assert any(w.startswith("targets missing") and "[7]" in w for w in result["warnings"]), result["warnings"]
