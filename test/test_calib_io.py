@@ -294,23 +294,10 @@ distortion_coefficients: !!opencv-matrix
 avg_reprojection_error: 0.41
 """
 # OpenCV's interactive calibrator (opencv_interactive-calibration) names them otherwise
-OPENCV_INTERACTIVE = """%YAML:1.0
----
-calibrationDate: "Sat Dec  5 07:58:00 2026"
-framesCount: 20
-cameraResolution: [ 640, 480 ]
-cameraMatrix: !!opencv-matrix
-   rows: 3
-   cols: 3
-   dt: d
-   data: [ 520., 0., 326., 0., 522.08, 236.5, 0., 0., 1. ]
-dist_coeffs: !!opencv-matrix
-   rows: 1
-   cols: 5
-   dt: d
-   data: [ -0.32, 0.12, 1.2e-03, -8.0e-04, -0.02 ]
-avg_reprojection_error: 0.41
-"""
+OPENCV_INTERACTIVE = ("%YAML:1.0\n---\ncalibrationDate: \"Sat Dec  5 07:58:00 2026\"\nframesCount: 20\n"
+                      "cameraResolution: [ 640, 480 ]\n" + OPENCV_SAMPLE[OPENCV_SAMPLE.index("camera_matrix:"):]
+                      .replace("camera_matrix:", "cameraMatrix:").replace("distortion_coefficients:", "dist_coeffs:")
+                      .replace("rows: 5\n   cols: 1", "rows: 1\n   cols: 5"))
 
 
 def test_opencvs_own_calibration_files_are_read(tmp_path):
