@@ -33,6 +33,8 @@ VIEWS_PER_VIDEO = 60  # consecutive frames add little but time
 DETECT_WORKERS = 2  # board searches at once: the two cores of a lab PC (OpenCV runs them without the GIL)
 
 
+DEFAULT_LOSS, DEFAULT_OUTLIER_SIGMA = "linear", 4.0  # the board fit's
+DEFAULT_WATER_INDEX, DEFAULT_ABSORBED_DISTANCE_M = 1.333, 0.7  # the port's
 FRAME_LINES = 30  # frames with a line each; then one line every PROGRESS_EVERY_S
 PROGRESS_EVERY_S = 2.0
 
@@ -55,9 +57,9 @@ def add_parser(sub) -> None:
                      help="camera model (ROS's distortion_model): auto (the default) fits all three and picks the "
                           "one that best predicts held-out views; plumb_bob for most lenses, rational_polynomial "
                           "and equidistant (fisheye) for wide ones")
-    cal.add_argument("--loss", default="linear", choices=["linear", "huber", "soft_l1", "cauchy"],
+    cal.add_argument("--loss", default=DEFAULT_LOSS, choices=["linear", "huber", "soft_l1", "cauchy"],
                      help="robust loss for the bundle adjustment")
-    cal.add_argument("--outlier-sigma", type=positive_float, default=4.0,
+    cal.add_argument("--outlier-sigma", type=positive_float, default=DEFAULT_OUTLIER_SIGMA,
                      help="reject points beyond this many robust standard deviations")
     cal.add_argument("--no-outlier-rejection", action="store_true")
     cal.add_argument("--video-step", type=int, default=0,
@@ -71,9 +73,10 @@ def add_parser(sub) -> None:
                      help="an explicit flat port in front of the --lens air calibration: fitted (normal, distance) "
                           "from the underwater views given, or taken as measured when none are given")
     cal.add_argument("--lens", metavar="AIR_YAML", help="the lens's calibration in air (with --port)")
-    cal.add_argument("--water-index", type=liquid_index, default=1.333, help="refractive index of the water")
+    cal.add_argument("--water-index", type=liquid_index, default=DEFAULT_WATER_INDEX,
+                     help="refractive index of the water")
     cal.add_argument("--fit-water-index", action="store_true", help="fit the water's index too (with --port)")
-    cal.add_argument("--absorbed-distance", type=distance_m, default=0.7, metavar="M",
+    cal.add_argument("--absorbed-distance", type=distance_m, default=DEFAULT_ABSORBED_DISTANCE_M, metavar="M",
                      help="distance of the plane for the absorbed plumb_bob equivalent written for ROS tools")
     cal.set_defaults(func=cmd_calibrate)
 
@@ -219,21 +222,22 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                            "(--lens)", EXIT_USAGE)
         unused = [option for option, given in (
             ("--distance", args.distance is not None), ("--medium air", args.medium == "air"),
-            ("--report", args.report is not None), ("--loss", args.loss != "linear"),
-            ("--outlier-sigma", args.outlier_sigma != 4.0), ("--no-outlier-rejection", args.no_outlier_rejection))
-            if given]
+            ("--report", args.report is not None), ("--loss", args.loss != DEFAULT_LOSS),
+            ("--outlier-sigma", args.outlier_sigma != DEFAULT_OUTLIER_SIGMA),
+            ("--no-outlier-rejection", args.no_outlier_rejection)) if given]
         if unused:  # the port's fit has none of these; its file is for water at --absorbed-distance
-            raise CliError(f"{', '.join(unused)} do(es) not apply with --port/--lens (the port's file is for water; "
-                           "its plane is --absorbed-distance)", EXIT_USAGE)
+            raise CliError(f"{', '.join(unused)} {'does' if len(unused) == 1 else 'do'} not apply with --port/--lens "
+                           "(the port's file is for water; its plane is --absorbed-distance)", EXIT_USAGE)
         if output.exists() and not args.replace:
             raise CliError(f"{output} exists: a port calibration is not judged against the one it holds; use "
                            "--replace to write over it", EXIT_REFUSED)
         return _calibrate_port(args, say)
-    unused = [option for option, given in (("--water-index", args.water_index != 1.333),
-                                           ("--absorbed-distance", args.absorbed_distance != 0.7)) if given]
+    unused = [option for option, given in (
+        ("--water-index", args.water_index != DEFAULT_WATER_INDEX),
+        ("--absorbed-distance", args.absorbed_distance != DEFAULT_ABSORBED_DISTANCE_M)) if given]
     if unused:
-        raise CliError(f"{', '.join(unused)} apply only with --port and --lens (a lens behind a flat port)",
-                       EXIT_USAGE)
+        raise CliError(f"{', '.join(unused)} {'applies' if len(unused) == 1 else 'apply'} only with --port and --lens "
+                       "(a lens behind a flat port)", EXIT_USAGE)
     if not args.inputs or not args.board:
         raise CliError("give the board (--board) and its images", EXIT_USAGE)
     board, files = _board_and_files(args)
