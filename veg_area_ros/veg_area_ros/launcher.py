@@ -4,16 +4,30 @@ and exit 130, not a traceback."""
 
 from __future__ import annotations
 
+import signal
 import sys
 
 EXIT_INTERRUPTED = 130
 
 
 def main() -> int:
+    interrupted = []
+
+    def on_interrupt(signum, frame):  # remembered: inside numpy's C start-up it surfaces as an ImportError
+        interrupted.append(signum)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, on_interrupt)
     try:
         from .cli import main as run
 
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         return run()
     except KeyboardInterrupt:
+        print("veg-area: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except ImportError:
+        if not interrupted:
+            raise
         print("veg-area: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

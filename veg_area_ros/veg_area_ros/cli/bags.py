@@ -12,8 +12,7 @@ from .common import EXIT_USAGE, CliError, check_writable, positive_float
 def add_parsers(sub) -> None:
     rec = sub.add_parser("record", help="record topics into a rosbag2 bag (MCAP, or sqlite3) as they come, "
                          "serialized (ROS 2 node; Ctrl-C closes the bag)")
-    rec.add_argument("topics", nargs="*", default=["image_raw", "camera_info", "projected_area",
-                                                   "projected_area/info"],
+    rec.add_argument("topics", nargs="*", default=None,
                      help="topics (default: image_raw camera_info projected_area projected_area/info); a topic "
                           "never seen, or seen but never received, is a warning and exit 1")
     rec.add_argument("--all", action="store_true", help="every topic on the graph")
@@ -40,6 +39,9 @@ def add_parsers(sub) -> None:
 
 
 
+DEFAULT_RECORDED = ("image_raw", "camera_info", "projected_area", "projected_area/info")
+
+
 def cmd_record(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -49,6 +51,8 @@ def cmd_record(args: argparse.Namespace) -> int:
     if args.all and args.topics:
         raise CliError(f"--all records every topic on the graph; give the topics ({' '.join(args.topics)}) or "
                        "--all, not both", EXIT_USAGE)
+    if not args.topics:
+        args.topics = [] if args.all else list(DEFAULT_RECORDED)
     for topic in args.topics:  # said before ROS starts, not as an RCLError from inside it
         problem = topic_name_problem(topic)
         if problem:
@@ -63,7 +67,8 @@ def cmd_record(args: argparse.Namespace) -> int:
     ros_args = ["--ros-args", "-p", f"storage:={args.storage}"]
     if args.output:
         ros_args += ["-p", f"output:={args.output}"]
-    ros_args += ["-p", "topics:=[" + ",".join(f"'{t}'" for t in args.topics) + "]"]
+    if args.topics:  # with --all none are named: the node's own default is left alone
+        ros_args += ["-p", "topics:=[" + ",".join(f"'{t}'" for t in args.topics) + "]"]
     ros_args += ["-p", f"all:={'true' if args.all else 'false'}", "-p", f"duration:={float(args.duration or 0.0)}"]
     return record_main(["veg-area-record", *ros_args])
 
