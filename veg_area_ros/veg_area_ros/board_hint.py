@@ -96,30 +96,3 @@ def dictionary_hint(dictionary: str, grey: np.ndarray) -> str:
         return ""
     return (f"; the frame holds {_family(name).removeprefix('DICT_')} markers (ids up to {largest}), not "
             f"{dictionary}'s: is the targets file's dictionary {_smallest_dictionary(name, largest)}?")
-
-
-def larger_board(board: BoardSpec, greys: Sequence[np.ndarray]) -> BoardSpec | None:
-    """A chessboard or circle grid of more points than `board` (up to 3 more each way) that these frames hold,
-    the largest found, or None: a spec that is a part of the printed board is found in a different place of
-    each view, and its points' positions on the board are then wrong."""
-    if board.kind == "charuco":  # its markers' ids place a partial view
-        return None
-    found = None
-    for extra_cols in range(4):
-        for extra_rows in range(4):
-            if extra_cols == extra_rows == 0:
-                continue
-            other = replace(board, cols=board.cols + extra_cols, rows=board.rows + extra_rows)
-            if (found is None or other.cols * other.rows > found.cols * found.rows) and any(
-                    _whole_board_seen(other, grey) for grey in greys):
-                found = other
-    return found
-
-
-def _whole_board_seen(board: BoardSpec, grey: np.ndarray) -> bool:
-    """Whether the frame holds `board` whole: for a chessboard OpenCV's classic detector, which needs every
-    corner (the sector detector also reports a 9x7 grid on a 9x6 board)."""
-    if board.kind != "chessboard":
-        return board.detect(grey) is not None
-    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
-    return bool(cv2.findChessboardCorners(grey, (board.cols, board.rows), flags=flags)[0])

@@ -201,18 +201,6 @@ def _hint(board, files: list[Path], step: int) -> str:
     return board_hint(board, greys)
 
 
-def _larger_board(board, files: list[Path], step: int):
-    """A larger board than `board` that a few of the frames hold (`board_hint.larger_board`), or None."""
-    from itertools import islice
-
-    from ..board_hint import larger_board
-    from ..frames import iter_frames
-
-    greys = [frame.image for frame in islice((f for f in iter_frames(files, step, grey=True, spread=True)
-                                               if f.image is not None), HINT_FRAMES)]
-    return larger_board(board, greys)
-
-
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from ..calib_io import CalibrationFileError, fit_metadata, read_calibration, write_calibration
     from ..calibration import CalibrationError, calibrate
@@ -279,10 +267,6 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             raise CliError(f"no readable image among the inputs ({len(found.unreadable)} unreadable)")
         raise CliError(f"no {board} board found in any of {found.seen} images{_hint(board, files, step)}; "
                        "supported boards: chessboard, charuco, circles (asymmetric, or :symmetric)")
-    whole = _larger_board(board, files, step)
-    if whole is not None:
-        raise CliError(f"the images hold {whole}, of which {board} is a part: a part is found in a different place "
-                       "of each view and misplaces the points; give the whole board's inner corners")
     try:
         result = calibrate(found.views, found.image_size, robust_loss=args.loss,
                            outlier_sigma=None if args.no_outlier_rejection else args.outlier_sigma, progress=say,
