@@ -63,6 +63,18 @@ def _smallest_dictionary(family: str, largest_id: int) -> str:
     return f"{family[:-len('1000')]}{size}"
 
 
+def _markers_seen(dictionary: str, grey: np.ndarray) -> tuple[int, bool, tuple[str, str]] | None:
+    """The ArUco markers this frame holds, set against `dictionary`: (how many, whether they are that
+    dictionary's, the family and largest id said in words with the dictionary to write), or None."""
+    found = marker_family(grey)
+    if found is None:
+        return None
+    name, count, largest = found
+    ours = _family(name) == _family(dictionary) and largest < _capacity(dictionary)
+    return count, ours, (f"{_family(name).removeprefix('DICT_')} markers (ids up to {largest}), not {dictionary}'s",
+                         _smallest_dictionary(name, largest))
+
+
 def board_hint(board: BoardSpec, greys: Sequence[np.ndarray]) -> str:
     """Why `board` may be found in none of these grey frames: another spec found in them, with the mistake it
     corrects ('' when none is found)."""
@@ -73,26 +85,22 @@ def board_hint(board: BoardSpec, greys: Sequence[np.ndarray]) -> str:
     if board.kind != "charuco":
         return ""
     for grey in greys:
-        family = marker_family(grey)
-        if family is None:
+        seen = _markers_seen(board.dictionary, grey)
+        if seen is None:
             continue
-        name, count, largest = family
-        if _family(name) == _family(board.dictionary) and largest < _capacity(board.dictionary):
+        count, ours, (held, suggested) = seen
+        if ours:
             return (f"; {count} {board.dictionary} markers are found but no {board.cols}x{board.rows} board: check "
                     "the squares across and down, and the marker's size against the square's")
-        return (f"; the frames hold {_family(name).removeprefix('DICT_')} markers (ids up to {largest}), not "
-                f"{board.dictionary}'s: try {_smallest_dictionary(name, largest)}")
+        return f"; the frames hold {held}: try {suggested}"
     return ""
 
 
 def dictionary_hint(dictionary: str, grey: np.ndarray) -> str:
     """Why a targets file's markers of `dictionary` may be found nowhere in this frame: the ArUco family the
     frame holds instead, with the dictionary to write ('' when it holds none, or the same family)."""
-    found = marker_family(grey)
-    if found is None:
+    seen = _markers_seen(dictionary, grey)
+    if seen is None or seen[1]:
         return ""
-    name, _, largest = found
-    if _family(name) == _family(dictionary) and largest < _capacity(dictionary):
-        return ""
-    return (f"; the frame holds {_family(name).removeprefix('DICT_')} markers (ids up to {largest}), not "
-            f"{dictionary}'s: is the targets file's dictionary {_smallest_dictionary(name, largest)}?")
+    held, suggested = seen[2]
+    return f"; the frame holds {held}: is the targets file's dictionary {suggested}?"
