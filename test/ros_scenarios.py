@@ -309,6 +309,7 @@ def main() -> int:
                   "two_machines": scenario_two_machines, "bad_start_files": scenario_bad_start_files,
                   "guidance": scenario_guidance, "replay_into_recorder": scenario_replay_into_recorder,
                   "compressed_driver": scenario_compressed_driver,
+                  "mono16_driver": scenario_mono16_driver,
                   "calibration_trap": scenario_calibration_trap, "console": scenario_console,
                   "metadata": scenario_metadata}[name](
                       options, nodes)
@@ -1303,6 +1304,49 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     recorder.wait(20)
     return {"areas": areas, "published": published, "jpeg": np.asarray(jpeg).ravel().tolist(),
             "recorder_exit": recorder.returncode}
+
+
+def scenario_mono16_driver(options: dict, nodes: Nodes) -> dict:
+    """A machine-vision camera's driver in this probe publishing a 12-bit sensor's frames as mono16 on image_raw
+    (sensor data QoS) with camera_info; the area node measures them: each result's Af and warnings."""
+    import cv2
+    import numpy as np
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from veg_area_msgs.msg import ProjectedArea
+    from veg_area_ros.ros.messages import camera_to_info
+    from veg_area_ros.ros.qos import RESULT_QOS
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene
+
+    rclpy.init()
+    probe = Node("mono16_driver")
+    image_pub = probe.create_publisher(Image, "image_raw", qos_profile_sensor_data)
+    info_pub = probe.create_publisher(CameraInfo, "camera_info", qos_profile_sensor_data)
+    results: list[tuple[float, list[str]]] = []
+    probe.create_subscription(ProjectedArea, "projected_area", lambda m: results.append((m.area_m2, list(m.warnings))),
+                              RESULT_QOS)
+    grey = cv2.cvtColor(render_scene(ENDOSCOPE, cube_scene(), 0.7), cv2.COLOR_BGR2GRAY)
+    twelve = (grey.astype(np.uint16) << 4) | np.random.default_rng(0).integers(0, 16, grey.shape, dtype=np.uint16)
+
+    def publish() -> None:
+        stamp = probe.get_clock().now().to_msg()
+        message = Image(height=480, width=640, encoding="mono16", is_bigendian=0, step=1280,
+                        data=twelve.astype("<u2").tobytes())
+        message.header.stamp, message.header.frame_id = stamp, "camera"
+        info_pub.publish(camera_to_info(ENDOSCOPE, "camera", stamp))
+        image_pub.publish(message)
+
+    probe.create_timer(0.2, publish)
+    try:
+        nodes.start("area_node")
+        spin_for(probe, float(options["seconds"]), until=lambda: len(results) >= 3)
+    finally:
+        probe.destroy_node()
+        rclpy.try_shutdown()
+    return {"results": results, "grey": grey.ravel().tolist()}
 
 
 def scenario_metadata(options: dict, nodes: Nodes) -> dict:

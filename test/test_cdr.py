@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import CameraInfo, Image
 
+from veg_area_ros.bit_depth import StreamDepth
 from veg_area_ros.cdr import (
     CameraInfoFields,
     Header,
@@ -115,9 +116,32 @@ def test_broken_bytes_are_refused_with_a_reason(mangle, problem):
 
 
 def test_bad_image_fields_are_refused_like_messages():
-    msg = Image(height=4, width=4, encoding="16UC1", step=8, data=bytes(32))
+    msg = Image(height=4, width=4, encoding="32FC1", step=16, data=bytes(64))
     with pytest.raises(ImageMessageError, match="not supported"):
         decode_image(serialize_message(msg)).pixels()
+
+
+def test_a_16_bit_streams_depth_is_held_so_a_darker_frame_is_not_read_brighter():
+    """A 12-bit camera's frame whose values stay under 1024 would pass for 10-bit data on its own (read four
+    times brighter); a stream that has shown 12-bit values keeps reading it at 12 bits, and each says so."""
+    bright = np.full((4, 4), 3000, np.uint16)
+    dark = np.full((4, 4), 800, np.uint16)
+
+    def fields(image: np.ndarray) -> object:
+        msg = Image(height=4, width=4, encoding="mono16", step=8, data=image.astype("<u2").tobytes())
+        return decode_image(serialize_message(msg))
+
+    alone: list[str] = []
+    assert fields(dark).pixels(notes=alone).max() == 800 >> 2
+    assert "read as 10-bit data" in alone[0]
+    stream, notes = StreamDepth(), []
+    assert fields(bright).pixels(stream, notes).max() == 3000 >> 4
+    assert fields(dark).pixels(stream, notes).max() == 800 >> 4
+    assert stream.bits == 12 and all("read as 12-bit data" in note for note in notes) and len(notes) == 2
+    assert "reached 3000" in notes[1]
+    full = np.full((4, 4), 60000, np.uint16)  # 16-bit data: read as OpenCV and cv_bridge read it, nothing said
+    said: list[str] = []
+    assert fields(full).pixels(StreamDepth(), said).max() == 60000 >> 8 and not said
 
 
 GOOD_IMAGE = encode_image(np.zeros((5, 7, 3), np.uint8), 1, 2, "cam")

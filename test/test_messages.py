@@ -36,7 +36,9 @@ def test_padded_rows_and_rgb_are_read_right():
 
 
 @pytest.mark.parametrize("msg,problem", [
-    (Image(height=4, width=4, encoding="16UC1", step=8, data=bytes(32)), "not supported"),
+    (Image(height=4, width=4, encoding="16UC1", step=8, data=bytes(32)), "depth cameras"),
+    (Image(height=4, width=4, encoding="32FC1", step=16, data=bytes(64)), "not supported .float"),
+    (Image(height=4, width=4, encoding="mono16", step=4, data=bytes(16)), "shorter"),
     (Image(height=0, width=4, encoding="mono8", step=4, data=b""), "empty"),
     (Image(height=4, width=4, encoding="bgr8", step=4, data=bytes(16)), "shorter"),
     (Image(height=4, width=4, encoding="mono8", step=4, data=bytes(15)), "15 bytes"),

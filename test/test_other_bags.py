@@ -223,6 +223,60 @@ def test_camera_drivers_encodings_are_measured_as_their_colour_frames(workspace,
         assert errors[pattern] < 1 and min(e for read, e in errors.items() if read != pattern) > 10, errors
 
 
+def _twelve_bits(frame: np.ndarray, seed: int) -> np.ndarray:
+    """A frame as a 12-bit sensor gives it in 16 bits: its 8-bit levels with four low bits of noise below."""
+    low = np.random.default_rng(seed).integers(0, 16, frame.shape, dtype=np.uint16)
+    return (frame.astype(np.uint16) << 4) | low
+
+
+def test_a_machine_vision_cameras_16_bit_frames_are_measured_as_its_8_bit_ones(workspace, scenes):
+    """Machine-vision drivers publish a 10-16-bit sensor's levels as mono16, bgr16 (big-endian too) or a 16-bit
+    Bayer mosaic, and image_transport compresses mono16 as a 16-bit PNG: each was refused ("16-bit and float
+    images are not measured"). A 12-bit sensor's frames are read at 12 bits, as its 8-bit frames would be (the
+    same Af exactly; the mosaic within a tenth of a percent), and each row says the depth it assumed."""
+    greys = [cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) for frame in scenes["left"]]
+
+    def raw(encoding: str, data: np.ndarray, step: int, k: int, bigendian: int = 0):
+        return TYPES.types["sensor_msgs/msg/Image"](
+            header=_header(k, "left"), height=480, width=640, encoding=encoding, is_bigendian=bigendian, step=step,
+            data=np.frombuffer(data.tobytes(), np.uint8))
+
+    def png16(grey: np.ndarray, k: int):
+        return TYPES.types["sensor_msgs/msg/CompressedImage"](
+            header=_header(k, "left"), format="mono16; png compressed mono16",
+            data=np.frombuffer(cv2.imencode(".png", _twelve_bits(grey, k))[1].tobytes(), np.uint8))
+
+    bags = {
+        "bgr8": ("sensor_msgs/msg/Image", [_image(f, k, "left") for k, f in enumerate(scenes["left"])]),
+        "mono8": ("sensor_msgs/msg/Image", [raw("mono8", g, 640, k) for k, g in enumerate(greys)]),
+        "mono16": ("sensor_msgs/msg/Image", [raw("mono16", _twelve_bits(g, k), 1280, k) for k, g in enumerate(greys)]),
+        "bgr16_big_endian": ("sensor_msgs/msg/Image", [
+            raw("bgr16", _twelve_bits(f, k).astype(">u2"), 3840, k, bigendian=1)
+            for k, f in enumerate(scenes["left"])]),
+        "bayer_rggb16": ("sensor_msgs/msg/Image", [
+            raw("bayer_rggb16", _twelve_bits(_encoded(f, "bayer_rggb8")[0], k), 1280, k)
+            for k, f in enumerate(scenes["left"])]),
+        "mono16_png": ("sensor_msgs/msg/CompressedImage", [png16(g, k) for k, g in enumerate(greys)]),
+    }
+    areas, warnings = {}, {}
+    for name, (msgtype, messages) in bags.items():
+        topic = "/left/image_raw/compressed" if msgtype.endswith("CompressedImage") else "/left/image_raw"
+        bag = workspace / name
+        write_bag(bag, "mcap", [
+            ("/left/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "left") for k in range(FRAMES)]),
+            (topic, msgtype, messages)])
+        rows, done = _measure(workspace, bag, "--calibration", "bag")
+        assert done.returncode == 0 and len(rows) == FRAMES, (name, done.stderr)
+        areas[name] = np.array([r["area_m2"] for r in rows])
+        warnings[name] = [" ".join(r["warnings"]) for r in rows]
+    assert list(areas["mono16"]) == list(areas["mono8"]) == list(areas["mono16_png"])
+    assert list(areas["bgr16_big_endian"]) == list(areas["bgr8"])
+    assert np.abs(areas["bayer_rggb16"] / areas["bgr8"] - 1).max() < 1e-3, areas["bayer_rggb16"] / areas["bgr8"]
+    for name in ("mono16", "bgr16_big_endian", "bayer_rggb16", "mono16_png"):
+        assert all("read as 12-bit data" in text for text in warnings[name]), (name, warnings[name])
+    assert not any("bit data" in text for text in warnings["bgr8"] + warnings["mono8"])
+
+
 def test_a_ros1_bag_is_measured_as_the_same_frames_in_a_rosbag2_bag(workspace, scenes):
     """A lab's older recordings are ROS 1 bags (`rosbag record`, written here by rosbags' rosbag1 writer): they
     were "neither an image nor a video". Read as rosbags-convert converts them (the header's seq dropped,
@@ -397,6 +451,25 @@ def test_the_area_node_measures_image_transports_compressed_topic_and_the_record
     assert len(measured) >= 5 and all("area_m2" in row for row in measured), rows
     assert all(abs(row["area_m2"] / core.area_m2 - 1) <= core.weight_error_bound for row in measured), (
         [row["area_m2"] for row in measured], core.area_m2)
+
+
+@pytest.mark.timeout(300)
+def test_the_area_node_measures_a_16_bit_cameras_frames_and_says_the_depth(tmp_path):
+    """A machine-vision driver's mono16 frames of a 12-bit sensor: the area node measures each as the core
+    measures its 8-bit frame (the same Af), and each result's warnings say the depth it read them at."""
+    from ros_harness import run_scenario
+
+    from veg_area_ros.area import AreaMeasurer
+    from veg_area_ros.classify import Classifier
+    from veg_area_ros.sim.synthetic import scene_targets
+
+    result = run_scenario("mono16_driver", tmp_path, seconds=12.0)
+    assert len(result["results"]) >= 3, result["log"]
+    grey = np.array(result["grey"], np.uint8).reshape(480, 640)
+    core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier()).measure(grey)
+    for area, warnings in result["results"]:
+        assert area == pytest.approx(core.area_m2, rel=1e-12), (area, core.area_m2)
+        assert any("read as 12-bit data" in warning for warning in warnings), warnings
 
 
 def test_our_mcap_is_written_as_ros2_bag_record_writes_it(tmp_path):

@@ -15,15 +15,24 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .bit_depth import StreamDepth, to_8_bit
+
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, no options
-# bytes per pixel of each 8-bit encoding of sensor_msgs/image_encodings (8UC1/8UC3 read as cv_bridge reads them)
+# channels of each 8-bit encoding of sensor_msgs/image_encodings (8UC1/8UC3 read as cv_bridge reads them)
 CHANNELS = {"bgr8": 3, "rgb8": 3, "mono8": 1, "8UC1": 1, "8UC3": 3, "bgra8": 4, "rgba8": 4, "8UC4": 4,
             "bayer_rggb8": 1, "bayer_bggr8": 1, "bayer_gbrg8": 1, "bayer_grbg8": 1, "yuv422": 2, "yuv422_yuy2": 2}
+# and of each 16-bit one a camera publishes grey levels in (a machine-vision camera's 10-16-bit sensor)
+CHANNELS_16 = {"mono16": 1, "bgr16": 3, "rgb16": 3, "16UC3": 3, "bgra16": 4, "rgba16": 4, "16UC4": 4,
+               "bayer_rggb16": 1, "bayer_bggr16": 1, "bayer_gbrg16": 1, "bayer_grbg16": 1}
 # to BGR; OpenCV names a Bayer pattern by its second row's second and third pixels, ROS by the first two rows'
 TO_BGR = {"rgb8": cv2.COLOR_RGB2BGR, "bgra8": cv2.COLOR_BGRA2BGR, "8UC4": cv2.COLOR_BGRA2BGR,
           "rgba8": cv2.COLOR_RGBA2BGR, "bayer_rggb8": cv2.COLOR_BayerBG2BGR, "bayer_bggr8": cv2.COLOR_BayerRG2BGR,
           "bayer_gbrg8": cv2.COLOR_BayerGR2BGR, "bayer_grbg8": cv2.COLOR_BayerGB2BGR,
           "yuv422": cv2.COLOR_YUV2BGR_UYVY, "yuv422_yuy2": cv2.COLOR_YUV2BGR_YUY2}
+TO_BGR.update({name.replace("8", "16"): code for name, code in TO_BGR.items()
+               if name.replace("8", "16") in CHANNELS_16})
+NOT_GREY_LEVELS = {"16UC1": "16UC1 is how depth cameras publish distances (mm), not grey levels; a grey camera's "
+                            "16-bit images are mono16"}
 
 
 class ImageMessageError(ValueError):
@@ -72,30 +81,41 @@ def unstamped(buffer) -> bytes:
     return bytes(buffer[STAMP_END:])
 
 
-def frame_pixels(data, height: int, width: int, encoding: str, step: int) -> np.ndarray:
+def frame_pixels(data, height: int, width: int, encoding: str, step: int, is_bigendian: bool = False,
+                 depth: StreamDepth | None = None, notes: list[str] | None = None) -> np.ndarray:
     """A BGR (H, W, 3) or grey (H, W) uint8 frame from an Image's fields: a view of `data` when the rows are
-    packed bgr8/mono8 (no copy), a converted copy for the other 8-bit encodings (RGB, with alpha, a camera's raw
-    Bayer mosaic, YUV 4:2:2) or padded rows. ImageMessageError says what is wrong."""
-    channels = CHANNELS.get(encoding)
+    packed bgr8/mono8 (no copy), a converted copy for the other encodings (RGB, with alpha, a camera's raw
+    Bayer mosaic, YUV 4:2:2) or padded rows. A 16-bit encoding is read at the depth its values use, held over
+    the stream by `depth` (`bit_depth.to_8_bit`), what was assumed appended to `notes`. ImageMessageError says
+    what is wrong."""
+    channels = CHANNELS.get(encoding) or CHANNELS_16.get(encoding)
     if channels is None:
-        depth = " (16-bit and float images are not measured: publish an 8-bit encoding)" \
-            if any(mark in encoding for mark in ("16", "32", "64")) else ""
-        raise ImageMessageError(f"encoding {encoding!r} is not supported{depth}; these are: {', '.join(CHANNELS)}")
+        wide = any(mark in encoding for mark in ("32", "64", "FC"))
+        reason = NOT_GREY_LEVELS.get(encoding) or f"encoding {encoding!r} is not supported" + (
+            " (float and 32-bit images are not measured: publish an 8- or 16-bit encoding)" if wide else "")
+        raise ImageMessageError(f"{reason}; these are: {', '.join([*CHANNELS, *CHANNELS_16])}")
     if encoding.startswith("yuv422") and width % 2:
         raise ImageMessageError(f"a {encoding} image needs an even width, not {width}")
     if width == 0 or height == 0:
         raise ImageMessageError(f"empty image ({width}x{height})")
-    if step < width * channels:
+    size = 2 if encoding in CHANNELS_16 else 1
+    if step < width * channels * size:
         raise ImageMessageError(f"step {step} is shorter than a {width}-pixel {encoding} row")
     data = np.frombuffer(data, np.uint8)
     if data.size != step * height:
         raise ImageMessageError(f"data holds {data.size} bytes, {height} rows of step {step} need {step * height}")
-    rows = data.reshape(height, step)[:, : width * channels]
+    rows = data.reshape(height, step)[:, : width * channels * size]
+    if size == 2:
+        rows = np.ascontiguousarray(rows).view(">u2" if is_bigendian else "<u2").astype(np.uint16, copy=False)
     image = rows.reshape(height, width, channels) if channels in (3, 4) else rows
     if encoding.startswith("yuv422"):
         image = rows.reshape(height, width, 2)
     if encoding in TO_BGR:
-        return cv2.cvtColor(np.ascontiguousarray(image), TO_BGR[encoding])
+        image = cv2.cvtColor(np.ascontiguousarray(image), TO_BGR[encoding])
+    if size == 2:
+        image, note = to_8_bit(image, depth)
+        if note and notes is not None:
+            notes.append(note)
     return np.ascontiguousarray(image)
 
 
@@ -218,8 +238,10 @@ class ImageFields:
     step: int
     data: memoryview  # a view into the CDR buffer
 
-    def pixels(self) -> np.ndarray:
-        return frame_pixels(self.data, self.height, self.width, self.encoding, self.step)
+    def pixels(self, depth: StreamDepth | None = None, notes: list[str] | None = None) -> np.ndarray:
+        """The frame as `frame_pixels` makes it (`depth` and `notes`: a 16-bit stream's, see there)."""
+        return frame_pixels(self.data, self.height, self.width, self.encoding, self.step, bool(self.is_bigendian),
+                            depth, notes)
 
 
 def decode_image(buffer) -> ImageFields:
@@ -242,8 +264,9 @@ class CompressedImageFields:
     format: str
     data: memoryview  # a view into the CDR buffer
 
-    def pixels(self) -> np.ndarray:
-        """A BGR (H, W, 3) or grey (H, W) uint8 frame, decoded as OpenCV decodes the same JPEG or PNG file."""
+    def pixels(self, depth: StreamDepth | None = None, notes: list[str] | None = None) -> np.ndarray:
+        """A BGR (H, W, 3) or grey (H, W) uint8 frame, decoded as OpenCV decodes the same JPEG or PNG file; a
+        16-bit PNG (a mono16 camera's) read as `frame_pixels` reads a 16-bit Image."""
         kind = self.format.lower()
         if "compresseddepth" in kind.replace(" ", ""):
             raise ImageMessageError(f"a depth image (format {self.format!r}) holds no grey levels to measure")
@@ -251,14 +274,17 @@ class CompressedImageFields:
         if image is None:
             raise ImageMessageError(f"the compressed image (format {self.format!r}, {len(self.data)} bytes) cannot "
                                     "be decoded")
-        if image.dtype != np.uint8:
-            raise ImageMessageError(f"a {image.dtype} compressed image (format {self.format!r}): only 8-bit "
-                                    "images are measured")
+        if image.dtype not in (np.uint8, np.uint16):
+            raise ImageMessageError(f"a {image.dtype} compressed image (format {self.format!r}): only 8- and "
+                                    "16-bit images are measured")
         if image.ndim == 3 and image.shape[2] == 4:
             image = cv2.cvtColor(image, cv2.COLOR_BGRA2BGR)
         stored = kind.rsplit("compressed", 1)[-1].strip() if "compressed" in kind else ""
         if image.ndim == 3 and stored.startswith("rgb"):  # the encoder was given RGB rows as they were
             image = cv2.cvtColor(image, cv2.COLOR_RGB2BGR)
+        image, note = to_8_bit(image, depth)
+        if note and notes is not None:
+            notes.append(note)
         return image
 
 

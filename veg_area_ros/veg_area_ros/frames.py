@@ -19,6 +19,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .bit_depth import to_8_bit
 from .files import MAX_IMAGE_PIXELS, special_file
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp"}
@@ -89,25 +90,6 @@ def header_size(data: bytes) -> tuple[int, int] | None:
                 return width, height
             offset += 2 + length
     return None
-
-
-SENSOR_DEPTHS = (10, 12, 14, 16)  # bits a camera's 16-bit file may hold
-
-
-def to_8_bit(image: np.ndarray) -> tuple[np.ndarray, str]:
-    """A 16-bit image as 8 bits, and what was assumed ('' when nothing was). A scientific camera's 10-, 12- or
-    14-bit values in a 16-bit file read as 16-bit data leave 4 to 64 grey levels (a 12-bit frame read as
-    'clipped shadows' throughout, a 10-bit one found no targets): the depth is the smallest of SENSOR_DEPTHS
-    that holds the largest value, said in the note unless it is 16 (read as OpenCV and cv_bridge read it)."""
-    if image.dtype == np.uint8:
-        return image, ""
-    top = int(image.max())
-    depth = 8 if top < 256 else next(d for d in SENSOR_DEPTHS if top < 2**d)
-    scaled = (image >> (depth - 8)).astype(np.uint8)  # the low bits dropped, as OpenCV's own 16-to-8 bits
-    if depth == 16:
-        return scaled, ""
-    return scaled, (f"16-bit image read as {depth}-bit data: its values reach {top}, so each is divided by "
-                    f"{2 ** (depth - 8)} (not 256); a darker frame of the same camera would be read brighter")
 
 
 def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -> tuple[np.ndarray | None, str]:
@@ -405,17 +387,20 @@ def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: i
 
 
 def _bag_frame(path: Path, frame) -> Frame:
-    """One bag image message as a Frame, with the reason where its pixels cannot be decoded."""
+    """One bag image message as a Frame, with the reason where its pixels cannot be decoded. A 16-bit image's
+    depth is judged on its own values, as a file's: a frame's reading must not depend on where a split of the
+    bag (`--jobs`, a cluster) began."""
     from .cdr import ImageMessageError
 
     header = frame.image.header
+    notes: list[str] = []
     try:
-        image, problem = frame.image.pixels(), ""
+        image, problem = frame.image.pixels(notes=notes), ""
     except ImageMessageError as exc:
         image, problem = None, str(exc)
     return Frame(f"{shown_name(path)}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
                  frame.camera_info, position=frame.index, camera_info_problem=frame.camera_info_problem,
-                 camera_metadata=frame.camera_metadata)
+                 camera_metadata=frame.camera_metadata, notes=tuple(notes))
 
 
 def spread_offset(window: int, step: int) -> int:

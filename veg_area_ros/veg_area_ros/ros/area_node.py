@@ -32,6 +32,7 @@ from std_msgs.msg import String
 
 from veg_area_msgs.msg import ProjectedArea
 
+from ..bit_depth import StreamDepth
 from ..board import to_grey
 from ..board_hint import dictionary_hint
 from ..calib_io import metadata_for, read_calibration
@@ -109,6 +110,7 @@ class AreaNode(Node):
         self.frames = FrameTally()
         self.frames_measured = 0
         self.dictionary_hinted = False
+        self.bit_depth = StreamDepth()  # a 16-bit camera's depth, held over its frames
         self._skipped_logged = 0
         self._lost_logged = 0
         self._tally_logged_at = -TALLY_LOG_PERIOD_S
@@ -403,7 +405,8 @@ class AreaNode(Node):
     def _on_image(self, data: bytes) -> None:
         try:
             fields = decode_image(data) if self.transport == "raw" else decode_compressed_image(data)
-            frame = fields.pixels()
+            notes: list[str] = []
+            frame = fields.pixels(self.bit_depth, notes)
         except ImageMessageError as exc:
             self.warn("frame refused", str(exc))
             return
@@ -432,6 +435,7 @@ class AreaNode(Node):
             self.warn("frame not measured", text)
             return
         self.frames_measured += 1
+        result.warnings.extend(notes)
         source = self._calibration_source()
         if source == "camera_info" and self.info_frame_id and header.frame_id and self.info_frame_id != header.frame_id:
             result.warnings.append(f"calibration of another frame: camera_info's frame_id {self.info_frame_id!r} is "

@@ -18,6 +18,7 @@ from std_srvs.srv import Trigger
 
 from veg_area_msgs.msg import CalibrationProgress
 
+from ..bit_depth import StreamDepth
 from ..board import BoardSpec, BoardSpecError, detect_scaled, to_grey
 from ..board_hint import board_hint
 from ..calib_io import (
@@ -79,6 +80,7 @@ class CalibrationNode(Node):
         self.frames_seen = 0
         self.frames_skipped = 0  # arrived while the last one was still being looked at: counted, never queued
         self.frames_looked = 0
+        self.bit_depth = StreamDepth()  # a 16-bit camera's depth, held over its frames
         self._skipped_said, self._skipped_said_at = 0, -math.inf  # the skipped count last reported, and when
         self.feedback_published = 0  # ~/feedback images: drawn only while someone subscribes
         self.frames_without_board = 0  # looked at before any view was found
@@ -148,10 +150,13 @@ class CalibrationNode(Node):
 
     def _look(self, data: bytes) -> None:
         try:
-            image = decode_image(data).pixels()
+            notes: list[str] = []
+            image = decode_image(data).pixels(self.bit_depth, notes)
         except ImageMessageError as exc:
             self.warn("frame ignored", str(exc))
             return
+        for note in notes:
+            self.warn("16-bit frame", note)
         size = (image.shape[1], image.shape[0])
         if self.image_size is None:
             self.image_size = size
