@@ -143,6 +143,19 @@ def test_targets_not_found(workspace):
     assert "only 0 target(s) found" in done.stderr and "missing marker ids [0, 1, 2, 3]" in done.stderr
 
 
+def test_markers_of_another_dictionary_beside_a_hand_picked_point_are_named(workspace, tmp_path):
+    """The targets' dictionary hint is given where none of the markers is found, also when a hand-picked point
+    is found beside them ("only 1 target(s)"): it was given only when the error's text began "only 0"."""
+    content = scene_targets_content()
+    targets = {**content, "dictionary": "DICT_5X5_50", "points": [{"pixel": [320, 240], "plane": [0.0, 0.0]}]}
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(targets))
+    done = run_cli("measure", str(workspace / "cube.png"), "--calibration", str(workspace / "water.yaml"),
+                   "--targets", str(tmp_path / "targets.yaml"), cwd=tmp_path)
+    assert done.returncode == 1
+    assert "only 1 target(s) found" in done.stderr, done.stderr
+    assert "the frame holds 4X4 markers" in done.stderr and "DICT_4X4_50?" in done.stderr, done.stderr
+
+
 def test_targets_file_with_a_duplicate_id(workspace, tmp_path):
     bad = tmp_path / "targets.yaml"
     bad.write_text("dictionary: DICT_4X4_50\nmarkers:\n  0: [-0.22, -0.16]\n  0: [0.22, -0.16]\n")

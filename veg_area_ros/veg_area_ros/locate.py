@@ -20,7 +20,7 @@ from .idealize import IdealView
 from .markers import DetectedMarker, marker_centre, track_markers
 from .scale import PlaneScale
 from .target_error import marker_centre_std
-from .targets import TargetsError, TargetsSpec
+from .targets import TargetsError, TargetsNotFoundError, TargetsSpec
 
 MARKER_EXCLUSION = 1.5  # markers are cut out of the default ROI this much larger than their black square
 NO_CALIBRATION_FOR_OFFSET = ("an object plane offset needs a calibration (the camera's pinhole); measure with "
@@ -123,8 +123,8 @@ class Locator:
             located.labels.append(f"point {k}")
             planes.append(plane)
         if len(located.pixels) < 2:
-            raise TargetsError(f"only {len(located.pixels)} target(s) found in the frame; "
-                               f"missing marker ids {located.missing}")
+            raise TargetsNotFoundError(f"only {len(located.pixels)} target(s) found in the frame; "
+                                  f"missing marker ids {located.missing}", len(located.pixels) - len(targets.points))
         height, width = frame.shape[:2]
         for k, (pixel, _) in enumerate(targets.points):
             if not (-0.5 <= pixel[0] <= width - 0.5 and -0.5 <= pixel[1] <= height - 0.5):

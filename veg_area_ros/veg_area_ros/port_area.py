@@ -30,7 +30,7 @@ from .flat_port import (
 from .idealize import IdealView
 from .markers import detect_markers
 from .scale import PlaneScale
-from .targets import TargetsError, TargetsSpec
+from .targets import TargetsError, TargetsNotFoundError, TargetsSpec
 
 PORT_AS_MEASURED = ("port uncertainty not recorded (the port as measured): Af's std carries the lens's but not "
                     "the port's numbers' (fit the port from underwater board views to have it)")
@@ -119,7 +119,8 @@ class PortAreaMeasurer:
         pixels = [markers[i].centre for i in found] + [pixel for pixel, _ in self.targets.points]
         planes = [self.targets.markers[i] for i in found] + [plane for _, plane in self.targets.points]
         if len(pixels) < 4:
-            raise TargetsError(f"only {len(pixels)} target(s) found; the plane's pose through the port needs 4")
+            raise TargetsNotFoundError(f"only {len(pixels)} target(s) found; the plane's pose through the port needs 4",
+                                  len(found))
         return np.array(planes, float), np.array(pixels, float)
 
     def _stand_in(self, camera: FlatPortCamera, planes: np.ndarray, pixels: np.ndarray

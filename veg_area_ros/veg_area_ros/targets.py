@@ -36,6 +36,15 @@ class TargetsError(ValueError):
     """A targets file or a frame's targets that cannot give a scale; the message says why."""
 
 
+class TargetsNotFoundError(TargetsError):
+    """A frame that shows too few of its targets; `markers_found`: how many of the ArUco markers it showed (none
+    where the markers are printed from another dictionary than the targets file names)."""
+
+    def __init__(self, message: str, markers_found: int) -> None:
+        super().__init__(message)
+        self.markers_found = markers_found
+
+
 def _pair(value, what: str) -> np.ndarray:
     try:
         pair = np.array(value, dtype=float).ravel()

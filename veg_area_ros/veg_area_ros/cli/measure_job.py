@@ -161,7 +161,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     from ..light import LightError
     from ..locate import NO_CALIBRATION_FOR_OFFSET
     from ..overlay import draw_overlay
-    from ..targets import TargetsError, TargetsSpec
+    from ..targets import TargetsError, TargetsNotFoundError, TargetsSpec
 
     say = progress(job.quiet)
     camera = port_camera = file_camera = conditions = None
@@ -359,8 +359,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
                 if frame.name.rsplit("#", 1)[0] in other_camera:
                     result.warnings.append(other_camera[frame.name.rsplit("#", 1)[0]])
             except (InputError, FrameSizeError, TargetsError, ClassifyError, ValueError) as exc:
-                if (not dictionary_hinted and isinstance(exc, TargetsError) and str(exc).startswith("only 0 target(s)")
-                        and targets.dictionary and frame.image is not None):
+                if (not dictionary_hinted and isinstance(exc, TargetsNotFoundError) and exc.markers_found == 0
+                        and targets.markers and frame.image is not None):
                     from ..board import to_grey
                     from ..board_hint import dictionary_hint
 

@@ -46,7 +46,7 @@ from ..light import LightError
 from ..overlay import draw_overlay
 from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, TONE_CURVE_CHOICES, MeasurementSettings
 from ..sources import default_targets
-from ..targets import TargetsError, TargetsSpec
+from ..targets import TargetsError, TargetsNotFoundError, TargetsSpec
 from .health import CountedWarnings, InputWatch, publish_safely
 from .messages import ImageMessageError, image_bytes, projected_area, projected_area_vector
 from .params import declare, read_start_file
@@ -429,7 +429,8 @@ class AreaNode(Node):
             return
         except (TargetsError, ClassifyError, LightError) as exc:
             text = str(exc)
-            if not self.dictionary_hinted and text.startswith("only 0 target(s)") and self.targets.dictionary:
+            if (not self.dictionary_hinted and isinstance(exc, TargetsNotFoundError) and exc.markers_found == 0
+                    and self.targets.markers):
                 self.dictionary_hinted = True  # the other ArUco families tried once: a wrong dictionary finds none
                 text += dictionary_hint(self.targets.dictionary, to_grey(frame))
             self.warn("frame not measured", text)
