@@ -21,6 +21,7 @@ import numpy as np
 
 from .bit_depth import to_8_bit
 from .files import MAX_IMAGE_PIXELS, special_file
+from .orientation import as_stored, is_tiff, orientation_note, stored_orientation
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp"}
 VIDEO_SUFFIXES = {".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv"}
@@ -96,7 +97,8 @@ def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -
     """Decode an image file (`grey`: to one channel, which for a JPEG skips its colour entirely); a truncated
     JPEG is refused rather than measured half-grey, and a header that declares an absurd size is refused
     before decoding; a device or pipe is refused unread. A 16-bit file is read at the depth its values use
-    (`to_8_bit`), what was assumed appended to `notes`; a floating-point one is refused."""
+    (`to_8_bit`), what was assumed appended to `notes`; a floating-point one is refused. Pixels are read as
+    stored, the EXIF orientation not applied (`orientation`), and said in `notes` where it would have been."""
     problem = special_file(path)
     if problem:
         return None, problem
@@ -113,9 +115,14 @@ def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -
             return None, f"declares {width}x{height} pixels, more than any camera here ({MAX_IMAGE_PIXELS} at most)"
         if min(width, height) < MIN_IMAGE_SIDE:
             return None, f"is {width}x{height} pixels, too small to hold a board or targets"
-    mode = cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR
+    orientation = stored_orientation(data)
+    if orientation != 1 and notes is not None:
+        notes.append(orientation_note(orientation))
+    mode = (cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR) | cv2.IMREAD_IGNORE_ORIENTATION
     if data[:2] != JPEG_START:
         image = cv2.imdecode(np.frombuffer(data, np.uint8), mode | cv2.IMREAD_ANYDEPTH)
+        if image is not None and is_tiff(data):
+            image = as_stored(image, orientation)
         if image is None:
             return None, "is not an image OpenCV can decode"
         if image.dtype == np.uint8:
@@ -124,7 +131,9 @@ def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -
             kind = "floating point" if image.dtype.kind == "f" else f"{8 * image.dtype.itemsize}-bit integers"
             return None, f"is a {image.dtype} image ({kind}); save it with 8 or 16 bits per channel"
         if grey:  # the depth judged on the colours, as a colour reading of the same file judges it
-            image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH)
+            image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH
+                                 | cv2.IMREAD_IGNORE_ORIENTATION)
+            image = as_stored(image, orientation) if is_tiff(data) else image
         image, note = to_8_bit(image)
         if note and notes is not None:
             notes.append(note)

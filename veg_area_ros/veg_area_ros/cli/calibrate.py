@@ -92,6 +92,7 @@ class BoardViews:
     no_board: list[str] = field(default_factory=list)
     wrong_size: list[str] = field(default_factory=list)
     repeated: list[str] = field(default_factory=list)
+    notes: dict[str, list[str]] = field(default_factory=dict)  # what reading assumed, by kind: (frames, a note)
     guide: object | None = None  # guidance.CalibrationGuide over the views: their variety, what is still needed
 
 
@@ -138,6 +139,8 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
             found.unreadable.append(frame.name)
             say(f"[{seen}] {frame.name}: skipped, {frame.problem}")
             continue
+        for note in frame.notes:  # an EXIF orientation not applied, a 16-bit depth: said once for all frames
+            found.notes.setdefault(note.split(":")[0], []).append(note)
         size = (frame.image.shape[1], frame.image.shape[0])
         if found.image_size is None:
             found.image_size = size
@@ -163,6 +166,8 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
         verdict = found.guide.offer(detection, frame.image, keep=True, stats=stats)  # the user chose them: advice
         advice = f" ({verdict.reason})" if not verdict.kept and verdict.kind != "similar" else ""
         frame_line(seen, f"[{seen}] {frame.name}: {len(detection)} board points{advice}")
+    for notes in found.notes.values():
+        say(f"{len(notes)} of {found.seen} frames: {notes[-1]}")
     if found.seen > FRAME_LINES:
         say(f"{found.seen} frames: {len(found.views)} views, {len(found.no_board)} without a board, "
             f"{len(found.repeated)} repeats of the pose before")
