@@ -125,3 +125,44 @@ def test_photos_held_either_way_calibrate_as_the_sensor_and_measure(tmp_path):
 def test_any_bytes_give_an_orientation_or_none_never_an_error(prefix, body):
     assert stored_orientation(prefix + body) in range(1, 9)
     assert stored_orientation(prefix + b"\xff\xe1\x00\x10Exif\x00\x00MM\x00*" + body) in range(1, 9)
+
+
+def rotated_mp4(data: bytes, degrees: int) -> bytes:
+    """The same MP4 with its video track's display matrix turned by `degrees` (90, 180, 270), as a phone writes
+    a video taken upright: the frames' bytes as they were."""
+    import struct
+
+    box = data.find(b"tkhd")
+    assert box > 0 and data[box + 4] == 0  # version 0: 32-bit times before the matrix
+    matrix = box + 4 + 4 + 20 + 8 + 8
+    one = 0x10000
+    cos, sin = {90: (0, 1), 180: (-1, 0), 270: (0, -1)}[degrees]
+    turned = struct.pack(">9i", cos * one, sin * one, 0, -sin * one, cos * one, 0, 0, 0, 0x40000000)
+    return data[:matrix] + turned + data[matrix + 36:]
+
+
+def test_a_phones_video_is_read_as_stored_and_says_its_rotation(tmp_path):
+    """A video whose container says "show it turned 90°" (a phone held upright): OpenCV turned its frames, so
+    a calibration of the sensor refused them ("frame is 480x640 but the calibration is for 640x480"); read as
+    stored, each frame measures as the unturned video's and says the rotation was not applied."""
+    write_calibration(tmp_path / "endoscope.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    writer = cv2.VideoWriter(str(tmp_path / "clip.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 10, (640, 480))
+    for k in range(3):
+        writer.write(render_scene(ENDOSCOPE, cube_scene(), 0.7, seed=k))
+    writer.release()
+    (tmp_path / "clip_upright.mp4").write_bytes(rotated_mp4((tmp_path / "clip.mp4").read_bytes(), 90))
+    capture = cv2.VideoCapture(str(tmp_path / "clip_upright.mp4"))
+    assert capture.read()[1].shape == (640, 480, 3)  # what OpenCV alone gives: a player's
+    capture.release()
+    rows = {}
+    for name in ("clip.mp4", "clip_upright.mp4"):
+        done = run_cli("measure", str(tmp_path / name), "--calibration", str(tmp_path / "endoscope.yaml"),
+                       "--targets", str(tmp_path / "targets.yaml"), "--json", "--csv", str(tmp_path / f"{name}.csv"),
+                       cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        rows[name] = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    assert [r["area_m2"] for r in rows["clip_upright.mp4"]] == [r["area_m2"] for r in rows["clip.mp4"]]
+    assert len(rows["clip.mp4"]) == 3
+    assert all(any("video rotation 90° not applied" in w for w in r["warnings"]) for r in rows["clip_upright.mp4"])
+    assert not any("rotation" in w for r in rows["clip.mp4"] for w in r["warnings"])

@@ -21,7 +21,7 @@ import numpy as np
 
 from .bit_depth import to_8_bit
 from .files import MAX_IMAGE_PIXELS, special_file
-from .orientation import as_stored, is_tiff, orientation_note, stored_orientation
+from .orientation import as_stored, is_tiff, orientation_note, stored_orientation, video_rotation_note
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp"}
 VIDEO_SUFFIXES = {".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv"}
@@ -296,6 +296,7 @@ class Packet:
     data: np.ndarray  # the frame's JPEG bytes
     time_s: float | None
     position: int
+    notes: tuple[str, ...] = ()  # as Frame.notes
 
 
 def _motion_jpeg_capture(path: Path) -> cv2.VideoCapture | None:
@@ -339,9 +340,12 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
     packets = capture is not None
     if capture is None:
         capture = cv2.VideoCapture(opencv_path(path))
+        capture.set(cv2.CAP_PROP_ORIENTATION_AUTO, 0)  # the sensor's grid, as images are read (`orientation`)
     if not capture.isOpened():
         yield Frame(shown_name(path), None, "is not a video OpenCV can open")
         return
+    note = video_rotation_note(capture.get(cv2.CAP_PROP_ORIENTATION_META))
+    notes = (note,) if note else ()
     fps = capture.get(cv2.CAP_PROP_FPS)
     declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
     if stop is not None:
@@ -357,8 +361,8 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
                 if not ok or (packets and not _whole_jpeg(image)):  # a cut JPEG: the video ends here, as FFmpeg's
                     break
                 name, time_s = f"{shown_name(path)}#{index}", index / fps if fps > 0 else None
-                yield (Packet(name, image.reshape(-1), time_s, index) if packets else
-                       Frame(name, image, time_s=time_s, position=index))
+                yield (Packet(name, image.reshape(-1), time_s, index, notes) if packets else
+                       Frame(name, image, time_s=time_s, position=index, notes=notes))
             elif not capture.grab():
                 break
             index += 1
@@ -461,11 +465,11 @@ def decode_with_grey(item: Frame | Packet) -> Frame:
     """A `Packet` decoded (OpenCV's JPEG decoder, as the same frame saved as a .jpg file would be read), and a
     colour frame's grey conversion beside it (`Frame.grey`)."""
     if isinstance(item, Packet):
-        image = cv2.imdecode(item.data, cv2.IMREAD_COLOR)
+        image = cv2.imdecode(item.data, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
         if image is None:
             return Frame(item.name, None, "this frame's JPEG could not be decoded (the video is damaged here)",
                          time_s=item.time_s, position=item.position)
-        item = Frame(item.name, image, time_s=item.time_s, position=item.position)
+        item = Frame(item.name, image, time_s=item.time_s, position=item.position, notes=item.notes)
     if item.image is not None and item.image.ndim == 3 and item.grey is None:
         item = replace(item, grey=cv2.cvtColor(item.image, cv2.COLOR_BGR2GRAY))
     return item

@@ -1,7 +1,8 @@
 """An image file's EXIF orientation, and its pixels kept in the grid they were stored in (the sensor's).
 
 A phone or a DSLR writes which way up it was held (EXIF tag 274, 1-8), and OpenCV, like a photo viewer, turns
-the image by it when decoding. A camera held by hand around a board, or pointing straight down at a flume,
+the image by it when decoding. A phone's video carries the same as a rotation
+of its container's display matrix. A camera held by hand around a board, or pointing straight down at a flume,
 writes a different tag from shot to shot: turned, the same sensor gave 640x480 and 480x640 frames, so a
 calibration kept only the views of one orientation (and fitted the sensor turned), and a photo taken the other
 way round was refused by it. The lens's geometry belongs to the sensor's grid, so frames are read as stored,
@@ -103,6 +104,15 @@ def as_stored(shown: np.ndarray, orientation: int) -> np.ndarray:
             5: lambda x: np.swapaxes(x, 0, 1), 6: lambda x: np.rot90(x, 1),
             7: lambda x: np.swapaxes(x, 0, 1)[::-1, ::-1], 8: lambda x: np.rot90(x, -1)}
     return np.ascontiguousarray(undo[orientation](shown)) if orientation in undo else shown
+
+
+def video_rotation_note(degrees: float) -> str:
+    """What a video's frame read as stored says where its container's display matrix would have turned it."""
+    turn = round(degrees) % 360
+    if turn == 0:
+        return ""
+    return (f"video rotation {turn}° not applied: read as stored, the sensor's pixel grid that the calibration "
+            "holds for, which a video player shows turned; a ROI or hand-picked pixels are taken in the stored grid")
 
 
 def orientation_note(orientation: int) -> str:
