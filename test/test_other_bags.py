@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import yaml
 from helpers import run_cli
-from rosbags.rosbag2 import Writer
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, Writer
 from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
 
@@ -57,15 +57,21 @@ def _compressed(jpeg: bytes, k: int, frame_id: str):
                                                           data=np.frombuffer(jpeg, np.uint8))
 
 
-def write_bag(path: Path, storage: str, topics: list[tuple[str, str, list]]) -> None:
-    """A bag of (topic, msgtype, messages) in that connection order, the messages interleaved by index."""
-    with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=STORAGE[storage]) as writer:
+def write_bag(path: Path, storage: str, topics: list[tuple[str, str, list]], compression: str = "none",
+              first: int = 0) -> None:
+    """A bag of (topic, msgtype, messages) in that connection order, the messages interleaved by index from
+    `first`; `compression` as `ros2 bag record --compression-mode file|message` (zstd) writes it."""
+    writer = Writer(path, version=Writer.VERSION_LATEST, storage_plugin=STORAGE[storage])
+    if compression != "none":
+        writer.set_compression(CompressionMode[compression.upper()], CompressionFormat.ZSTD)
+    with writer:
         connections = [(writer.add_connection(topic, msgtype, typestore=TYPES), msgtype, messages)
                        for topic, msgtype, messages in topics]
         for k in range(max(len(messages) for *_, messages in topics)):
             for slot, (connection, msgtype, messages) in enumerate(connections):
                 if k < len(messages):
-                    writer.write(connection, (100 + k) * 10**9 + slot, TYPES.serialize_cdr(messages[k], msgtype))
+                    writer.write(connection, (100 + first + k) * 10**9 + slot,
+                                 TYPES.serialize_cdr(messages[k], msgtype))
 
 
 @pytest.fixture(scope="module")
@@ -167,6 +173,52 @@ def test_compressed_images_give_the_jpeg_files_af(workspace, scenes, storage):
     assert done.returncode == 0, done.stderr
     assert [r["area_m2"] for r in from_bag] == [r["area_m2"] for r in from_files]
     assert abs(from_bag[0]["area_m2"] / cube_scene().true_area_m2 - 1) < 0.005
+
+
+def _split(bag: Path, storage: str, parts: list[list[tuple[str, str, list]]], first: list[int]) -> None:
+    """A bag split into several files as `ros2 bag record --max-bag-size` leaves it: one metadata.yaml that
+    lists every file, each file a bag of its own part of the messages."""
+    suffix = {"mcap": "mcap", "sqlite3": "db3"}[storage]
+    bag.mkdir()
+    infos = []
+    for number, (topics, start) in enumerate(zip(parts, first, strict=True)):
+        part = bag.parent / f"{bag.name}_part{number}"
+        write_bag(part, storage, topics, first=start)
+        (part / f"{part.name}.{suffix}").rename(bag / f"{bag.name}_{number}.{suffix}")
+        infos.append(yaml.safe_load((part / "metadata.yaml").read_text())["rosbag2_bagfile_information"])
+    merged = infos[0]
+    merged["relative_file_paths"] = [f"{bag.name}_{k}.{suffix}" for k in range(len(parts))]
+    merged["files"] = [{**info["files"][0], "path": f"{bag.name}_{k}.{suffix}"} for k, info in enumerate(infos)]
+    merged["message_count"] = sum(info["message_count"] for info in infos)
+    for k, topic in enumerate(merged["topics_with_message_count"]):
+        topic["message_count"] = sum(info["topics_with_message_count"][k]["message_count"] for info in infos)
+    (bag / "metadata.yaml").write_text(yaml.safe_dump({"rosbag2_bagfile_information": merged}))
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_compressed_and_split_bags_as_ros2_bag_record_writes_them(workspace, scenes, storage):
+    """`ros2 bag record --compression-mode file|message --compression-format zstd` (a .mcap.zstd or .db3.zstd
+    file, or each message compressed) and `--max-bag-size` (the recording split over several files): each
+    gives the plain bag's rows."""
+    def topics(first: int, count: int) -> list[tuple[str, str, list]]:
+        ks = range(first, first + count)
+        return [("/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "left") for k in ks]),
+                ("/image_raw", "sensor_msgs/msg/Image", [_image(scenes["left"][k], k, "left") for k in ks])]
+
+    bags = {}
+    for compression in ("none", "file", "message"):
+        bags[compression] = workspace / f"{storage}_{compression}"
+        write_bag(bags[compression], storage, topics(0, FRAMES), compression)
+    bags["split"] = workspace / f"{storage}_split"
+    _split(bags["split"], storage, [topics(0, 2), topics(2, FRAMES - 2)], [0, 2])
+    assert any(path.suffix == ".zstd" for path in bags["file"].iterdir())
+    rows = {}
+    for name, bag in bags.items():
+        found, done = _measure(workspace, bag, "--calibration", "bag")
+        assert done.returncode == 0, (name, done.stderr)
+        rows[name] = [(row["frame"].rsplit("#", 1)[1], row["area_m2"]) for row in found]
+    assert len(rows["none"]) == FRAMES
+    assert rows["file"] == rows["message"] == rows["split"] == rows["none"]
 
 
 def _encoded(frame: np.ndarray, encoding: str) -> tuple[np.ndarray, int]:
