@@ -136,6 +136,36 @@ def test_calibration_of_another_image_size(workspace, tmp_path):
     assert "frame is 640x480 but the calibration is for 320x240" in done.stderr
 
 
+def test_photos_opencv_cannot_read_are_named_never_passed_over(workspace, tmp_path):
+    """A DSLR shooting raw beside JPEG, a phone's HEIC: a folder's .CR2/.NEF/.HEIC files were passed over in
+    silence (and a folder of only those "holds no image or video files"); they are named with what to do, and
+    a phone's .jfif or an .avif photo is read."""
+    folder = tmp_path / "shoot"
+    folder.mkdir()
+    cube = cv2.imread(str(workspace / "cube.png"))
+    (folder / "IMG_0001.jfif").write_bytes(cv2.imencode(".jpg", cube, [cv2.IMWRITE_JPEG_QUALITY, 95])[1].tobytes())
+    (folder / "IMG_0002.avif").write_bytes(cv2.imencode(".avif", cube)[1].tobytes())
+    for name in ("IMG_0001.CR2", "IMG_0002.CR2", "IMG_0003.HEIC"):
+        (folder / name).write_bytes(b"\x00" * 64)
+    (folder / "notes.txt").write_text("flume run 3")
+    done = run_cli("measure", str(folder), "--calibration", str(workspace / "water.yaml"), "--targets",
+                   str(workspace / "targets.yaml"), "--threshold", "120", "--json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert [json.loads(line)["frame"] for line in done.stdout.splitlines()] == ["IMG_0001.jfif", "IMG_0002.avif"]
+    assert "3 photos not read (.CR2, .HEIC: OpenCV reads neither camera raw nor HEIC; export them as JPEG" in (
+        done.stderr), done.stderr
+    assert "notes.txt" not in done.stderr
+    raw_only = tmp_path / "raw"
+    raw_only.mkdir()
+    (raw_only / "DSC_0001.NEF").write_bytes(b"\x00" * 64)
+    done = run_cli("calibrate", str(raw_only), "--board", "chessboard:9x6:0.025", "-o", str(tmp_path / "c.yaml"),
+                   cwd=tmp_path)
+    assert done.returncode == 1 and "1 photos are .NEF (OpenCV reads neither camera raw nor HEIC" in done.stderr
+    done = run_cli("measure", str(raw_only / "DSC_0001.NEF"), "--calibration", "none", "--targets",
+                   str(workspace / "targets.yaml"), cwd=tmp_path)
+    assert done.returncode == 1 and "a .NEF photo; OpenCV reads neither camera raw nor HEIC" in done.stderr
+
+
 def test_targets_not_found(workspace):
     cv2.imwrite(str(workspace / "blank.png"), np.full((480, 640, 3), 180, np.uint8))
     done = measure(workspace, image="blank.png")

@@ -23,7 +23,12 @@ from .bit_depth import to_8_bit
 from .files import MAX_IMAGE_PIXELS, special_file
 from .orientation import as_stored, is_tiff, orientation_note, stored_orientation, video_rotation_note
 
-IMAGE_SUFFIXES = {".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp"}
+IMAGE_SUFFIXES = {".jpg", ".jpeg", ".jpe", ".jfif", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp",
+                  ".avif", ".jp2", ".j2k"}
+# photos OpenCV does not read (a DSLR's raw files, a phone's HEIC): named, never passed over in silence
+UNREAD_PHOTO_SUFFIXES = {".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw", ".srf", ".sr2", ".orf", ".rw2", ".raf",
+                         ".dng", ".pef", ".srw", ".x3f", ".3fr", ".iiq", ".heic", ".heif"}
+EXPORT_ADVICE = "OpenCV reads neither camera raw nor HEIC; export them as JPEG, PNG or TIFF"
 VIDEO_SUFFIXES = {".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv"}
 
 
@@ -218,19 +223,32 @@ def _decode_jpeg(data: bytes, mode: int = cv2.IMREAD_COLOR) -> tuple[np.ndarray 
     return image, " ".join(warning.split())
 
 
-def expand_inputs(paths: Sequence[str | Path]) -> list[Path]:
-    """Files named directly, and the image and video files inside named folders, in name order."""
+def _kinds(files: list[Path]) -> str:
+    return ", ".join(sorted({f.suffix for f in files}))
+
+
+def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None) -> list[Path]:
+    """Files named directly, and the image and video files inside named folders, in name order. Photos in a
+    folder that OpenCV does not read (camera raw, HEIC) are said in `notes`; named directly, or all a folder
+    holds, they are refused."""
     files: list[Path] = []
     for raw in paths:
         path = Path(raw)
         if is_bag(path):
             files.append(path)
         elif path.is_dir():
-            inside = sorted(p for p in path.iterdir()
-                            if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES)
+            entries = [p for p in path.iterdir() if p.is_file()]
+            inside = sorted(p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES)
+            unread = [p for p in entries if p.suffix.lower() in UNREAD_PHOTO_SUFFIXES]
             if not inside:
-                raise InputError(f"{path}: folder holds no image or video files")
+                raise InputError(f"{path}: folder holds no image or video files" + (
+                    f" OpenCV reads: {len(unread)} photos are {_kinds(unread)} ({EXPORT_ADVICE})" if unread else ""))
+            if unread and notes is not None:
+                notes.append(f"{path}: {len(unread)} photos not read ({_kinds(unread)}: {EXPORT_ADVICE}); "
+                             f"{len(inside)} other files read")
             files.extend(inside)
+        elif path.is_file() and path.suffix.lower() in UNREAD_PHOTO_SUFFIXES:
+            raise InputError(f"{path}: a {path.suffix} photo; {EXPORT_ADVICE}")
         elif path.is_file():
             files.append(path)
         elif path.exists():  # a FIFO, socket or device (or a symlink to one): nothing to read frames from

@@ -122,8 +122,9 @@ class FileSource:
     is decoded once. An unreadable frame raises SourceError naming it."""
 
     def __init__(self, paths: list[Path], loop: bool = False):
+        self.notes: list[str] = []  # what reading assumed (a 16-bit file's depth), each kind once, for the node
         try:
-            self.files = expand_inputs(paths)
+            self.files = expand_inputs(paths, self.notes)  # and photos passed over (camera raw, HEIC)
         except InputError as exc:
             raise SourceError(str(exc)) from exc
         self.loop = loop
@@ -131,7 +132,6 @@ class FileSource:
         self._first_pass: list[np.ndarray | str] | None = [] if loop else None  # while it may be replayed
         self._replay: list[np.ndarray | str] | None = None
         self._next = 0
-        self.notes: list[str] = []  # what reading assumed (a 16-bit file's depth), each kind once, for the node
         self._note_kinds: set[str] = set()
 
     def read(self) -> np.ndarray | None:

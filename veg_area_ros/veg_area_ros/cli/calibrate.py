@@ -177,7 +177,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
     return found
 
 
-def _board_and_files(args: argparse.Namespace):
+def _board_and_files(args: argparse.Namespace, say):
     from ..board import BoardSpec, BoardSpecError
     from ..frames import InputError, expand_inputs
 
@@ -185,10 +185,14 @@ def _board_and_files(args: argparse.Namespace):
         board = BoardSpec.parse(args.board)
     except BoardSpecError as exc:
         raise CliError(str(exc), EXIT_USAGE) from exc
+    unread: list[str] = []
     try:
-        return board, expand_inputs(args.inputs)
+        files = expand_inputs(args.inputs, unread)
     except InputError as exc:
         raise CliError(str(exc)) from exc
+    for note in unread:
+        say(f"warning: {note}")
+    return board, files
 
 
 HINT_FRAMES = 3  # frames a board spec's likely mistakes are tried on when it is found in none
@@ -245,7 +249,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                        "(a lens behind a flat port)", EXIT_USAGE)
     if not args.inputs or not args.board:
         raise CliError("give the board (--board) and its images", EXIT_USAGE)
-    board, files = _board_and_files(args)
+    board, files = _board_and_files(args, say)
     if args.video_step > 1 and all(f.suffix.lower() in IMAGE_SUFFIXES for f in files):
         raise CliError(f"--video-step {args.video_step} takes every Nth frame of a video; the inputs are images",
                        EXIT_USAGE)
@@ -382,7 +386,7 @@ def _calibrate_port(args: argparse.Namespace, say) -> int:
     if args.inputs:
         if not args.board:
             raise CliError("give the board (--board) of the underwater views", EXIT_USAGE)
-        board, files = _board_and_files(args)
+        board, files = _board_and_files(args, say)
         found = collect_views(files, board, max(1, args.video_step), say, lens.image_size, "the lens calibration")
         views = [(view.detection.object_points, view.detection.image_points) for view in found.views]
         if len(views) < 2:
