@@ -128,6 +128,44 @@ def test_batch_over_several_videos_on_all_cores(workspace, tmp_path):
     assert [o["input"] for o in objects] == [*map(str, videos[:2])] and [o["measured"] for o in objects] == [3, 3]
 
 
+def variable_rate_mp4(data: bytes, durations: list[tuple[int, int]]) -> bytes:
+    """An MP4 (moov after mdat, as OpenCV writes it) with its frames' durations replaced by `durations`
+    ((frames, ticks) runs, the same total): a phone's variable frame rate, the pixels as they were."""
+    import struct
+
+    start = data.find(b"stts") - 4
+    (size,) = struct.unpack(">I", data[start:start + 4])
+    table = struct.pack(">I4sII", 16 + 8 * len(durations), b"stts", 0, len(durations))
+    table += b"".join(struct.pack(">II", *run) for run in durations)
+    grown = bytearray(data[:start] + table + data[start + size:])
+    for box in (b"moov", b"trak", b"mdia", b"minf", b"stbl"):  # the boxes holding it grow alike
+        at = grown.find(box) - 4
+        grown[at:at + 4] = struct.pack(">I", struct.unpack(">I", grown[at:at + 4])[0] + len(table) - size)
+    return bytes(grown)
+
+
+def test_a_variable_frame_rate_videos_rows_carry_each_frames_own_time(workspace, tmp_path):
+    """A phone films at a variable rate: time_s was the frame number over the nominal rate (0.3 s for a frame
+    shown at 0.4 s); it is each frame's presentation time, in one run and in a range a worker reads alike."""
+    writer = cv2.VideoWriter(str(tmp_path / "steady.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 10, ENDOSCOPE.image_size)
+    for k in range(6):
+        writer.write(render_scene(ENDOSCOPE, SCENE, 0.7, FlatPort(), seed=k))
+    writer.release()
+    steady = (tmp_path / "steady.mp4").read_bytes()
+    (tmp_path / "phone.mp4").write_bytes(variable_rate_mp4(steady, [(2, 1024), (1, 2048), (2, 512), (1, 1024)]))
+    times = {}
+    for name in ("steady", "phone"):
+        done = run_cli("measure", str(tmp_path / f"{name}.mp4"), "--calibration", str(workspace / "water.yaml"),
+                       "--targets", str(workspace / "targets.yaml"), "--threshold", "otsu", cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        times[name] = [float(r["time_s"]) for r in csv.DictReader((tmp_path / f"{name}_area.csv").open())]
+    assert times["steady"] == pytest.approx([0, 0.1, 0.2, 0.3, 0.4, 0.5])
+    assert times["phone"] == pytest.approx([0, 0.1, 0.2, 0.4, 0.45, 0.5])
+    from veg_area_ros.frames import iter_video
+
+    assert [f.time_s for f in iter_video(tmp_path / "phone.mp4", start=3)] == pytest.approx([0.4, 0.45, 0.5])
+
+
 def test_calibration_of_another_image_size(workspace, tmp_path):
     small = tmp_path / "small.yaml"
     write_calibration(small, calibrated_endoscope("water").__class__(320, 240, c=260, xp=160, yp=120))

@@ -7,6 +7,7 @@ No ROS here.
 from __future__ import annotations
 
 import itertools
+import math
 import os
 import re
 import struct
@@ -347,6 +348,16 @@ def _whole_jpeg(packet: np.ndarray) -> bool:
     return packet.size > 4 and packet.reshape(-1)[:2].tobytes() == b"\xff\xd8" and tail.endswith(b"\xff\xd9")
 
 
+def presented_time(capture: cv2.VideoCapture, index: int, fps: float) -> float | None:
+    """The frame just read's presentation time in seconds, as a player shows it: a phone's video has a variable
+    frame rate, and its frame number over the nominal rate was off by a tenth of a second within a few frames.
+    The number over the rate where the stream records no times (FFmpeg then gives 0 for every frame)."""
+    presented = capture.get(cv2.CAP_PROP_POS_MSEC) / 1000
+    if math.isfinite(presented) and (presented > 0 or index == 0):
+        return presented
+    return index / fps if fps > 0 else None
+
+
 def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = None,
                spread: bool = False, encoded: bool = False) -> Iterator[Frame | Packet]:
     """Every `step`-th frame of a video (indices counted from its first frame), from index `start` up to
@@ -378,7 +389,7 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
                 ok, image = capture.read()
                 if not ok or (packets and not _whole_jpeg(image)):  # a cut JPEG: the video ends here, as FFmpeg's
                     break
-                name, time_s = f"{shown_name(path)}#{index}", index / fps if fps > 0 else None
+                name, time_s = f"{shown_name(path)}#{index}", presented_time(capture, index, fps)
                 yield (Packet(name, image.reshape(-1), time_s, index, notes) if packets else
                        Frame(name, image, time_s=time_s, position=index, notes=notes))
             elif not capture.grab():
