@@ -406,3 +406,73 @@ def test_kalibrs_camchain_is_read_for_its_one_camera(tmp_path):
         path.write_text(text)
         with pytest.raises(CalibrationFileError, match=problem):
             read_calibration(path)
+
+
+METASHAPE_XML = """<?xml version="1.0" encoding="UTF-8"?>
+<calibration>
+  <projection>frame</projection>
+  <width>6000</width>
+  <height>4000</height>
+  <f>4418.62</f>
+  <cx>21.37</cx>
+  <cy>-14.92</cy>
+  <b1>3.25</b1>
+  <k1>-0.0712</k1>
+  <k2>0.0935</k2>
+  <k3>-0.0427</k3>
+  <p1>0.00041</p1>
+  <p2>-0.00087</p2>
+  <date>2026-11-30T09:12:44Z</date>
+</calibration>
+"""
+
+
+def _metashape_pixels(points: np.ndarray, text: str) -> np.ndarray:
+    """Metashape's frame camera as its manual writes it (Appendix C): pixels from the image's top-left corner."""
+    import xml.etree.ElementTree as ElementTree
+
+    root = ElementTree.fromstring(text)
+    value = {child.tag: float(child.text) for child in root if child.tag not in ("projection", "date")}
+    x, y = points[:, 0] / points[:, 2], points[:, 1] / points[:, 2]
+    r2 = x * x + y * y
+    radial = 1 + value["k1"] * r2 + value["k2"] * r2**2 + value["k3"] * r2**3
+    xd = x * radial + value["p1"] * (r2 + 2 * x * x) + 2 * value["p2"] * x * y
+    yd = y * radial + value["p2"] * (r2 + 2 * y * y) + 2 * value["p1"] * x * y
+    u = value["width"] * 0.5 + value["cx"] + xd * value["f"] + xd * value["b1"]
+    v = value["height"] * 0.5 + value["cy"] + yd * value["f"]
+    return np.column_stack([u, v])
+
+
+def test_metashapes_calibration_xml_projects_as_metashape_does(tmp_path):
+    """A photogrammetrist's calibration from Agisoft Metashape (the field's self-calibrating bundle adjustment,
+    the Brown model) was "not valid YAML": read, every point projects where Metashape's own formula puts it
+    (its principal point from the image's centre and pixels from the top-left pixel's corner, b1 in fx, p1 and
+    p2 in the other order than OpenCV's); terms camera_info's models lack are refused unless 0."""
+    import cv2
+
+    path = tmp_path / "camera_calibration.xml"
+    path.write_text(METASHAPE_XML)
+    camera = read_calibration(path).camera
+    assert (camera.width, camera.height, camera.model) == (6000, 4000, "plumb_bob")
+    rng = np.random.default_rng(3)
+    points = np.column_stack([rng.uniform(-0.6, 0.6, 200), rng.uniform(-0.4, 0.4, 200), np.ones(200)])
+    matrix = np.array([[camera.fx, 0, camera.xp], [0, camera.fy, camera.yp], [0, 0, 1]])
+    ours, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), matrix, np.array(camera.dist))
+    metashape_corner_origin = _metashape_pixels(points, METASHAPE_XML)
+    assert np.abs(ours.reshape(-1, 2) + 0.5 - metashape_corner_origin).max() < 1e-6
+    path.write_text(METASHAPE_XML.replace("<width>6000</width>\n  <height>4000</height>",
+                                          '<resolution width="6000" height="4000"/>'))
+    assert read_calibration(path).camera == camera  # Metashape 1.x and 2.x write the size either way
+    for text, problem in [
+        (METASHAPE_XML.replace("frame", "fisheye"), "a Metashape fisheye camera: only frame cameras"),
+        (METASHAPE_XML.replace("<k3>", "<k4>0.001</k4><k3>"), r"k4 \(r⁸\) is not 0"),
+        (METASHAPE_XML.replace("<b1>", "<b2>0.4</b2><b1>"), r"b2 \(skew\) is not 0"),
+        (METASHAPE_XML.replace("<f>4418.62</f>", ""), "without <f>"),
+        (METASHAPE_XML.replace("<k1>-0.0712", "<k1>abc"), "<k1> is not a number: 'abc'"),
+        ('<?xml version="1.0"?><!DOCTYPE c [<!ENTITY a "aaaa">]>' + METASHAPE_XML.split("?>", 1)[1], "DOCTYPE"),
+    ]:
+        path.write_text(text)
+        with pytest.raises(CalibrationFileError, match=problem):
+            read_calibration(path)
+    path.write_text(METASHAPE_XML.replace("<k3>", "<k4>0</k4><p3>0</p3><k3>"))  # written as 0: nothing lost
+    assert read_calibration(path).camera == camera

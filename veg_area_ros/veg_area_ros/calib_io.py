@@ -30,9 +30,11 @@ from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
 from .foreign_calibrations import (
     ForeignCalibrationError,
     is_kalibr_camchain,
+    is_metashape_xml,
     is_opencv_storage,
     is_ost_ini,
     kalibr_content,
+    metashape_content,
     opencv_storage_content,
     ost_ini_content,
 )
@@ -177,7 +179,8 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
 
 
 def read_calibration(path: str | os.PathLike) -> CalibrationFile:
-    """Read a camera_info YAML (or ROS 1's `ost.ini`, OpenCV's FileStorage YAML or XML, Kalibr's camchain); any
+    """Read a camera_info YAML (or ROS 1's `ost.ini`, OpenCV's FileStorage YAML or XML, Kalibr's camchain,
+    Agisoft Metashape's calibration XML); any
     problem raises CalibrationFileError naming the file and the problem."""
     path = Path(path)
     try:
@@ -193,6 +196,8 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
             return from_camera_info_dict(ost_ini_content(text), path)
         if is_opencv_storage(text):
             return from_camera_info_dict(opencv_storage_content(text), path)
+        if is_metashape_xml(text):
+            return from_camera_info_dict(metashape_content(text), path)
     except ForeignCalibrationError as exc:
         raise CalibrationFileError(f"{path}: {exc}") from exc
     try:

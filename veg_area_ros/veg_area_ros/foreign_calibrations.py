@@ -1,6 +1,7 @@
 """Calibration files other tools write, as the camera_info fields `calib_io` reads: ROS 1 cameracalibrator's
-`ost.ini`, OpenCV's FileStorage (its calibration sample's, its interactive calibrator's, a script's; YAML or XML)
-and Kalibr's camchain YAML. Each gives one camera's fields or a ForeignCalibrationError saying what is wrong."""
+`ost.ini`, OpenCV's FileStorage (its calibration sample's, its interactive calibrator's, a script's; YAML or XML),
+Kalibr's camchain YAML and Agisoft Metashape's calibration XML. Each gives one camera's fields or a
+ForeignCalibrationError saying what is wrong."""
 
 from __future__ import annotations
 
@@ -192,3 +193,68 @@ def kalibr_content(content: dict) -> dict[str, Any]:
             "distortion_model": ros_model,
             "camera_matrix": {"rows": 3, "cols": 3, "data": [fu, 0.0, pu, 0.0, fv, pv, 0.0, 0.0, 1.0]},
             "distortion_coefficients": {"rows": 1, "cols": len(coefficients), "data": coefficients}}
+
+
+def is_metashape_xml(text: str) -> bool:
+    """Whether a calibration file is Agisoft Metashape's (or PhotoScan's) camera calibration XML."""
+    head = text.lstrip()[:400]
+    return head.startswith("<") and "<calibration" in head
+
+
+METASHAPE_UNSUPPORTED = {"k4": "k4 (r⁸)", "p3": "p3", "p4": "p4", "b2": "b2 (skew)"}
+
+
+def metashape_content(text: str) -> dict[str, Any]:
+    """The camera_info fields of Metashape's calibration XML (Tools > Camera Calibration > Export), a frame
+    camera's Brown model: f, cx, cy (pixels, the principal point from the image's centre), b1 (fx - fy), k1-k3
+    and p1-p2. Converted to OpenCV's conventions: the principal point counted from the top-left pixel's centre
+    (Metashape counts from its corner, the centre at 0.5), fx = f + b1, and p1, p2 swapped (Metashape's p1
+    multiplies r² + 2x², OpenCV's p2 does). Terms camera_info's models lack (k4, p3, p4, a skew b2) are refused
+    unless 0, as are its fisheye and spherical cameras."""
+    import xml.etree.ElementTree as ElementTree
+
+    if "<!DOCTYPE" in text or "<!ENTITY" in text:  # Metashape writes none; entities can expand without bound
+        raise ForeignCalibrationError("a Metashape calibration XML with a DOCTYPE or entities, which it never holds")
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError as exc:
+        raise ForeignCalibrationError(f"not a readable Metashape calibration XML ({exc})") from exc
+    if root.tag != "calibration":
+        raise ForeignCalibrationError(f"a Metashape XML whose root is <{root.tag}>, not <calibration>")
+    kind = (root.get("type") or root.findtext("projection") or "frame").strip()
+    if kind != "frame":
+        raise ForeignCalibrationError(f"a Metashape {kind} camera: only frame cameras (the Brown model) are read; "
+                                      "calibrate a fisheye lens here (veg-area calibrate --model equidistant)")
+
+    def number(name: str, default: float | None = 0.0) -> float:
+        value = root.findtext(name)
+        if value is None:
+            if default is None:
+                raise ForeignCalibrationError(f"a Metashape calibration without <{name}>")
+            return default
+        try:
+            return float(value)
+        except ValueError as exc:
+            raise ForeignCalibrationError(f"Metashape's <{name}> is not a number: {value.strip()!r}") from exc
+
+    resolution = root.find("resolution")
+    if resolution is not None:
+        try:
+            width, height = int(resolution.get("width", "")), int(resolution.get("height", ""))
+        except ValueError as exc:
+            raise ForeignCalibrationError("Metashape's <resolution> needs width and height in pixels") from exc
+    else:
+        width, height = int(number("width", None)), int(number("height", None))
+    unsupported = [label for name, label in METASHAPE_UNSUPPORTED.items() if number(name) != 0]
+    if unsupported:
+        raise ForeignCalibrationError(f"Metashape's {', '.join(unsupported)} {'is' if len(unsupported) == 1 else 'are'}"
+                                      " not 0: camera_info's plumb_bob model has no such term (fix it at 0 in "
+                                      "Metashape's calibration and adjust again)")
+    focal = number("f", None)
+    fx, fy = focal + number("b1"), focal
+    cx, cy = width / 2 + number("cx") - 0.5, height / 2 + number("cy") - 0.5
+    return {"camera_name": "metashape", "image_width": width, "image_height": height,
+            "camera_matrix": {"rows": 3, "cols": 3, "data": [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]},
+            "distortion_model": "plumb_bob",
+            "distortion_coefficients": {"rows": 1, "cols": 5, "data": [
+                number("k1"), number("k2"), number("p2"), number("p1"), number("k3")]}}
