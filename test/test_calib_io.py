@@ -476,3 +476,23 @@ def test_metashapes_calibration_xml_projects_as_metashape_does(tmp_path):
             read_calibration(path)
     path.write_text(METASHAPE_XML.replace("<k3>", "<k4>0</k4><p3>0</p3><k3>"))  # written as 0: nothing lost
     assert read_calibration(path).camera == camera
+
+
+def test_metashapes_cameras_xml_gives_its_one_sensors_adjusted_calibration(tmp_path):
+    """Export Cameras writes the whole chunk: the one sensor's adjusted calibration is read (not its initial
+    one); a chunk of two cameras is refused with their labels."""
+    calibration = METASHAPE_XML.split("?>", 1)[1].replace("<calibration>",
+                                                          '<calibration type="frame" class="adjusted">')
+    initial = ('<calibration type="frame" class="initial"><resolution width="6000" height="4000"/><f>4400</f>'
+               '</calibration>')
+    sensor = ('<sensor id="{id}" label="{label}" type="frame"><resolution width="6000" height="4000"/>'
+              '<property name="pixel_width" value="0.0039"/>' + initial + calibration + '</sensor>')
+    document = ('<?xml version="1.0" encoding="UTF-8"?>\n<document version="1.5.0"><chunk label="Chunk 1">'
+                '<sensors next_id="1">{sensors}</sensors><cameras next_id="0"/></chunk></document>')
+    path = tmp_path / "cameras.xml"
+    path.write_text(document.format(sensors=sensor.format(id=0, label="ILCE-7RM3 (35mm)")))
+    (tmp_path / "alone.xml").write_text(METASHAPE_XML)
+    assert read_calibration(path).camera == read_calibration(tmp_path / "alone.xml").camera
+    path.write_text(document.format(sensors=sensor.format(id=0, label="left") + sensor.format(id=1, label="right")))
+    with pytest.raises(CalibrationFileError, match=r"2 calibrated sensors \('left', 'right'\)"):
+        read_calibration(path)

@@ -198,19 +198,35 @@ def kalibr_content(content: dict) -> dict[str, Any]:
 def is_metashape_xml(text: str) -> bool:
     """Whether a calibration file is Agisoft Metashape's (or PhotoScan's) camera calibration XML."""
     head = text.lstrip()[:400]
-    return head.startswith("<") and "<calibration" in head
+    return head.startswith("<") and ("<calibration" in head or "<document" in head)
 
 
 METASHAPE_UNSUPPORTED = {"k4": "k4 (r⁸)", "p3": "p3", "p4": "p4", "b2": "b2 (skew)"}
 
 
+def _metashape_sensor_calibration(document):
+    """The one sensor's calibration in Metashape's cameras.xml (its adjusted one where it has an initial one too);
+    several sensors (cameras) are refused with their labels."""
+    sensors = [sensor for sensor in document.iter("sensor") if sensor.findall("calibration")]
+    if len(sensors) != 1:
+        labels = ", ".join(repr(sensor.get("label", "?")) for sensor in sensors) or "none"
+        raise ForeignCalibrationError(f"a Metashape cameras.xml with {len(sensors)} calibrated sensors ({labels}); "
+                                      "measuring needs one camera's: export that sensor's calibration")
+    calibrations = sensors[0].findall("calibration")
+    chosen = next((c for c in calibrations if c.get("class") == "adjusted"), calibrations[-1])
+    if chosen.find("resolution") is None and sensors[0].find("resolution") is not None:
+        chosen.append(sensors[0].find("resolution"))
+    return chosen
+
+
 def metashape_content(text: str) -> dict[str, Any]:
-    """The camera_info fields of Metashape's calibration XML (Tools > Camera Calibration > Export), a frame
-    camera's Brown model: f, cx, cy (pixels, the principal point from the image's centre), b1 (fx - fy), k1-k3
-    and p1-p2. Converted to OpenCV's conventions: the principal point counted from the top-left pixel's centre
-    (Metashape counts from its corner, the centre at 0.5), fx = f + b1, and p1, p2 swapped (Metashape's p1
-    multiplies r² + 2x², OpenCV's p2 does). Terms camera_info's models lack (k4, p3, p4, a skew b2) are refused
-    unless 0, as are its fisheye and spherical cameras."""
+    """The camera_info fields of Metashape's calibration XML (Tools > Camera Calibration > Export, or the one
+    sensor's in File > Export > Export Cameras' cameras.xml), a frame camera's Brown model: f, cx, cy (pixels,
+    the principal point from the image's centre), b1 (fx - fy), k1-k3 and p1-p2. Converted to OpenCV's
+    conventions: the principal point counted from the top-left pixel's centre (Metashape counts from its
+    corner, the centre at 0.5), fx = f + b1, and p1, p2 swapped (Metashape's p1 multiplies r² + 2x², OpenCV's
+    p2 does). Terms camera_info's models lack (k4, p3, p4, a skew b2) are refused unless 0, as are its fisheye
+    and spherical cameras."""
     import xml.etree.ElementTree as ElementTree
 
     if "<!DOCTYPE" in text or "<!ENTITY" in text:  # Metashape writes none; entities can expand without bound
@@ -219,6 +235,8 @@ def metashape_content(text: str) -> dict[str, Any]:
         root = ElementTree.fromstring(text)
     except ElementTree.ParseError as exc:
         raise ForeignCalibrationError(f"not a readable Metashape calibration XML ({exc})") from exc
+    if root.tag == "document":  # File > Export > Export Cameras: each sensor's calibrations inside
+        root = _metashape_sensor_calibration(root)
     if root.tag != "calibration":
         raise ForeignCalibrationError(f"a Metashape XML whose root is <{root.tag}>, not <calibration>")
     kind = (root.get("type") or root.findtext("projection") or "frame").strip()
