@@ -468,6 +468,9 @@ def test_metashapes_calibration_xml_projects_as_metashape_does(tmp_path):
         (METASHAPE_XML.replace("<k3>", "<k4>0.001</k4><k3>"), r"k4 \(r⁸\) is not 0"),
         (METASHAPE_XML.replace("<b1>", "<b2>0.4</b2><b1>"), r"b2 \(skew\) is not 0"),
         (METASHAPE_XML.replace("<f>4418.62</f>", ""), "without <f>"),
+        (METASHAPE_XML.replace("<width>6000</width>", "<width>nan</width>"), "image size must be two whole"),
+        (METASHAPE_XML.replace("<height>4000</height>", ""), "image size must be two whole"),
+        (METASHAPE_XML.replace("<f>4418.62", "<f>inf"), "finite|positive"),
         (METASHAPE_XML.replace("<k1>-0.0712", "<k1>abc"), "<k1> is not a number: 'abc'"),
         ('<?xml version="1.0"?><!DOCTYPE c [<!ENTITY a "aaaa">]>' + METASHAPE_XML.split("?>", 1)[1], "DOCTYPE"),
     ]:

@@ -256,13 +256,11 @@ def metashape_content(text: str) -> dict[str, Any]:
             raise ForeignCalibrationError(f"Metashape's <{name}> is not a number: {value.strip()!r}") from exc
 
     resolution = root.find("resolution")
-    if resolution is not None:
-        try:
-            width, height = int(resolution.get("width", "")), int(resolution.get("height", ""))
-        except ValueError as exc:
-            raise ForeignCalibrationError("Metashape's <resolution> needs width and height in pixels") from exc
-    else:
-        width, height = int(number("width", None)), int(number("height", None))
+    sides = ([resolution.get("width", ""), resolution.get("height", "")] if resolution is not None
+             else [root.findtext("width") or "", root.findtext("height") or ""])
+    if not all(side.strip().isdigit() and int(side) > 0 for side in sides):
+        raise ForeignCalibrationError(f"Metashape's image size must be two whole numbers of pixels, found {sides}")
+    width, height = (int(side) for side in sides)
     unsupported = [label for name, label in METASHAPE_UNSUPPORTED.items() if number(name) != 0]
     if unsupported:
         raise ForeignCalibrationError(f"Metashape's {', '.join(unsupported)} {'is' if len(unsupported) == 1 else 'are'}"
