@@ -204,6 +204,20 @@ def test_photos_opencv_cannot_read_are_named_never_passed_over(workspace, tmp_pa
     assert done.returncode == 1 and "a .NEF photo; OpenCV reads neither camera raw nor HEIC" in done.stderr
 
 
+def test_a_folders_frames_are_taken_in_the_order_a_file_browser_shows(workspace, tmp_path):
+    """Frames exported as frame_1.png ... frame_10.png: text order measured frame_10 second, so the time series
+    and its plot were out of order; numbers in names are compared as numbers."""
+    folder = tmp_path / "exported"
+    folder.mkdir()
+    for k in (1, 2, 10, 9):
+        (folder / f"frame_{k}.png").write_bytes((workspace / "cube.png").read_bytes())
+    done = run_cli("measure", str(folder), "--calibration", str(workspace / "water.yaml"), "--targets",
+                   str(workspace / "targets.yaml"), "--threshold", "120", "--json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    frames = [json.loads(line)["frame"] for line in done.stdout.splitlines()]
+    assert frames == ["frame_1.png", "frame_2.png", "frame_9.png", "frame_10.png"]
+
+
 def test_targets_not_found(workspace):
     cv2.imwrite(str(workspace / "blank.png"), np.full((480, 640, 3), 180, np.uint8))
     done = measure(workspace, image="blank.png")

@@ -224,12 +224,23 @@ def _decode_jpeg(data: bytes, mode: int = cv2.IMREAD_COLOR) -> tuple[np.ndarray 
     return image, " ".join(warning.split())
 
 
+def in_name_order(paths) -> list[Path]:
+    """Files in the order a file browser shows them: numbers in names compared as numbers (frame_2 before
+    frame_10, which plain text order put after frame_1), then the names as text."""
+    def key(path: Path) -> tuple:
+        parts = re.split(r"(\d+)", path.name)
+        return [int(part) if k % 2 else part.lower() for k, part in enumerate(parts)], path.name
+
+    return sorted(paths, key=key)
+
+
 def _kinds(files: list[Path]) -> str:
     return ", ".join(sorted({f.suffix for f in files}))
 
 
 def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None) -> list[Path]:
-    """Files named directly, and the image and video files inside named folders, in name order. Photos in a
+    """Files named directly, and the image and video files inside named folders, in name order (numbers as
+    numbers: `in_name_order`). Photos in a
     folder that OpenCV does not read (camera raw, HEIC) are said in `notes`; named directly, or all a folder
     holds, they are refused."""
     files: list[Path] = []
@@ -239,7 +250,7 @@ def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None) -
             files.append(path)
         elif path.is_dir():
             entries = [p for p in path.iterdir() if p.is_file()]
-            inside = sorted(p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES)
+            inside = in_name_order(p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES)
             unread = [p for p in entries if p.suffix.lower() in UNREAD_PHOTO_SUFFIXES]
             if not inside:
                 raise InputError(f"{path}: folder holds no image or video files" + (
