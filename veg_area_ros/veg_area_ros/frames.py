@@ -13,7 +13,7 @@ import re
 import struct
 import sys
 import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -224,7 +224,7 @@ def _decode_jpeg(data: bytes, mode: int = cv2.IMREAD_COLOR) -> tuple[np.ndarray 
     return image, " ".join(warning.split())
 
 
-def in_name_order(paths) -> list[Path]:
+def in_name_order(paths: Iterable[Path]) -> list[Path]:
     """Files in the order a file browser shows them: numbers in names compared as numbers (frame_2 before
     frame_10, which plain text order put after frame_1), then the names as text."""
     def key(path: Path) -> tuple:
@@ -240,9 +240,8 @@ def _kinds(files: list[Path]) -> str:
 
 def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None) -> list[Path]:
     """Files named directly, and the image and video files inside named folders, in name order (numbers as
-    numbers: `in_name_order`). Photos in a
-    folder that OpenCV does not read (camera raw, HEIC) are said in `notes`; named directly, or all a folder
-    holds, they are refused."""
+    numbers: `in_name_order`). Photos in a folder that OpenCV does not read (camera raw, HEIC) are said in
+    `notes`; named directly, or all a folder holds, they are refused."""
     files: list[Path] = []
     for raw in paths:
         path = Path(raw)
