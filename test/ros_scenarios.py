@@ -1308,10 +1308,12 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
 
 def scenario_mono16_driver(options: dict, nodes: Nodes) -> dict:
     """A machine-vision camera's driver in this probe publishing a 12-bit sensor's frames as mono16 on image_raw
-    (sensor data QoS) with camera_info; the area node measures them: each result's Af and warnings."""
+    (sensor data QoS) with camera_info, every other frame left unstamped (header stamp 0, as some drivers leave
+    it); the area node measures them: each result's Af, warnings and stamp."""
     import cv2
     import numpy as np
     import rclpy
+    from builtin_interfaces.msg import Time
     from rclpy.node import Node
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
@@ -1325,14 +1327,18 @@ def scenario_mono16_driver(options: dict, nodes: Nodes) -> dict:
     probe = Node("mono16_driver")
     image_pub = probe.create_publisher(Image, "image_raw", qos_profile_sensor_data)
     info_pub = probe.create_publisher(CameraInfo, "camera_info", qos_profile_sensor_data)
-    results: list[tuple[float, list[str]]] = []
-    probe.create_subscription(ProjectedArea, "projected_area", lambda m: results.append((m.area_m2, list(m.warnings))),
-                              RESULT_QOS)
+    results: list[tuple[float, list[str], int]] = []
+    probe.create_subscription(ProjectedArea, "projected_area", lambda m: results.append(
+        (m.area_m2, list(m.warnings), m.header.stamp.sec * 10**9 + m.header.stamp.nanosec)), RESULT_QOS)
     grey = cv2.cvtColor(render_scene(ENDOSCOPE, cube_scene(), 0.7), cv2.COLOR_BGR2GRAY)
     twelve = (grey.astype(np.uint16) << 4) | np.random.default_rng(0).integers(0, 16, grey.shape, dtype=np.uint16)
 
+    published = 0
+
     def publish() -> None:
-        stamp = probe.get_clock().now().to_msg()
+        nonlocal published
+        stamp = probe.get_clock().now().to_msg() if published % 2 == 0 else Time()
+        published += 1
         message = Image(height=480, width=640, encoding="mono16", is_bigendian=0, step=1280,
                         data=twelve.astype("<u2").tobytes())
         message.header.stamp, message.header.frame_id = stamp, "camera"
@@ -1342,7 +1348,8 @@ def scenario_mono16_driver(options: dict, nodes: Nodes) -> dict:
     probe.create_timer(0.2, publish)
     try:
         nodes.start("area_node")
-        spin_for(probe, float(options["seconds"]), until=lambda: len(results) >= 3)
+        spin_for(probe, float(options["seconds"]), until=lambda: sum(r[2] == 0 for r in results) >= 2
+                 and sum(r[2] != 0 for r in results) >= 2)
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()

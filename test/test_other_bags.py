@@ -508,7 +508,8 @@ def test_the_area_node_measures_image_transports_compressed_topic_and_the_record
 @pytest.mark.timeout(300)
 def test_the_area_node_measures_a_16_bit_cameras_frames_and_says_the_depth(tmp_path):
     """A machine-vision driver's mono16 frames of a 12-bit sensor: the area node measures each as the core
-    measures its 8-bit frame (the same Af), and each result's warnings say the depth it read them at."""
+    measures its 8-bit frame (the same Af), and each result's warnings say the depth it read them at; a frame
+    the driver left unstamped says its result cannot be paired by time (it was silent)."""
     from ros_harness import run_scenario
 
     from veg_area_ros.area import AreaMeasurer
@@ -516,12 +517,14 @@ def test_the_area_node_measures_a_16_bit_cameras_frames_and_says_the_depth(tmp_p
     from veg_area_ros.sim.synthetic import scene_targets
 
     result = run_scenario("mono16_driver", tmp_path, seconds=12.0)
-    assert len(result["results"]) >= 3, result["log"]
+    stamps = [stamp for *_, stamp in result["results"]]
+    assert sum(s == 0 for s in stamps) >= 2 and sum(s != 0 for s in stamps) >= 2, (stamps, result["log"])
     grey = np.array(result["grey"], np.uint8).reshape(480, 640)
     core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier()).measure(grey)
-    for area, warnings in result["results"]:
+    for area, warnings, stamp in result["results"]:
         assert area == pytest.approx(core.area_m2, rel=1e-12), (area, core.area_m2)
         assert any("read as 12-bit data" in warning for warning in warnings), warnings
+        assert any(w.startswith("header stamp 0") for w in warnings) == (stamp == 0), (stamp, warnings)
 
 
 def test_our_mcap_is_written_as_ros2_bag_record_writes_it(tmp_path):
@@ -705,3 +708,32 @@ def test_an_area_node_given_camera_info_reads_the_calibrations_tone_curve(tmp_pa
     # and the calibration's covariance: a term of the std from then on (none before)
     stds = result["calibration_stds"]
     assert all(std > 0 for std in stds[came:]) and all(std == 0 for std in stds[:came]), stds
+
+
+def test_a_driver_that_does_not_stamp_its_images_is_timed_by_the_bag_and_says_so(workspace, scenes):
+    """A camera driver that leaves header.stamp at 0: every row was at time 0 (a flat Af(t), no pairing with the
+    flume's instruments); each frame is timed by when the bag received it, and its row says why."""
+    zero = TYPES.types["std_msgs/msg/Header"](stamp=TYPES.types["builtin_interfaces/msg/Time"](sec=0, nanosec=0),
+                                              frame_id="left")
+    infos, images = [], []
+    for k, frame in enumerate(scenes["left"]):
+        infos.append(dataclasses.replace(_info(ENDOSCOPE, k, "left"), header=zero))
+        images.append(dataclasses.replace(_image(frame, k, "left"), header=zero))
+    bag = workspace / "unstamped"
+    write_bag(bag, "mcap", [("/camera_info", "sensor_msgs/msg/CameraInfo", infos),
+                            ("/image_raw", "sensor_msgs/msg/Image", images)])
+    rows, done = _measure(workspace, bag, "--calibration", "bag")
+    assert done.returncode == 0 and len(rows) == FRAMES, done.stderr
+    received = [(100 + k) * 10**9 + 1 for k in range(FRAMES)]  # write_bag's receive times of the images
+    assert [row["time_s"] for row in rows] == pytest.approx([t / 1e9 for t in received])
+    assert all(any(w.startswith("header stamp 0") for w in row["warnings"]) for row in rows)
+    stamped, done = _measure(workspace, _stamped_copy(workspace, scenes), "--calibration", "bag")
+    assert not any(w.startswith("header stamp 0") for row in stamped for w in row["warnings"])
+
+
+def _stamped_copy(workspace: Path, scenes) -> Path:
+    bag = workspace / "stamped"
+    write_bag(bag, "mcap", [
+        ("/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "left") for k in range(FRAMES)]),
+        ("/image_raw", "sensor_msgs/msg/Image", [_image(f, k, "left") for k, f in enumerate(scenes["left"])])])
+    return bag

@@ -438,6 +438,10 @@ def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: i
                     "readable", lost=end - read)
 
 
+UNSTAMPED_NOTE = ("header stamp 0: the camera driver does not stamp its images, so the frame is timed by when the "
+                  "bag received it (time_s; stamp_sec and stamp_nanosec stay 0), late by the transport's delay")
+
+
 def _bag_frame(path: Path, frame) -> Frame:
     """One bag image message as a Frame, with the reason where its pixels cannot be decoded. A 16-bit image's
     depth is judged on its own values, as a file's: a frame's reading must not depend on where a split of the
@@ -450,7 +454,11 @@ def _bag_frame(path: Path, frame) -> Frame:
         image, problem = frame.image.pixels(notes=notes), ""
     except ImageMessageError as exc:
         image, problem = None, str(exc)
-    return Frame(f"{shown_name(path)}#{frame.index}", image, problem, header.seconds, (header.sec, header.nanosec),
+    time_s = header.seconds
+    if header.nanoseconds == 0:  # a driver that does not stamp its images: every frame would be at time 0
+        time_s = frame.timestamp_ns / 1e9
+        notes.append(UNSTAMPED_NOTE)
+    return Frame(f"{shown_name(path)}#{frame.index}", image, problem, time_s, (header.sec, header.nanosec),
                  frame.camera_info, position=frame.index, camera_info_problem=frame.camera_info_problem,
                  camera_metadata=frame.camera_metadata, notes=tuple(notes))
 

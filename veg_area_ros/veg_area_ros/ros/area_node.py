@@ -437,6 +437,10 @@ class AreaNode(Node):
             return
         self.frames_measured += 1
         result.warnings.extend(notes)
+        if header.nanoseconds == 0:
+            result.warnings.append("header stamp 0: the camera driver does not stamp its images, so this result "
+                                   "carries stamp 0 too and cannot be paired with force or velocity by time (set "
+                                   "the driver to stamp its frames)")
         source = self._calibration_source()
         if source == "camera_info" and self.info_frame_id and header.frame_id and self.info_frame_id != header.frame_id:
             result.warnings.append(f"calibration of another frame: camera_info's frame_id {self.info_frame_id!r} is "
