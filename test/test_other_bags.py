@@ -737,3 +737,22 @@ def _stamped_copy(workspace: Path, scenes) -> Path:
         ("/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "left") for k in range(FRAMES)]),
         ("/image_raw", "sensor_msgs/msg/Image", [_image(f, k, "left") for k, f in enumerate(scenes["left"])])])
     return bag
+
+
+def test_an_mcap_that_is_not_a_ros2_recording_is_named_as_such(workspace):
+    """Foxglove's recorder writes MCAP with its own schemas (JSON or protobuf, no sensor_msgs): it was "not a
+    readable rosbag2 bag (Profile is not ros2.)" with advice to rebuild a killed recording."""
+    from mcap.writer import Writer as McapWriter
+
+    path = workspace / "foxglove.mcap"
+    with path.open("wb") as file:
+        writer = McapWriter(file)
+        writer.start(profile="", library="foxglove-recorder")
+        schema = writer.register_schema(name="foxglove.RawImage", encoding="jsonschema", data=b'{"type": "object"}')
+        channel = writer.register_channel(topic="/camera/image", message_encoding="json", schema_id=schema)
+        writer.add_message(channel_id=channel, log_time=1, publish_time=1, data=b'{"width": 2}')
+        writer.finish()
+    rows, done = _measure(workspace, path, "--calibration", "none")
+    assert done.returncode == 1 and not rows
+    assert "an MCAP file of profile '', not a ROS 2 recording" in done.stderr, done.stderr
+    assert "bag-recover" not in done.stderr

@@ -459,9 +459,27 @@ def _open_reader(path: str | Path) -> Reader:
         reader = Reader(path)
         reader.open()
     except Exception as exc:  # rosbags raises its own error classes for every kind of broken bag
+        profile = _mcap_profile(Path(path))
+        if profile is not None and profile != "ros2":
+            raise BagError(f"{path}: an MCAP file of profile {profile!r}, not a ROS 2 recording (Foxglove's own "
+                           "schemas, protobuf or JSON, are not sensor_msgs): record the camera with "
+                           "'ros2 bag record' or 'veg-area record'") from exc
         raise BagError(f"{path}: not a readable rosbag2 bag ({exc}); a recording that was killed can be "
                        "rebuilt with 'veg-area bag-recover'") from exc
     return reader
+
+
+def _mcap_profile(path: Path) -> str | None:
+    """The profile an MCAP file's header names ('ros2' for a rosbag2 recording), or None where it is no MCAP."""
+    try:
+        with path.open("rb") as file:
+            head = file.read(8 + 1 + 8 + 4 + 256)
+    except OSError:
+        return None
+    if head[:8] != b"\x89MCAP0\r\n" or head[8:9] != b"\x01":  # the magic, then the Header record
+        return None
+    (length,) = struct.unpack_from("<I", head, 17)
+    return head[21:21 + length].decode("utf-8", "replace") if 21 + length <= len(head) else None
 
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
