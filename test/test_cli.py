@@ -104,6 +104,10 @@ def test_a_symmetric_grid_searched_as_asymmetric_says_what_to_write(tmp_path):
      "the frames hold 4X4 markers (ids up to 16), not DICT_6X6_250's: try DICT_4X4_50"),
     ("charuco:7x5:0.04:0.03:DICT_4X4_50", "charuco:6x5:0.04:0.03:DICT_4X4_100",
      "DICT_4X4_100 markers are found but no 6x5 board: check the squares across and down"),
+    ("charuco:7x6:0.04:0.03:DICT_4X4_50:legacy", "charuco:7x6:0.04:0.03:DICT_4X4_50",
+     "charuco:7x6:0.04:0.03:DICT_4X4_50:legacy is found in 3 of the 3 frames tried: a ChArUco board with an even "
+     "number of rows is laid out one way by OpenCV 4.6 and later and the other by earlier versions and calib.io: "
+     "add :legacy to the spec"),
 ])
 def test_a_board_found_nowhere_says_which_board_the_images_hold(tmp_path, printed, given, said):
     """The usual mistakes in a board spec (squares counted for inner corners, a ChArUco board's sides swapped,
@@ -116,6 +120,23 @@ def test_a_board_found_nowhere_says_which_board_the_images_hold(tmp_path, printe
     result = run_cli("calibrate", str(tmp_path), "--board", given, "-o", str(tmp_path / "c.yaml"), "--medium", "air")
     assert_clean_failure(result, 1, said)
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_a_charuco_board_in_the_layout_before_opencv_4_6_calibrates_with_legacy(tmp_path):
+    """A ChArUco board with an even number of rows printed from calib.io or OpenCV before 4.6 has its markers in
+    the other squares: OpenCV 5 found markers and no board ("no charuco board found"). With :legacy it
+    calibrates, and the file records the spec as given."""
+    from helpers import render_views
+
+    spec = "charuco:7x6:0.04:0.03:DICT_4X4_50:legacy"
+    _, _, images = render_views(seed=5, count=12, spec=spec)
+    for k, image in enumerate(images):
+        cv2.imwrite(str(tmp_path / f"view{k:02d}.png"), image)
+    result = run_cli("calibrate", str(tmp_path), "--board", spec, "-o", str(tmp_path / "c.yaml"), "--medium", "air")
+    assert result.returncode == 0, result.stderr
+    assert "[12] view11.png: " in result.stdout + result.stderr and "no charuco board" not in result.stdout
+    written = yaml.safe_load((tmp_path / "c.yaml").read_text())
+    assert written["veg_area_ros"]["board"] == spec
 
 
 def test_empty_folder(tmp_path):

@@ -4,6 +4,8 @@ No ROS here. A board spec is a string a user types:
 
     chessboard:COLSxROWS:SQUARE_M            inner corners, square side in metres
     charuco:SXxSY:SQUARE_M:MARKER_M:DICT     squares, square and marker side, ArUco dictionary
+    charuco:SXxSY:SQUARE_M:MARKER_M:DICT:legacy   a board laid out as OpenCV before 4.6 (and calib.io) lay
+                                             out those with an even number of rows
     circles:COLSxROWS:SPACING_M              asymmetric circle grid; circle (i, j) sits at
                                              ((2j + i mod 2)·s, i·s), OpenCV's convention
     circles:COLSxROWS:SPACING_M:symmetric    symmetric circle grid; circle (i, j) at (j·s, i·s)
@@ -47,6 +49,7 @@ class BoardSpec:
     marker: float = 0.0
     dictionary: str = ""
     symmetric: bool = False  # circles: a symmetric grid (else OpenCV's asymmetric one)
+    legacy: bool = False  # charuco: the layout before OpenCV 4.6 (differs where the rows are even)
 
     @classmethod
     def parse(cls, text: str) -> BoardSpec:
@@ -61,10 +64,12 @@ class BoardSpec:
             raise BoardSpecError(f"unknown board kind {parts[0]!r} in {text!r}; use one of {', '.join(KINDS)}")
         expected = usage[kind].count(":") + 1
         symmetric = kind == "circles" and len(parts) == expected + 1 and parts[-1].lower() == "symmetric"
-        if symmetric:
+        legacy = kind == "charuco" and len(parts) == expected + 1 and parts[-1].lower() == "legacy"
+        if symmetric or legacy:
             parts = parts[:-1]
         if len(parts) != expected:
-            hint = " (or circles:COLSxROWS:SPACING_M:symmetric)" if kind == "circles" else ""
+            hint = {"circles": " (or circles:COLSxROWS:SPACING_M:symmetric)",
+                    "charuco": " (or charuco:SXxSY:SQUARE_M:MARKER_M:DICT:legacy)"}.get(kind, "")
             raise BoardSpecError(f"board spec {text!r} should look like {usage[kind]}{hint}")
         try:
             cols, rows = (int(n) for n in parts[1].lower().split("x"))
@@ -83,7 +88,7 @@ class BoardSpec:
                 raise BoardSpecError(f"unknown ArUco dictionary {parts[4]!r} in {text!r}")
             if not 0 < marker < square:
                 raise BoardSpecError(f"the marker must be smaller than the square in {text!r}")
-        spec = cls(kind, cols, rows, square, marker, dictionary, symmetric)
+        spec = cls(kind, cols, rows, square, marker, dictionary, symmetric, legacy)
         span = float(np.max(np.ptp(spec.object_points()[:, :2], axis=0)))
         if not MIN_TARGET_SPAN_M <= span <= MAX_TARGET_SPAN_M:  # the same range as targets: the board scales them
             raise BoardSpecError(
@@ -94,7 +99,8 @@ class BoardSpec:
 
     def __str__(self) -> str:
         if self.kind == "charuco":
-            return f"charuco:{self.cols}x{self.rows}:{self.square:g}:{self.marker:g}:{self.dictionary}"
+            return (f"charuco:{self.cols}x{self.rows}:{self.square:g}:{self.marker:g}:{self.dictionary}"
+                    + (":legacy" if self.legacy else ""))
         return f"{self.kind}:{self.cols}x{self.rows}:{self.square:g}" + (":symmetric" if self.symmetric else "")
 
     # --- geometry -----------------------------------------------------------------------------------
@@ -121,7 +127,9 @@ class BoardSpec:
 
     def _charuco_board(self) -> cv2.aruco.CharucoBoard:
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
-        return cv2.aruco.CharucoBoard((self.cols, self.rows), self.square, self.marker, dictionary)
+        board = cv2.aruco.CharucoBoard((self.cols, self.rows), self.square, self.marker, dictionary)
+        board.setLegacyPattern(self.legacy)
+        return board
 
     def texture(self, pixels_per_metre: float) -> np.ndarray:
         """The printed board as a grey image covering extent(); pixel (0, 0) is at (x0, y0)."""

@@ -1,6 +1,7 @@
 """What board the images hold when the one the user named is found in none of them: the mistakes a person makes
 writing a board spec (a chessboard's squares counted instead of its inner corners, a ChArUco board's squares
-in the other order, another ArUco dictionary, a circle grid of the other kind), tried on a few frames."""
+in the other order or its layout of another OpenCV version, another ArUco dictionary, a circle grid of the other
+kind), tried on a few frames."""
 
 from __future__ import annotations
 
@@ -27,7 +28,13 @@ def _alternatives(board: BoardSpec) -> list[tuple[BoardSpec, str]]:
                 (replace(board, cols=cols + 1, rows=rows + 1), "a chessboard's size counts its inner corners, "
                  "where four squares meet")]
     if board.kind == "charuco":
-        return [(replace(board, cols=rows, rows=cols), "a ChArUco board's size is its squares across, then down")]
+        swapped = [(replace(board, cols=rows, rows=cols), "a ChArUco board's size is its squares across, then down")]
+        if rows % 2:
+            return swapped
+        layout = (replace(board, legacy=not board.legacy), "a ChArUco board with an even number of rows is laid out "
+                  "one way by OpenCV 4.6 and later and the other by earlier versions and calib.io: "
+                  + ("drop :legacy" if board.legacy else "add :legacy to the spec"))
+        return [layout, *swapped]
     return [(replace(board, symmetric=not board.symmetric), "circle grids come symmetric or asymmetric")]
 
 

@@ -43,8 +43,9 @@ def add_parser(sub) -> None:
     cal = sub.add_parser("calibrate", help="self-calibrating bundle adjustment from board images or videos")
     cal.add_argument("inputs", nargs="*", help="images, folders of images, videos (underwater views with --port)")
     cal.add_argument("--board",
-                     help="chessboard:COLSxROWS:SQUARE_M | charuco:SXxSY:SQUARE_M:MARKER_M:DICT | "
-                          "circles:COLSxROWS:SPACING_M (asymmetric grid) | circles:COLSxROWS:SPACING_M:symmetric")
+                     help="chessboard:COLSxROWS:SQUARE_M | charuco:SXxSY:SQUARE_M:MARKER_M:DICT (add :legacy "
+                          "for OpenCV's layout before 4.6 and calib.io's) | circles:COLSxROWS:SPACING_M "
+                          "(asymmetric grid) | circles:COLSxROWS:SPACING_M:symmetric")
     cal.add_argument("-o", "--output", required=True, help="camera_info YAML to write")
     cal.add_argument("--json", action="store_true", help="print the result as one JSON object on stdout")
     cal.add_argument("--report", metavar="DIR", help="write residual and coverage plots (PNG) here")
