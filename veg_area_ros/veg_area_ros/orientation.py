@@ -58,25 +58,19 @@ def _jpeg_exif(data: bytes) -> bytes:
     return b""
 
 
-def _png_exif(data: bytes) -> bytes:
-    offset = 8
+def _chunk(data: bytes, offset: int, big_endian: bool, wanted: bytes) -> bytes:
+    """The payload of the first chunk named `wanted` in a PNG's chunks (length, then name, then a CRC after the
+    payload) or a RIFF file's (name, then length; payloads padded to even), b"" where there is none."""
     while offset + 8 <= len(data):
-        length, kind = struct.unpack_from(">I4s", data, offset)
-        if kind == b"eXIf":
+        if big_endian:
+            length, kind = struct.unpack_from(">I4s", data, offset)
+        else:
+            kind, length = struct.unpack_from("<4sI", data, offset)
+        if kind == wanted:
             return data[offset + 8:offset + 8 + length]
         if kind == b"IEND":
             break
-        offset += 12 + length
-    return b""
-
-
-def _webp_exif(data: bytes) -> bytes:
-    offset = 12
-    while offset + 8 <= len(data):
-        kind, length = struct.unpack_from("<4sI", data, offset)
-        if kind == b"EXIF":
-            return data[offset + 8:offset + 8 + length]
-        offset += 8 + length + (length & 1)
+        offset += 8 + length + (4 if big_endian else length & 1)
     return b""
 
 
@@ -85,9 +79,9 @@ def stored_orientation(data: bytes) -> int:
     if data[:2] == b"\xff\xd8":
         return _tiff_orientation(_jpeg_exif(data))
     if data[:8] == b"\x89PNG\r\n\x1a\n":
-        return _tiff_orientation(_png_exif(data))
+        return _tiff_orientation(_chunk(data, 8, True, b"eXIf"))
     if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
-        return _tiff_orientation(_webp_exif(data))
+        return _tiff_orientation(_chunk(data, 12, False, b"EXIF"))
     if data[:4] in (b"II*\x00", b"MM\x00*"):
         return _tiff_orientation(data)
     return 1
