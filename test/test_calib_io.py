@@ -499,3 +499,43 @@ def test_metashapes_cameras_xml_gives_its_one_sensors_adjusted_calibration(tmp_p
     path.write_text(document.format(sensors=sensor.format(id=0, label="left") + sensor.format(id=1, label="right")))
     with pytest.raises(CalibrationFileError, match=r"2 calibrated sensors \('left', 'right'\)"):
         read_calibration(path)
+
+
+COLMAP_CAMERAS = """# Camera list with one line of data per camera:
+#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]
+# Number of cameras: 2
+1 OPENCV 640 480 536.07 536.02 342.87 236.04 -0.2651 -0.0467 0.0018 -0.0003
+2 OPENCV 640 480 536.07 536.02 342.87 236.04 -0.2651 -0.0467 0.0018 -0.0003
+"""
+
+
+def test_colmaps_cameras_txt_is_read_with_its_principal_point_moved_half_a_pixel(tmp_path):
+    """A structure-from-motion user's calibration: COLMAP's cameras.txt (its sparse model as text) was "not a
+    camera_info calibration". Read for its camera (two identical lines, one per photo, are one camera), the
+    principal point moved by half a pixel (COLMAP counts from the top-left pixel's corner), its OpenCV, full
+    OpenCV and fisheye models as camera_info's; cameras that differ or a model camera_info lacks refused."""
+    path = tmp_path / "cameras.txt"
+    path.write_text(COLMAP_CAMERAS)
+    camera = read_calibration(path).camera
+    assert (camera.width, camera.height, camera.model) == (640, 480, "plumb_bob")
+    assert (camera.fx, camera.fy, camera.xp, camera.yp) == pytest.approx((536.07, 536.02, 342.37, 235.54))
+    assert camera.dist == pytest.approx([-0.2651, -0.0467, 0.0018, -0.0003, 0.0])
+    for line, model, dist in [
+        ("1 SIMPLE_RADIAL 640 480 530 320.5 240.5 -0.21", "plumb_bob", [-0.21, 0, 0, 0, 0]),
+        ("1 FULL_OPENCV 640 480 530 531 320 240 -0.2 0.05 0.001 0.002 0.01 0.1 0.02 0.003", "rational_polynomial",
+         [-0.2, 0.05, 0.001, 0.002, 0.01, 0.1, 0.02, 0.003]),
+        ("1 OPENCV_FISHEYE 1280 960 600 601 640 480 0.05 -0.01 0.002 -0.0005", "equidistant",
+         [0.05, -0.01, 0.002, -0.0005]),
+    ]:
+        path.write_text(line + "\n")
+        camera = read_calibration(path).camera
+        assert camera.model == model and camera.dist == pytest.approx(dist), line
+    for text, problem in [
+        (COLMAP_CAMERAS.replace("2 OPENCV 640 480 536.07", "2 OPENCV 640 480 900"), "2 different cameras"),
+        ("1 FOV 640 480 500 500 320 240 0.9\n", "FOV model has no camera_info counterpart"),
+        ("1 OPENCV 640 480 536 536 320 240 -0.2 0.05\n", "OPENCV has 8 parameters"),
+        ("1 PINHOLE 640 480 536 536 320 x\n", "not all numbers"),
+    ]:
+        path.write_text(text)
+        with pytest.raises(CalibrationFileError, match=problem):
+            read_calibration(path)

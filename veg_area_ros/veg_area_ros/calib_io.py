@@ -29,6 +29,8 @@ from .files import write_atomic
 from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
 from .foreign_calibrations import (
     ForeignCalibrationError,
+    colmap_content,
+    is_colmap_cameras,
     is_kalibr_camchain,
     is_metashape_xml,
     is_opencv_storage,
@@ -180,7 +182,7 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
 
 def read_calibration(path: str | os.PathLike) -> CalibrationFile:
     """Read a camera_info YAML (or ROS 1's `ost.ini`, OpenCV's FileStorage YAML or XML, Kalibr's camchain,
-    Agisoft Metashape's calibration XML); any
+    Agisoft Metashape's calibration XML, COLMAP's cameras.txt); any
     problem raises CalibrationFileError naming the file and the problem."""
     path = Path(path)
     try:
@@ -198,6 +200,8 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
             return from_camera_info_dict(opencv_storage_content(text), path)
         if is_metashape_xml(text):
             return from_camera_info_dict(metashape_content(text), path)
+        if is_colmap_cameras(text):
+            return from_camera_info_dict(colmap_content(text), path)
     except ForeignCalibrationError as exc:
         raise CalibrationFileError(f"{path}: {exc}") from exc
     try:

@@ -1,7 +1,7 @@
 """Calibration files other tools write, as the camera_info fields `calib_io` reads: ROS 1 cameracalibrator's
 `ost.ini`, OpenCV's FileStorage (its calibration sample's, its interactive calibrator's, a script's; YAML or XML),
-Kalibr's camchain YAML and Agisoft Metashape's calibration XML. Each gives one camera's fields or a
-ForeignCalibrationError saying what is wrong."""
+Kalibr's camchain YAML, Agisoft Metashape's calibration XML and COLMAP's cameras.txt. Each gives one camera's
+fields or a ForeignCalibrationError saying what is wrong."""
 
 from __future__ import annotations
 
@@ -274,3 +274,61 @@ def metashape_content(text: str) -> dict[str, Any]:
             "distortion_model": "plumb_bob",
             "distortion_coefficients": {"rows": 1, "cols": 5, "data": [
                 number("k1"), number("k2"), number("p2"), number("p1"), number("k3")]}}
+
+
+# COLMAP's camera models (cameras.txt) that camera_info's hold: their parameters in COLMAP's order, camera_info's
+# model, and (beyond plumb_bob's fixed five) its coefficients in camera_info's order
+COLMAP_MODELS = {
+    "SIMPLE_PINHOLE": (["f", "cx", "cy"], "plumb_bob", []),
+    "PINHOLE": (["fx", "fy", "cx", "cy"], "plumb_bob", []),
+    "SIMPLE_RADIAL": (["f", "cx", "cy", "k1"], "plumb_bob", ["k1"]),
+    "RADIAL": (["f", "cx", "cy", "k1", "k2"], "plumb_bob", ["k1", "k2"]),
+    "OPENCV": (["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"], "plumb_bob", ["k1", "k2", "p1", "p2"]),
+    "FULL_OPENCV": (["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"], "rational_polynomial",
+                    ["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"]),
+    "OPENCV_FISHEYE": (["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"], "equidistant", ["k1", "k2", "k3", "k4"]),
+}
+COLMAP_LINE = re.compile(r"^\s*\d+\s+[A-Z_]+\s+\d+\s+\d+(\s+\S+)+\s*$")
+
+
+def is_colmap_cameras(text: str) -> bool:
+    """Whether a calibration file is COLMAP's cameras.txt (CAMERA_ID MODEL WIDTH HEIGHT PARAMS per line)."""
+    lines = [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    return bool(lines) and all(COLMAP_LINE.match(line) for line in lines)
+
+
+def colmap_content(text: str) -> dict[str, Any]:
+    """The camera_info fields of COLMAP's cameras.txt (a sparse model exported as text) for its one camera (or
+    several identical ones): its pinhole, radial, OpenCV, full OpenCV or OpenCV fisheye model, the principal
+    point moved by half a pixel (COLMAP counts pixels from the top-left pixel's corner, OpenCV from its centre).
+    Cameras that differ, or COLMAP's other models, are refused with their names."""
+    cameras: dict[tuple, list[str]] = {}
+    for line in text.splitlines():
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        camera_id, model, width, height, *values = line.split()
+        cameras.setdefault((model, width, height, *values), []).append(camera_id)
+    if len(cameras) != 1:
+        described = "; ".join(f"{', '.join(ids)}: {key[0]} {key[1]}x{key[2]}" for key, ids in cameras.items())
+        raise ForeignCalibrationError(f"a COLMAP cameras.txt with {len(cameras)} different cameras ({described}); "
+                                      "measuring needs one camera's: keep its line")
+    model, width, height, *values = next(iter(cameras))
+    if model not in COLMAP_MODELS:
+        raise ForeignCalibrationError(f"COLMAP's {model} model has no camera_info counterpart; these do: "
+                                      f"{', '.join(COLMAP_MODELS)}")
+    names, distortion_model, coefficients = COLMAP_MODELS[model]
+    if len(values) != len(names):
+        raise ForeignCalibrationError(f"COLMAP's {model} has {len(names)} parameters ({' '.join(names)}), "
+                                      f"found {len(values)}")
+    try:
+        value = dict(zip(names, (float(v) for v in values), strict=True))
+    except ValueError as exc:
+        raise ForeignCalibrationError(f"COLMAP's {model} parameters are not all numbers: {' '.join(values)}") from exc
+    fx, fy = value.get("fx", value.get("f")), value.get("fy", value.get("f"))
+    order = ["k1", "k2", "p1", "p2", "k3"] if distortion_model == "plumb_bob" else coefficients
+    distortion = [value.get(name, 0.0) for name in order]  # plumb_bob's terms a model lacks are 0
+    return {"camera_name": "colmap", "image_width": int(width), "image_height": int(height),
+            "camera_matrix": {"rows": 3, "cols": 3,
+                              "data": [fx, 0.0, value["cx"] - 0.5, 0.0, fy, value["cy"] - 0.5, 0.0, 0.0, 1.0]},
+            "distortion_model": distortion_model,
+            "distortion_coefficients": {"rows": 1, "cols": len(distortion), "data": distortion}}
