@@ -46,6 +46,39 @@ def test_calibration_documents(content):
     assert calibration.camera.width > 0 and np.all(np.isfinite(calibration.camera.dist))
 
 
+FOREIGN_CALIBRATIONS = [  # one of each format another tool writes, as read_calibration meets them
+    '<?xml version="1.0"?>\n<calibration>\n  <projection>frame</projection>\n  <width>6000</width>\n'
+    '  <height>4000</height>\n  <f>4418.6</f>\n  <cx>21.4</cx>\n  <cy>-14.9</cy>\n  <k1>-0.07</k1>\n'
+    '  <p1>0.0004</p1>\n</calibration>\n',
+    "# Camera list with one line of data per camera:\n1 OPENCV 640 480 536.07 536.02 342.87 236.04 -0.27 -0.05 "
+    "0.0018 -0.0003\n",
+    "cam0:\n  camera_model: pinhole\n  distortion_coeffs: [-0.32, 0.12, 0.0012, -0.0008]\n"
+    "  distortion_model: radtan\n  intrinsics: [520.0, 522.08, 326.0, 236.5]\n  resolution: [640, 480]\n",
+    "[image]\n\nwidth\n640\n\nheight\n480\n\n[narrow_stereo]\n\ncamera matrix\n500 0 320\n0 500 240\n0 0 1\n\n"
+    "distortion\n-0.2 0.05 0 0 0\n",
+]
+
+
+@FUZZ
+@given(st.sampled_from(FOREIGN_CALIBRATIONS), st.integers(0, 400), st.integers(0, 12), st.text(max_size=12))
+def test_other_tools_calibration_files(base, at, cut, patch):
+    """Another tool's file (Metashape XML, COLMAP's cameras.txt, Kalibr, ost.ini) with a stretch replaced by any
+    text: read, or refused as a calibration file, never another exception."""
+    import tempfile
+
+    from veg_area_ros.calib_io import read_calibration
+
+    text = base[:at] + patch + base[at + cut:]
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / ("camera.ini" if base.startswith("[image]") else "camera.txt")
+        path.write_text(text, encoding="utf-8", errors="surrogateescape")
+        try:
+            calibration = read_calibration(path)
+        except CalibrationFileError:
+            return
+    assert calibration.camera.width > 0 and np.all(np.isfinite(calibration.camera.dist))
+
+
 @FUZZ
 @given(st.one_of(documents, mutations(GOOD_TARGETS)))
 def test_targets_documents(content):
