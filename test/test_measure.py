@@ -192,7 +192,11 @@ def test_photos_opencv_cannot_read_are_named_never_passed_over(workspace, tmp_pa
     assert [json.loads(line)["frame"] for line in done.stdout.splitlines()] == ["IMG_0001.jfif", "IMG_0002.avif"]
     assert "3 photos not read (.CR2, .HEIC: OpenCV reads neither camera raw nor HEIC; export them as JPEG" in (
         done.stderr), done.stderr
-    assert "notes.txt" not in done.stderr
+    assert "notes.txt" not in done.stderr and done.stderr.count("3 photos not read") == 1
+    batch = run_cli("measure", str(folder), str(workspace / "cube.png"), "--calibration", str(workspace / "water.yaml"),
+                    "--targets", str(workspace / "targets.yaml"), "--threshold", "120", "--jobs", "2",
+                    "--output-dir", str(tmp_path / "out"), cwd=tmp_path)
+    assert batch.returncode == 0 and batch.stderr.count("3 photos not read (.CR2, .HEIC") == 1, batch.stderr
     raw_only = tmp_path / "raw"
     raw_only.mkdir()
     (raw_only / "DSC_0001.NEF").write_bytes(b"\x00" * 64)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 from ..settings import TONE_CURVE_CHOICES, MeasurementSettings
@@ -116,13 +117,18 @@ def add_parser(sub) -> None:
 
 
 def _refuse_options_the_inputs_ignore(args: argparse.Namespace) -> None:
-    """--video-step where no input can be a video and --image-topic where none is a bag were ignored in silence."""
+    """--video-step where no input can be a video and --image-topic where none is a bag were ignored in silence.
+    Photos a folder holds that OpenCV does not read are said here, once, whoever measures (a batch's processes, a
+    cluster's workers)."""
     from ..frames import IMAGE_SUFFIXES, InputError, expand_inputs, is_bag
 
+    unread: list[str] = []
     try:
-        files = expand_inputs(args.inputs)
+        files = expand_inputs(args.inputs, unread)
     except InputError:
         return  # said with its reason where the inputs are read
+    for note in unread:
+        print(f"warning: {note}", file=sys.stderr, flush=True)
     if args.video_step > 1 and files and all(f.suffix.lower() in IMAGE_SUFFIXES for f in files):
         raise CliError(f"--video-step {args.video_step} takes every Nth frame of a video; the inputs are images",
                        EXIT_USAGE)

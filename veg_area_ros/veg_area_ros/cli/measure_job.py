@@ -177,13 +177,10 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         targets = TargetsSpec.load(job.targets)
     except TargetsError as exc:
         raise CliError(str(exc)) from exc
-    unread: list[str] = []
     try:
-        files = expand_inputs(list(job.inputs), unread)
+        files = expand_inputs(list(job.inputs))  # photos OpenCV does not read: said by the command (cmd_measure)
     except InputError as exc:
         raise CliError(str(exc)) from exc
-    for note in unread:
-        say(f"warning: {note}")
     videos = [f for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
     bags = [f for f in files if is_bag(f)]
     trimmed = math.isfinite(job.start_time.seconds) or math.isfinite(job.end_time.seconds)
