@@ -1358,13 +1358,17 @@ def scenario_mono16_driver(options: dict, nodes: Nodes) -> dict:
 
 def scenario_metadata(options: dict, nodes: Nodes) -> dict:
     """A calibration whose file records the tone curve srgb and the medium air, served on camera_info by the
-    camera node (camera_info_url) or the calibration node (its camera_info_url) to an area node given no
+    camera node (camera_info_url as camera_info_manager's default: ${ROS_HOME}/camera_info/${NAME}.yaml) or the
+    calibration node (its camera_info_url) to an area node given no
     calibration_file (tone_curve auto): the tone curve the area node's results were read with, and what the
     file's edge trend did to them."""
     from veg_area_ros.calib_io import write_calibration
     from veg_area_ros.sim.synthetic import ENDOSCOPE
 
-    calibration = Path("endoscope_srgb.yaml").resolve()
+    # where camera_info_manager's default URL, file://${ROS_HOME}/camera_info/${NAME}.yaml, finds it
+    calibration = Path("ros_home", "camera_info", "endoscope.yaml").resolve()
+    calibration.parent.mkdir(parents=True)
+    GIVEN_ENVIRONMENT["ROS_HOME"] = str(Path("ros_home").resolve())
     # and an edge trend learned under the linear curve: applied to frames read as grey levels, refused (said) else
     trend = {"learned": True, "slope_px_per_dn": -0.003, "slope_std": 0.0005, "reference_dn": 190.0,
              "range_dn": [150.0, 250.0], "views": 8, "residual_px": 0.02, "scatter_px": 0.0, "tone_curve": "linear"}
@@ -1376,7 +1380,7 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
                                                             "edge_trend": trend, "camera_covariance": covariance})
     if options["server"] == "camera":
         nodes.start("camera_node", rate_hz=5.0, synthetic_scene="cube", synthetic_medium="air",
-                    camera_info_url=f"file://{calibration}")
+                    camera_info_url="file://${ROS_HOME}/camera_info/${NAME}.yaml", camera_name="endoscope")
     else:
         nodes.start("calibration_node", camera_info_url=f"file://{calibration}")
         nodes.start("camera_node", rate_hz=5.0, synthetic_scene="cube", synthetic_medium="air")

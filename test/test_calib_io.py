@@ -144,6 +144,21 @@ def test_camera_info_urls_that_cannot_be_meant_are_refused(url, reason):
         camera_info_url_to_path(url)
 
 
+def test_camera_info_managers_url_variables_are_put_in_as_it_puts_them(monkeypatch, tmp_path):
+    """usb_cam's and camera_info_manager's default URL, file://${ROS_HOME}/camera_info/${NAME}.yaml, was refused
+    ("needs an absolute path"): ${ROS_HOME} is $ROS_HOME or ~/.ros and ${NAME} the camera's name."""
+    from veg_area_ros.calib_io import camera_info_url_to_path
+
+    url = "file://${ROS_HOME}/camera_info/${NAME}.yaml"
+    monkeypatch.setenv("ROS_HOME", str(tmp_path / "ros"))
+    assert camera_info_url_to_path(url, "endoscope") == tmp_path / "ros" / "camera_info" / "endoscope.yaml"
+    monkeypatch.delenv("ROS_HOME")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    assert camera_info_url_to_path(url) == tmp_path / ".ros" / "camera_info" / "camera.yaml"
+    with pytest.raises(ValueError, match=r"\$\{CAMERA\} is not put in by camera_info_manager"):
+        camera_info_url_to_path("file://${ROS_HOME}/${CAMERA}.yaml")
+
+
 def test_a_package_url_points_into_the_installed_share_folder(monkeypatch):
     from helpers import REPO
 

@@ -14,6 +14,7 @@ import datetime as dt
 import json
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -220,13 +221,24 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
     return from_camera_info_dict(content, path)
 
 
-def camera_info_url_to_path(url: str) -> Path | None:
+URL_VARIABLES = re.compile(r"\$\{([^}]*)\}")
+
+
+def camera_info_url_to_path(url: str, camera_name: str = "camera") -> Path | None:
     """A camera_info URL as camera_info_manager reads it: `file:///absolute/path.yaml`, or
-    `package://<package>/<path>` (in that package's installed share folder); a plain absolute or ~ path is
-    taken too; '' = none. Anything else is a ValueError with the reason (`file://sub/x.yaml` names a host,
-    not a folder, and is refused rather than read as /x.yaml)."""
+    `package://<package>/<path>` (in that package's installed share folder), with `${NAME}` (the camera's name)
+    and `${ROS_HOME}` ($ROS_HOME, else ~/.ros) put in as it puts them (its default URL is
+    file://${ROS_HOME}/camera_info/${NAME}.yaml); a plain absolute or ~ path is taken too; '' = none. Anything
+    else is a ValueError with the reason (`file://sub/x.yaml` names a host, not a folder, and is refused rather
+    than read as /x.yaml)."""
     if not url:
         return None
+    values = {"NAME": camera_name, "ROS_HOME": os.environ.get("ROS_HOME") or os.path.expanduser("~/.ros")}
+    unknown = sorted({name for name in URL_VARIABLES.findall(url) if name not in values})
+    if unknown:
+        raise ValueError(f"camera_info URL {url!r}: {', '.join('${' + n + '}' for n in unknown)} is not put in by "
+                         "camera_info_manager; it knows ${NAME} and ${ROS_HOME}")
+    url = URL_VARIABLES.sub(lambda match: values[match.group(1)], url)
     if url.startswith("package://"):
         package, _, relative = url[len("package://"):].partition("/")
         if not package or not relative:

@@ -72,7 +72,7 @@ class CalibrationNode(Node):
             self.board = BoardSpec.parse(board_text)
         except BoardSpecError as exc:
             raise ValueError(f"parameter board: {exc}") from exc
-        self.path = camera_info_url_to_path(url)
+        self.path = camera_info_url_to_path(url, self.camera_name)
         self.views: list[View] = []
         self.kept_frames = KeptFrames(self.board)  # the views' frames, for the tone curve judged at each fit
         self.guide: CalibrationGuide | None = None  # from the first frame on (its size)

@@ -35,8 +35,10 @@ class CameraNode(Node):
                         read_only=True)
         height = declare(self, "image_height", 0, "Requested device height (0: the device's).", low=0, high=20000,
                          read_only=True)
-        url = declare(self, "camera_info_url", "", "file:// YAML calibration published on camera_info.",
-                      read_only=True)
+        url = declare(self, "camera_info_url", "", "file:// or package:// YAML calibration published on "
+                      "camera_info (${NAME} and ${ROS_HOME} put in as camera_info_manager does).", read_only=True)
+        camera_name = declare(self, "camera_name", "camera", "The camera's name: ${NAME} in camera_info_url.",
+                              read_only=True)
         scene = declare(self, "synthetic_scene", "board_then_cube", "What the synthetic camera shows.",
                         choices=SYNTHETIC_SCENES, read_only=True)
         medium = declare(self, "synthetic_medium", "water", "Synthetic camera in air or behind a port in water.",
@@ -49,7 +51,7 @@ class CameraNode(Node):
         # what camera_info cannot carry (tone curve, medium, distance), for an area node given camera_info only
         self.metadata_pub = self.create_publisher(String, "camera_info/metadata", LATCHED_QOS)
         self.camera_info = None
-        path = camera_info_url_to_path(url)
+        path = camera_info_url_to_path(url, camera_name)
         calibration = read_start_file(self, "camera_info_url", lambda: read_calibration(path),
                                       "publishing image_raw without camera_info") if path is not None else None
         if calibration is not None:  # serialized once; each frame only changes its stamp
