@@ -516,7 +516,7 @@ def test_the_area_node_measures_a_16_bit_cameras_frames_and_says_the_depth(tmp_p
     from veg_area_ros.classify import Classifier
     from veg_area_ros.sim.synthetic import scene_targets
 
-    result = run_scenario("mono16_driver", tmp_path, seconds=12.0)
+    result = run_scenario("mono16_driver", tmp_path, seconds=40.0)  # ends once 2 of each kind came
     stamps = [stamp for *_, stamp in result["results"]]
     assert sum(s == 0 for s in stamps) >= 2 and sum(s != 0 for s in stamps) >= 2, (stamps, result["log"])
     grey = np.array(result["grey"], np.uint8).reshape(480, 640)
