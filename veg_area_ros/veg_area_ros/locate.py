@@ -123,8 +123,8 @@ class Locator:
             located.labels.append(f"point {k}")
             planes.append(plane)
         if len(located.pixels) < 2:
-            raise TargetsNotFoundError(f"only {len(located.pixels)} target(s) found in the frame; "
-                                  f"missing marker ids {located.missing}", len(located.pixels) - len(targets.points))
+            raise TargetsNotFoundError(f"only {len(located.pixels)} target(s) found in the frame; missing marker "
+                                       f"ids {located.missing}", len(located.pixels) - len(targets.points))
         height, width = frame.shape[:2]
         for k, (pixel, _) in enumerate(targets.points):
             if not (-0.5 <= pixel[0] <= width - 0.5 and -0.5 <= pixel[1] <= height - 0.5):

@@ -119,8 +119,8 @@ class PortAreaMeasurer:
         pixels = [markers[i].centre for i in found] + [pixel for pixel, _ in self.targets.points]
         planes = [self.targets.markers[i] for i in found] + [plane for _, plane in self.targets.points]
         if len(pixels) < 4:
-            raise TargetsNotFoundError(f"only {len(pixels)} target(s) found; the plane's pose through the port needs 4",
-                                  len(found))
+            raise TargetsNotFoundError(f"only {len(pixels)} target(s) found; the plane's pose through the port "
+                                       "needs 4", len(found))
         return np.array(planes, float), np.array(pixels, float)
 
     def _stand_in(self, camera: FlatPortCamera, planes: np.ndarray, pixels: np.ndarray
