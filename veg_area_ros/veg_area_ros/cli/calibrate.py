@@ -93,7 +93,7 @@ class BoardViews:
     no_board: list[str] = field(default_factory=list)
     wrong_size: list[str] = field(default_factory=list)
     repeated: list[str] = field(default_factory=list)
-    notes: dict[str, list[str]] = field(default_factory=dict)  # what reading assumed, by kind: (frames, a note)
+    notes: dict[str, list[str]] = field(default_factory=dict)  # what reading assumed (EXIF, 16-bit), by its kind
     guide: object | None = None  # guidance.CalibrationGuide over the views: their variety, what is still needed
 
 
