@@ -178,7 +178,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
     return found
 
 
-def _board_and_files(args: argparse.Namespace, say):
+def _board_and_files(args: argparse.Namespace, say: Callable[[str], None]):
     from ..board import BoardSpec, BoardSpecError
     from ..frames import InputError, expand_inputs
 
