@@ -144,6 +144,23 @@ def variable_rate_mp4(data: bytes, durations: list[tuple[int, int]]) -> bytes:
     return bytes(grown)
 
 
+def test_a_camcorders_avchd_video_in_a_folder_is_measured(workspace, tmp_path):
+    """An AVCHD camcorder's clips are MPEG transport streams (.m2ts, .MTS): a folder of them "holds no image or
+    video files" (a name OpenCV reads was not taken for a video)."""
+    folder = tmp_path / "PRIVATE"
+    folder.mkdir()
+    writer = cv2.VideoWriter(str(folder / "00001.m2ts"), cv2.VideoWriter_fourcc(*"mp4v"), 25, ENDOSCOPE.image_size)
+    for k in range(6):
+        writer.write(render_scene(ENDOSCOPE, SCENE, 0.7, FlatPort(), seed=k))
+    writer.release()
+    done = run_cli("measure", str(folder), "--calibration", str(workspace / "water.yaml"), "--targets",
+                   str(workspace / "targets.yaml"), "--threshold", "otsu", "--json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    rows = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [row["frame"] for row in rows] == [f"00001.m2ts#{k}" for k in range(6)], rows
+    assert all(abs(row["area_m2"] / SCENE.true_area_m2 - 1) <= 0.01 for row in rows)
+
+
 def test_a_variable_frame_rate_videos_rows_carry_each_frames_own_time(workspace, tmp_path):
     """A phone films at a variable rate: time_s was the frame number over the nominal rate (0.3 s for a frame
     shown at 0.4 s); it is each frame's presentation time, in one run and in a range a worker reads alike."""

@@ -30,7 +30,9 @@ IMAGE_SUFFIXES = {".jpg", ".jpeg", ".jpe", ".jfif", ".png", ".bmp", ".tif", ".ti
 UNREAD_PHOTO_SUFFIXES = {".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw", ".srf", ".sr2", ".orf", ".rw2", ".raf",
                          ".dng", ".pef", ".srw", ".x3f", ".3fr", ".iiq", ".heic", ".heif"}
 EXPORT_ADVICE = "OpenCV reads neither camera raw nor HEIC; export them as JPEG, PNG or TIFF"
-VIDEO_SUFFIXES = {".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv"}
+# and camcorders' (AVCHD .mts/.m2ts), phones' (.3gp), broadcast and DV cameras' containers FFmpeg reads
+VIDEO_SUFFIXES = {".avi", ".mp4", ".mov", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".wmv", ".mts", ".m2ts", ".ts",
+                  ".3gp", ".flv", ".vob", ".asf", ".mxf", ".dv", ".ogv", ".mjpeg", ".mjpg"}
 
 
 class InputError(ValueError):
