@@ -38,10 +38,6 @@ def add_parsers(sub) -> None:
     recover.set_defaults(func=cmd_bag_recover)
 
 
-
-DEFAULT_RECORDED = ("image_raw", "camera_info", "projected_area", "projected_area/info")
-
-
 def cmd_record(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -51,9 +47,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     if args.all and args.topics:
         raise CliError(f"--all records every topic on the graph; give the topics ({' '.join(args.topics)}) or "
                        "--all, not both", EXIT_USAGE)
-    if not args.topics:
-        args.topics = [] if args.all else list(DEFAULT_RECORDED)
-    for topic in args.topics:  # said before ROS starts, not as an RCLError from inside it
+    for topic in args.topics or ():  # said before ROS starts, not as an RCLError from inside it
         problem = topic_name_problem(topic)
         if problem:
             raise CliError(problem, EXIT_USAGE)
@@ -67,7 +61,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     ros_args = ["--ros-args", "-p", f"storage:={args.storage}"]
     if args.output:
         ros_args += ["-p", f"output:={args.output}"]
-    if args.topics:  # with --all none are named: the node's own default is left alone
+    if args.topics:  # none named (or --all): the node's own DEFAULT_TOPICS, the one list of them
         ros_args += ["-p", "topics:=[" + ",".join(f"'{t}'" for t in args.topics) + "]"]
     ros_args += ["-p", f"all:={'true' if args.all else 'false'}", "-p", f"duration:={float(args.duration or 0.0)}"]
     return record_main(["veg-area-record", *ros_args])
