@@ -26,9 +26,8 @@ class StreamDepth:
     top: int = 0
 
 
-def values_depth(image: np.ndarray) -> int:
-    """The smallest sensor depth that holds the image's largest value (8 when it fits in 8 bits)."""
-    top = int(image.max()) if image.size else 0
+def depth_holding(top: int) -> int:
+    """The smallest sensor depth that holds a largest value of `top` (8 when it fits in 8 bits)."""
     return 8 if top < 256 else next(d for d in SENSOR_DEPTHS if top < 2**d)
 
 
@@ -38,8 +37,8 @@ def to_8_bit(image: np.ndarray, stream: StreamDepth | None = None) -> tuple[np.n
     of 16 is said nowhere: that is how OpenCV and cv_bridge read a 16-bit image."""
     if image.dtype == np.uint8:
         return image, ""
-    depth = values_depth(image)
-    top = int(image.max())
+    top = int(image.max()) if image.size else 0  # one pass over a 10 MP frame, not one per use
+    depth = depth_holding(top)
     if stream is not None:
         depth = stream.bits = max(stream.bits, depth)
         stream.top = max(stream.top, top)

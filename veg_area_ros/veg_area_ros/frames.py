@@ -127,10 +127,13 @@ def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -
     if orientation != 1 and notes is not None:
         notes.append(orientation_note(orientation))
     mode = (cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR) | cv2.IMREAD_IGNORE_ORIENTATION
+
+    def at_any_depth(flags: int) -> np.ndarray | None:  # a TIFF turned back: OpenCV turns it whatever the flags
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), flags | cv2.IMREAD_ANYDEPTH)
+        return as_stored(image, orientation) if image is not None and is_tiff(data) else image
+
     if data[:2] != JPEG_START:
-        image = cv2.imdecode(np.frombuffer(data, np.uint8), mode | cv2.IMREAD_ANYDEPTH)
-        if image is not None and is_tiff(data):
-            image = as_stored(image, orientation)
+        image = at_any_depth(mode)
         if image is None:
             return None, "is not an image OpenCV can decode"
         if image.dtype == np.uint8:
@@ -139,9 +142,7 @@ def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -
             kind = "floating point" if image.dtype.kind == "f" else f"{8 * image.dtype.itemsize}-bit integers"
             return None, f"is a {image.dtype} image ({kind}); save it with 8 or 16 bits per channel"
         if grey:  # the depth judged on the colours, as a colour reading of the same file judges it
-            image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH
-                                 | cv2.IMREAD_IGNORE_ORIENTATION)
-            image = as_stored(image, orientation) if is_tiff(data) else image
+            image = at_any_depth(cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
         image, note = to_8_bit(image)
         if note and notes is not None:
             notes.append(note)

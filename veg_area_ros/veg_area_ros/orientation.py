@@ -82,7 +82,7 @@ def stored_orientation(data: bytes) -> int:
         return _tiff_orientation(_chunk(data, 8, True, b"eXIf"))
     if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
         return _tiff_orientation(_chunk(data, 12, False, b"EXIF"))
-    if data[:4] in (b"II*\x00", b"MM\x00*"):
+    if is_tiff(data):
         return _tiff_orientation(data)
     return 1
 

@@ -141,7 +141,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
             say(f"[{seen}] {frame.name}: skipped, {frame.problem}")
             continue
         for note in frame.notes:  # an EXIF orientation not applied, a 16-bit depth: said once for all frames
-            found.notes.setdefault(note.split(":")[0], []).append(note)
+            found.notes.setdefault(note.split(":", 1)[0], []).append(note)
         size = (frame.image.shape[1], frame.image.shape[0])
         if found.image_size is None:
             found.image_size = size
