@@ -11,6 +11,8 @@ from typing import Any
 
 import cv2
 
+from .camera_model import MODEL_DIST_NAMES
+
 
 class ForeignCalibrationError(ValueError):
     """Another tool's file that is not one camera's calibration; `calib_io` adds the file's name."""
@@ -276,17 +278,16 @@ def metashape_content(text: str) -> dict[str, Any]:
                 number("k1"), number("k2"), number("p2"), number("p1"), number("k3")]}}
 
 
-# COLMAP's camera models (cameras.txt) that camera_info's hold: their parameters in COLMAP's order, camera_info's
-# model, and (beyond plumb_bob's fixed five) its coefficients in camera_info's order
+# COLMAP's camera models (cameras.txt) that camera_info's hold: their parameters in COLMAP's order, and
+# camera_info's model (its coefficients in MODEL_DIST_NAMES' order, those COLMAP's model lacks 0)
 COLMAP_MODELS = {
-    "SIMPLE_PINHOLE": (["f", "cx", "cy"], "plumb_bob", []),
-    "PINHOLE": (["fx", "fy", "cx", "cy"], "plumb_bob", []),
-    "SIMPLE_RADIAL": (["f", "cx", "cy", "k1"], "plumb_bob", ["k1"]),
-    "RADIAL": (["f", "cx", "cy", "k1", "k2"], "plumb_bob", ["k1", "k2"]),
-    "OPENCV": (["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"], "plumb_bob", ["k1", "k2", "p1", "p2"]),
-    "FULL_OPENCV": (["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"], "rational_polynomial",
-                    ["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"]),
-    "OPENCV_FISHEYE": (["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"], "equidistant", ["k1", "k2", "k3", "k4"]),
+    "SIMPLE_PINHOLE": (["f", "cx", "cy"], "plumb_bob"),
+    "PINHOLE": (["fx", "fy", "cx", "cy"], "plumb_bob"),
+    "SIMPLE_RADIAL": (["f", "cx", "cy", "k1"], "plumb_bob"),
+    "RADIAL": (["f", "cx", "cy", "k1", "k2"], "plumb_bob"),
+    "OPENCV": (["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"], "plumb_bob"),
+    "FULL_OPENCV": (["fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"], "rational_polynomial"),
+    "OPENCV_FISHEYE": (["fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"], "equidistant"),
 }
 COLMAP_LINE = re.compile(r"^\s*\d+\s+[A-Z_]+\s+\d+\s+\d+(\s+\S+)+\s*$")
 
@@ -316,7 +317,7 @@ def colmap_content(text: str) -> dict[str, Any]:
     if model not in COLMAP_MODELS:
         raise ForeignCalibrationError(f"COLMAP's {model} model has no camera_info counterpart; these do: "
                                       f"{', '.join(COLMAP_MODELS)}")
-    names, distortion_model, coefficients = COLMAP_MODELS[model]
+    names, distortion_model = COLMAP_MODELS[model]
     if len(values) != len(names):
         raise ForeignCalibrationError(f"COLMAP's {model} has {len(names)} parameters ({' '.join(names)}), "
                                       f"found {len(values)}")
@@ -325,8 +326,7 @@ def colmap_content(text: str) -> dict[str, Any]:
     except ValueError as exc:
         raise ForeignCalibrationError(f"COLMAP's {model} parameters are not all numbers: {' '.join(values)}") from exc
     fx, fy = value.get("fx", value.get("f")), value.get("fy", value.get("f"))
-    order = ["k1", "k2", "p1", "p2", "k3"] if distortion_model == "plumb_bob" else coefficients
-    distortion = [value.get(name, 0.0) for name in order]  # plumb_bob's terms a model lacks are 0
+    distortion = [value.get(name, 0.0) for name in MODEL_DIST_NAMES[distortion_model]]
     return {"camera_name": "colmap", "image_width": int(width), "image_height": int(height),
             "camera_matrix": {"rows": 3, "cols": 3,
                               "data": [fx, 0.0, value["cx"] - 0.5, 0.0, fy, value["cy"] - 0.5, 0.0, 0.0, 1.0]},
