@@ -1,5 +1,6 @@
 import dataclasses
 import os
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -554,3 +555,43 @@ def test_colmaps_cameras_txt_is_read_with_its_principal_point_moved_half_a_pixel
         path.write_text(text)
         with pytest.raises(CalibrationFileError, match=problem):
             read_calibration(path)
+
+
+def _colmap_binary(*cameras: tuple[int, int, int, int, list[float]]) -> bytes:
+    """cameras.bin as COLMAP's format documents it: a uint64 count, then per camera int32 id, int32 model id,
+    uint64 width and height and the model's parameters as float64, all little-endian."""
+    data = struct.pack("<Q", len(cameras))
+    for camera_id, model_id, width, height, params in cameras:
+        data += struct.pack("<iiQQ", camera_id, model_id, width, height) + struct.pack(f"<{len(params)}d", *params)
+    return data
+
+
+def test_colmaps_binary_cameras_bin_reads_as_its_text_export(tmp_path):
+    """COLMAP's mapper writes its sparse model as cameras.bin unless told otherwise; it was "cannot be read
+    ('utf-8' codec can't decode ...)". Read as the same model's cameras.txt is (the half-pixel shift, models),
+    whatever the file's name; a model camera_info lacks, a file cut short or one that runs on refused."""
+    opencv = [536.07, 536.02, 342.87, 236.04, -0.2651, -0.0467, 0.0018, -0.0003]
+    binary, text = tmp_path / "cameras.bin", tmp_path / "cameras.txt"
+    binary.write_bytes(_colmap_binary((1, 4, 640, 480, opencv), (2, 4, 640, 480, opencv)))
+    text.write_text(COLMAP_CAMERAS)
+    from_binary, from_text = read_calibration(binary).camera, read_calibration(text).camera
+    assert (from_binary.width, from_binary.height, from_binary.model) == (640, 480, "plumb_bob")
+    assert (from_binary.fx, from_binary.fy, from_binary.xp, from_binary.yp, *from_binary.dist) == (
+        from_text.fx, from_text.fy, from_text.xp, from_text.yp, *from_text.dist)
+    renamed = tmp_path / "sparse0_cameras"
+    renamed.write_bytes(_colmap_binary((3, 5, 1280, 960, [600, 601, 640, 480, 0.05, -0.01, 0.002, -0.0005])))
+    fisheye = read_calibration(renamed).camera
+    assert fisheye.model == "equidistant" and (fisheye.xp, fisheye.yp) == (639.5, 479.5)
+    assert fisheye.dist == pytest.approx([0.05, -0.01, 0.002, -0.0005])
+    whole = _colmap_binary((1, 4, 640, 480, opencv))
+    for data, problem in [
+        (_colmap_binary((1, 7, 640, 480, [500, 500, 320, 240, 0.9])), r"FOV model \(camera 1\) has no camera_info"),
+        (_colmap_binary((1, 4, 640, 480, opencv), (2, 4, 640, 480, [900, *opencv[1:]])),
+         "cameras.bin with 2 different"),
+        (whole[:-8], "ends inside camera 1's parameters"),
+        (whole + bytes(16), "16 bytes after its 1 cameras"),
+        (struct.pack("<Q", 2) + whole[8:], "ends after 1 of its 2 cameras"),
+    ]:
+        binary.write_bytes(data)
+        with pytest.raises(CalibrationFileError, match=problem):
+            read_calibration(binary)

@@ -4,6 +4,7 @@ never another exception. Derandomized, so CI sees the same examples every run.""
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -72,6 +73,29 @@ def test_other_tools_calibration_files(base, at, cut, patch):
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / ("camera.ini" if base.startswith("[image]") else "camera.txt")
         path.write_text(text, encoding="utf-8", errors="surrogateescape")
+        try:
+            calibration = read_calibration(path)
+        except CalibrationFileError:
+            return
+    assert calibration.camera.width > 0 and np.all(np.isfinite(calibration.camera.dist))
+
+
+COLMAP_BINARY = (struct.pack("<Q", 1) + struct.pack("<iiQQ", 1, 4, 640, 480)
+                 + struct.pack("<8d", 536.07, 536.02, 342.87, 236.04, -0.27, -0.05, 0.0018, -0.0003))
+
+
+@FUZZ
+@given(st.integers(0, len(COLMAP_BINARY)), st.integers(0, 12), st.binary(max_size=16))
+def test_colmaps_binary_cameras_file(at, cut, patch):
+    """COLMAP's cameras.bin with a stretch of bytes replaced by any bytes: read, or refused as a calibration
+    file, never another exception."""
+    import tempfile
+
+    from veg_area_ros.calib_io import read_calibration
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "cameras.bin"
+        path.write_bytes(COLMAP_BINARY[:at] + patch + COLMAP_BINARY[at + cut:])
         try:
             calibration = read_calibration(path)
         except CalibrationFileError:

@@ -30,7 +30,9 @@ from .files import write_atomic
 from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
 from .foreign_calibrations import (
     ForeignCalibrationError,
+    colmap_binary_content,
     colmap_content,
+    is_colmap_binary,
     is_colmap_cameras,
     is_kalibr_camchain,
     is_metashape_xml,
@@ -41,7 +43,7 @@ from .foreign_calibrations import (
     opencv_storage_content,
     ost_ini_content,
 )
-from .strict_yaml import StrictYamlError, dump_portable, load_text, read_text
+from .strict_yaml import StrictYamlError, decode_text, dump_portable, load_text, read_bytes
 
 METADATA_KEY = "veg_area_ros"
 
@@ -183,11 +185,16 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
 
 def read_calibration(path: str | os.PathLike) -> CalibrationFile:
     """Read a camera_info YAML (or ROS 1's `ost.ini`, OpenCV's FileStorage YAML or XML, Kalibr's camchain,
-    Agisoft Metashape's calibration XML, COLMAP's cameras.txt); any
+    Agisoft Metashape's calibration XML, COLMAP's cameras.txt or cameras.bin); any
     problem raises CalibrationFileError naming the file and the problem."""
     path = Path(path)
     try:
-        text = read_text(path)
+        data = read_bytes(path)
+        if is_colmap_binary(data):
+            return from_camera_info_dict(colmap_binary_content(data), path)
+        text = decode_text(data)
+    except ForeignCalibrationError as exc:
+        raise CalibrationFileError(f"{path}: {exc}") from exc
     except FileNotFoundError as exc:
         raise CalibrationFileError(f"{path}: no such calibration file") from exc
     except StrictYamlError as exc:

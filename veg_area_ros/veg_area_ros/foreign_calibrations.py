@@ -1,11 +1,12 @@
 """Calibration files other tools write, as the camera_info fields `calib_io` reads: ROS 1 cameracalibrator's
 `ost.ini`, OpenCV's FileStorage (its calibration sample's, its interactive calibrator's, a script's; YAML or XML),
-Kalibr's camchain YAML, Agisoft Metashape's calibration XML and COLMAP's cameras.txt. Each gives one camera's
-fields or a ForeignCalibrationError saying what is wrong."""
+Kalibr's camchain YAML, Agisoft Metashape's calibration XML and COLMAP's cameras.txt or cameras.bin. Each gives
+one camera's fields or a ForeignCalibrationError saying what is wrong."""
 
 from __future__ import annotations
 
 import re
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -298,7 +299,7 @@ def is_colmap_cameras(text: str) -> bool:
     return bool(lines) and all(COLMAP_LINE.match(line) for line in lines)
 
 
-def colmap_content(text: str) -> dict[str, Any]:
+def colmap_content(text: str, source: str = "cameras.txt") -> dict[str, Any]:
     """The camera_info fields of COLMAP's cameras.txt (a sparse model exported as text) for its one camera (or
     several identical ones): its pinhole, radial, OpenCV, full OpenCV or OpenCV fisheye model, the principal
     point moved by half a pixel (COLMAP counts pixels from the top-left pixel's corner, OpenCV from its centre).
@@ -311,7 +312,7 @@ def colmap_content(text: str) -> dict[str, Any]:
         cameras.setdefault((model, width, height, *values), []).append(camera_id)
     if len(cameras) != 1:
         described = "; ".join(f"{', '.join(ids)}: {key[0]} {key[1]}x{key[2]}" for key, ids in cameras.items())
-        raise ForeignCalibrationError(f"a COLMAP cameras.txt with {len(cameras)} different cameras ({described}); "
+        raise ForeignCalibrationError(f"a COLMAP {source} with {len(cameras)} different cameras ({described}); "
                                       "measuring needs one camera's: keep its line")
     model, width, height, *values = next(iter(cameras))
     if model not in COLMAP_MODELS:
@@ -332,3 +333,49 @@ def colmap_content(text: str) -> dict[str, Any]:
                               "data": [fx, 0.0, value["cx"] - 0.5, 0.0, fy, value["cy"] - 0.5, 0.0, 0.0, 1.0]},
             "distortion_model": distortion_model,
             "distortion_coefficients": {"rows": 1, "cols": len(distortion), "data": distortion}}
+
+
+# COLMAP's camera model ids as cameras.bin stores them (src/colmap/sensor/models.h)
+COLMAP_MODEL_IDS = ("SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV", "OPENCV_FISHEYE", "FULL_OPENCV",
+                    "FOV", "SIMPLE_RADIAL_FISHEYE", "RADIAL_FISHEYE", "THIN_PRISM_FISHEYE",
+                    "RAD_TAN_THIN_PRISM_FISHEYE", "SIMPLE_DIVISION", "DIVISION", "SIMPLE_FISHEYE", "FISHEYE", "EUCM",
+                    "EQUIRECTANGULAR")
+COLMAP_CAMERA_RECORD = struct.Struct("<iiQQ")  # camera_id, model_id, width, height; then the model's doubles
+MAX_COLMAP_CAMERAS = 100_000
+
+
+def is_colmap_binary(data: bytes) -> bool:
+    """Whether a file's bytes begin as COLMAP's cameras.bin does (the default output of its mapper): a camera
+    count, then the first camera's id, a known model id and an image size."""
+    if len(data) < 8 + COLMAP_CAMERA_RECORD.size:
+        return False
+    (count,) = struct.unpack_from("<Q", data)
+    _, model_id, width, height = COLMAP_CAMERA_RECORD.unpack_from(data, 8)
+    return 1 <= count <= MAX_COLMAP_CAMERAS and 0 <= model_id < len(COLMAP_MODEL_IDS) and 0 < width * height < 2**40
+
+
+def colmap_binary_content(data: bytes) -> dict[str, Any]:
+    """The camera_info fields of COLMAP's binary cameras.bin, read as its cameras.txt would be (`colmap_content`):
+    the same cameras, models and half-pixel shift. A model camera_info lacks is refused by name, since the
+    parameter count of the cameras after it is then unknown; a file that ends early or runs on is refused."""
+    (count,) = struct.unpack_from("<Q", data)
+    lines, offset = [], 8
+    for index in range(count):
+        if offset + COLMAP_CAMERA_RECORD.size > len(data):
+            raise ForeignCalibrationError(f"a COLMAP cameras.bin that ends after {index} of its {count} cameras")
+        camera_id, model_id, width, height = COLMAP_CAMERA_RECORD.unpack_from(data, offset)
+        offset += COLMAP_CAMERA_RECORD.size
+        model = COLMAP_MODEL_IDS[model_id] if 0 <= model_id < len(COLMAP_MODEL_IDS) else f"id {model_id}"
+        if model not in COLMAP_MODELS:
+            raise ForeignCalibrationError(f"COLMAP's {model} model (camera {camera_id}) has no camera_info "
+                                          f"counterpart; these do: {', '.join(COLMAP_MODELS)}")
+        size = 8 * len(COLMAP_MODELS[model][0])
+        if offset + size > len(data):
+            raise ForeignCalibrationError(f"a COLMAP cameras.bin that ends inside camera {camera_id}'s parameters")
+        values = struct.unpack_from(f"<{size // 8}d", data, offset)
+        offset += size
+        lines.append(" ".join([str(camera_id), model, str(width), str(height), *map(repr, values)]))
+    if offset != len(data):
+        raise ForeignCalibrationError(f"a COLMAP cameras.bin with {len(data) - offset} bytes after its {count} "
+                                      "cameras: not a cameras.bin (images.bin and points3D.bin hold no calibration)")
+    return colmap_content("\n".join(lines), source="cameras.bin")

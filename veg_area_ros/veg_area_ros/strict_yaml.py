@@ -49,15 +49,25 @@ def load_text(text: str):
     return yaml.load(text, Loader=_StrictLoader)
 
 
-def read_text(path: Path) -> str:
-    """A file's text, refused unread when it is larger than MAX_BYTES or no regular file (a device, a pipe)."""
+def read_bytes(path: Path) -> bytes:
+    """A file's bytes, refused unread when it is larger than MAX_BYTES or no regular file (a device, a pipe)."""
     problem = special_file(path)
     if problem:
         raise StrictYamlError(problem)
     size = path.stat().st_size
     if size > MAX_BYTES:
         raise StrictYamlError(f"{size} bytes: larger than any such file ({MAX_BYTES} at most)")
-    return path.read_text(encoding="utf-8")
+    return path.read_bytes()
+
+
+def decode_text(data: bytes) -> str:
+    """A file's bytes as UTF-8 text, its line ends as Python's text files give them (UnicodeDecodeError if not)."""
+    return data.decode("utf-8").replace("\r\n", "\n").replace("\r", "\n")
+
+
+def read_text(path: Path) -> str:
+    """A file's text (`read_bytes`, `decode_text`)."""
+    return decode_text(read_bytes(path))
 
 
 class _PortableDumper(yaml.SafeDumper):
