@@ -3,6 +3,9 @@ the same reason (none cuts eight distortion coefficients to five without a word)
 
 from __future__ import annotations
 
+import struct
+import zlib
+
 import cv2
 import numpy as np
 import pytest
@@ -11,7 +14,9 @@ from rclpy.serialization import serialize_message
 
 from veg_area_ros.calib_io import CalibrationFileError, read_calibration, to_camera_info_dict
 from veg_area_ros.camera_info import camera_info_fields, info_to_camera
+from veg_area_ros.camera_model import BrownCamera
 from veg_area_ros.cdr import decode_camera_info
+from veg_area_ros.frames import read_image
 from veg_area_ros.ros.messages import camera_to_info
 from veg_area_ros.sim.synthetic import ENDOSCOPE
 
@@ -144,3 +149,30 @@ def test_a_binning_or_roi_that_cannot_be_is_refused_with_its_values(roi, binning
 
     with pytest.raises(ValueError, match=problem):
         info_to_camera(_fields(ENDOSCOPE, binning=binning, roi=roi))
+
+
+def _png_header(width: int, height: int) -> bytes:
+    """A PNG's signature and header chunk alone: its declared size, no pixels."""
+    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + struct.pack(">I", len(header)) + b"IHDR" + header
+            + struct.pack(">I", zlib.crc32(b"IHDR" + header)))
+
+
+@pytest.mark.parametrize("width, height, taken", [
+    (11648, 8736, True),    # a 100 MP medium-format camera (refused as "more than any camera" at 64 MP)
+    (16320, 12240, True),   # a 200 MP phone sensor
+    (20000, 20000, False),  # 400 MP: no camera's, and decoding one took 9 GB
+])
+def test_the_largest_sensors_sold_are_taken_and_larger_images_refused_before_decoding(tmp_path, width, height, taken):
+    camera = BrownCamera(width, height, c=0.8 * width, xp=width / 2 - 0.5, yp=height / 2 - 0.5)
+    path = tmp_path / "photo.png"
+    path.write_bytes(_png_header(width, height))
+    image, problem = read_image(path)
+    assert image is None
+    if taken:
+        assert info_to_camera(camera_to_info(camera)).image_size == (width, height)
+        assert "more than any camera" not in problem, problem
+    else:
+        with pytest.raises(ValueError, match=r"20000x20000 pixels \(400 MP\) is more than any camera's sensor"):
+            info_to_camera(camera_to_info(camera))
+        assert problem.startswith("declares 20000x20000 pixels (400 MP) is more than any camera's sensor"), problem

@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from .camera_model import MODEL_DIST_NAMES, MODELS, BrownCamera, check_plausible
-from .files import MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE
+from .files import MAX_IMAGE_SIDE, too_many_pixels
 
 FISHEYE_MODELS = ("equidistant", "fisheye", "kannala_brandt")  # other tools' names for OpenCV's fisheye
 PINHOLE_SIZES = (0, 4, 5, 8, 12, 14)  # OpenCV's lengths; beyond the model's own coefficients they must be zero
@@ -38,9 +38,8 @@ def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence
     if max(width, height) > MAX_IMAGE_SIDE:
         raise ValueError(f"camera_info image size {width}x{height} is beyond any camera "
                          f"(at most {MAX_IMAGE_SIDE} px a side)")
-    if width * height > MAX_IMAGE_PIXELS:
-        raise ValueError(f"camera_info image size {width}x{height} is more than any camera here "
-                         f"({MAX_IMAGE_PIXELS} pixels at most)")
+    if too_many_pixels(width, height):
+        raise ValueError(f"camera_info image size {too_many_pixels(width, height)}")
     dist = np.asarray(d, float).ravel()
     matrix = np.asarray(k, float).ravel()
     if matrix.size != 9:

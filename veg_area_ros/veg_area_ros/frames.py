@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from .bit_depth import to_8_bit
-from .files import MAX_IMAGE_PIXELS, special_file
+from .files import special_file, too_many_pixels
 from .orientation import as_stored, is_tiff, orientation_note, stored_orientation, video_rotation_note
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".jpe", ".jfif", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp",
@@ -119,8 +119,8 @@ def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -
     size = header_size(data)
     if size is not None:
         width, height = size
-        if width * height > MAX_IMAGE_PIXELS:
-            return None, f"declares {width}x{height} pixels, more than any camera here ({MAX_IMAGE_PIXELS} at most)"
+        if too_many_pixels(width, height):
+            return None, f"declares {too_many_pixels(width, height)}"
         if min(width, height) < MIN_IMAGE_SIDE:
             return None, f"is {width}x{height} pixels, too small to hold a board or targets"
     orientation = stored_orientation(data)
