@@ -23,6 +23,7 @@ import numpy as np
 import yaml
 
 from . import __version__
+from .archive import ArchiveError, calibration_text, is_archive
 from .camera_info import camera_from_info, camera_info_fields
 from .camera_model import BrownCamera, check_plausible
 from .camera_uncertainty import CameraCovariance
@@ -185,15 +186,19 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
 
 def read_calibration(path: str | os.PathLike) -> CalibrationFile:
     """Read a camera_info YAML (or ROS 1's `ost.ini`, OpenCV's FileStorage YAML or XML, Kalibr's camchain,
-    Agisoft Metashape's calibration XML, COLMAP's cameras.txt or cameras.bin); any
+    Agisoft Metashape's calibration XML, COLMAP's cameras.txt or cameras.bin, camera_calibration's saved
+    calibrationdata.tar.gz); any
     problem raises CalibrationFileError naming the file and the problem."""
     path = Path(path)
     try:
-        data = read_bytes(path)
-        if is_colmap_binary(data):
-            return from_camera_info_dict(colmap_binary_content(data), path)
-        text = decode_text(data)
-    except ForeignCalibrationError as exc:
+        if is_archive(path):  # camera_calibration's saved archive: its ost.yaml
+            text = calibration_text(path)[1]
+        else:
+            data = read_bytes(path)
+            if is_colmap_binary(data):
+                return from_camera_info_dict(colmap_binary_content(data), path)
+            text = decode_text(data)
+    except (ArchiveError, ForeignCalibrationError) as exc:
         raise CalibrationFileError(f"{path}: {exc}") from exc
     except FileNotFoundError as exc:
         raise CalibrationFileError(f"{path}: no such calibration file") from exc

@@ -1,4 +1,5 @@
-"""The ground floor every reader and writer shares: atomic writes, and the size limits inputs are held to.
+"""The ground floor every reader and writer shares: atomic writes, the size limits inputs are held to, the
+order files are taken in.
 Imports nothing of the package, so any module may import it."""
 
 from __future__ import annotations
@@ -7,10 +8,11 @@ import contextlib
 import errno
 import glob
 import os
+import re
 import stat
 import tempfile
-from collections.abc import Iterator
-from pathlib import Path
+from collections.abc import Iterable, Iterator
+from pathlib import Path, PurePath
 
 # the largest sensors sold (200 MP phones, 150 MP medium format); measuring costs about 150 MB + 21 bytes a pixel
 # (10 MP 0.37 GB, 40 MP 1.0 GB), and a 20000x20000 PNG (400 MP) took 9 GB and minutes to decode before refusing
@@ -25,6 +27,16 @@ def too_many_pixels(width: int, height: int) -> str | None:
             f"({MAX_IMAGE_PIXELS / 1e6:.0f} MP at most here)")
 MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in a camera_info are corrupt
 
+
+
+def in_name_order(paths: Iterable[PurePath]) -> list:
+    """Files in the order a file browser shows them: numbers in names compared as numbers (frame_2 before
+    frame_10, which plain text order put after frame_1), then the names as text."""
+    def key(path: PurePath) -> tuple:
+        parts = re.split(r"(\d+)", path.name)
+        return [int(part) if k % 2 else part.lower() for k, part in enumerate(parts)], path.name
+
+    return sorted(paths, key=key)
 
 def special_file(path: str | os.PathLike, writing: bool = False) -> str | None:
     """Why `path` cannot be read (or, `writing`, written) as a file, or None: a device (/dev/zero never ends: 3 GB

@@ -13,15 +13,16 @@ import re
 import struct
 import sys
 import tempfile
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from .archive import ArchiveError, is_archive, read_members, view_names
 from .bit_depth import to_8_bit
-from .files import special_file, too_many_pixels
+from .files import in_name_order, special_file, too_many_pixels
 from .orientation import as_stored, is_tiff, orientation_note, stored_orientation, video_rotation_note
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".jpe", ".jfif", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp",
@@ -114,6 +115,12 @@ def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -
         data = path.read_bytes()
     except OSError as exc:
         return None, f"cannot be read ({exc.strerror or exc})"
+    return decode_image_file(data, grey, notes)
+
+
+def decode_image_file(data: bytes, grey: bool = False, notes: list[str] | None = None
+                      ) -> tuple[np.ndarray | None, str]:
+    """An image file's bytes decoded as `read_image` decodes a file (one inside an archive, say)."""
     if not data:
         return None, "is empty"
     size = header_size(data)
@@ -227,28 +234,29 @@ def _decode_jpeg(data: bytes, mode: int = cv2.IMREAD_COLOR) -> tuple[np.ndarray 
     return image, " ".join(warning.split())
 
 
-def in_name_order(paths: Iterable[Path]) -> list[Path]:
-    """Files in the order a file browser shows them: numbers in names compared as numbers (frame_2 before
-    frame_10, which plain text order put after frame_1), then the names as text."""
-    def key(path: Path) -> tuple:
-        parts = re.split(r"(\d+)", path.name)
-        return [int(part) if k % 2 else part.lower() for k, part in enumerate(parts)], path.name
-
-    return sorted(paths, key=key)
-
-
 def _kinds(files: list[Path]) -> str:
     return ", ".join(sorted({f.suffix for f in files}))
 
 
-def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None) -> list[Path]:
+def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None, archives: bool = False) -> list[Path]:
     """Files named directly, and the image and video files inside named folders, in name order (numbers as
     numbers: `in_name_order`). Photos in a folder that OpenCV does not read (camera raw, HEIC) are said in
-    `notes`; named directly, or all a folder holds, they are refused."""
+    `notes`; named directly, or all a folder holds, they are refused. `archives`: camera_calibration's archive
+    of board views is an input (calibrating); otherwise it is refused with what it is for."""
     files: list[Path] = []
     for raw in paths:
         path = Path(raw)
         if is_bag(path):
+            files.append(path)
+        elif is_archive(path) and path.exists():
+            if not archives:
+                raise InputError(f"{path}: an archive (camera_calibration saves its board views and ost.yaml as "
+                                 "one): calibrate on its views (veg-area calibrate ARCHIVE) or measure with its "
+                                 "calibration (--calibration ARCHIVE)")
+            try:
+                view_names(path, IMAGE_SUFFIXES)
+            except ArchiveError as exc:
+                raise InputError(f"{path}: {exc}") from exc
             files.append(path)
         elif path.is_dir():
             entries = [p for p in path.iterdir() if p.is_file()]
@@ -482,10 +490,12 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
     if encoded and grey:
         raise ValueError("encoded frames are decoded by `decoded`, in colour")
     start, stop = frame_range if frame_range is not None else (0, None)
-    for path in expand_inputs(paths):
+    for path in expand_inputs(paths, archives=True):
         suffix = path.suffix.lower()
         if is_bag(path):
             yield from _greyed(iter_bag(path, image_topic, start, stop), grey)
+        elif is_archive(path):
+            yield from iter_archive(path, grey)
         elif suffix in VIDEO_SUFFIXES:
             yield from _greyed(iter_video(path, video_step, start, stop, spread, encoded), grey)
         elif suffix in IMAGE_SUFFIXES:
@@ -502,6 +512,18 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
                 yield from _greyed(iter_video(path, video_step), grey)
             else:
                 yield Frame(shown_name(path), None, "is neither an image nor a video")
+
+
+def iter_archive(path: Path, grey: bool = False) -> Iterator[Frame]:
+    """The images inside a tar archive (camera_calibration's saved views), in name order, each named
+    ARCHIVE#MEMBER; an archive that cannot be read further ends with a frame saying why."""
+    try:
+        for name, data, problem in read_members(path, view_names(path, IMAGE_SUFFIXES)):
+            notes: list[str] = []
+            image, problem = decode_image_file(data, grey, notes) if data is not None else (None, problem)
+            yield Frame(f"{shown_name(path)}#{name}", image, problem, notes=tuple(notes))
+    except ArchiveError as exc:
+        yield Frame(shown_name(path), None, str(exc))
 
 
 def with_grey(frames: Iterator[Frame]) -> Iterator[Frame]:

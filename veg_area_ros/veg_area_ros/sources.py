@@ -124,7 +124,7 @@ class FileSource:
     def __init__(self, paths: list[Path], loop: bool = False):
         self.notes: list[str] = []  # what reading assumed (a 16-bit file's depth), each kind once, for the node
         try:
-            self.files = expand_inputs(paths, self.notes)  # and photos passed over (camera raw, HEIC)
+            self.files = expand_inputs(paths, self.notes, archives=True)  # and photos passed over (raw, HEIC)
         except InputError as exc:
             raise SourceError(str(exc)) from exc
         self.loop = loop

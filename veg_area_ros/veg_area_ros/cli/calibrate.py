@@ -188,7 +188,7 @@ def _board_and_files(args: argparse.Namespace, say: Callable[[str], None]):
         raise CliError(str(exc), EXIT_USAGE) from exc
     unread: list[str] = []
     try:
-        files = expand_inputs(args.inputs, unread)
+        files = expand_inputs(args.inputs, unread, archives=True)
     except InputError as exc:
         raise CliError(str(exc)) from exc
     for note in unread:
@@ -212,6 +212,7 @@ def _hint(board, files: list[Path], step: int) -> str:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
+    from ..archive import is_archive
     from ..calib_io import CalibrationFileError, fit_metadata, read_calibration, write_calibration
     from ..calibration import CalibrationError, calibrate
     from ..camera_model import implausibility
@@ -251,7 +252,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if not args.inputs or not args.board:
         raise CliError("give the board (--board) and its images", EXIT_USAGE)
     board, files = _board_and_files(args, say)
-    if args.video_step > 1 and all(f.suffix.lower() in IMAGE_SUFFIXES for f in files):
+    if args.video_step > 1 and all(f.suffix.lower() in IMAGE_SUFFIXES or is_archive(f) for f in files):
         raise CliError(f"--video-step {args.video_step} takes every Nth frame of a video; the inputs are images",
                        EXIT_USAGE)
 

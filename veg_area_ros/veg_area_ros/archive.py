@@ -1,0 +1,94 @@
+"""ROS camera_calibration's saved archive (`/tmp/calibrationdata.tar.gz`, written by its SAVE button): the board
+views it kept (`left-NNNN.png`; a stereo pair's also `right-NNNN.png`) and its calibration (`ost.yaml`, and
+`ost.txt` in ROS 1's INI form; a stereo pair's `left.yaml` and `right.yaml`). Read in place, one member at a time,
+never unpacked to disk. No ROS here."""
+
+from __future__ import annotations
+
+import tarfile
+import zlib
+from collections.abc import Iterable, Iterator
+from pathlib import Path, PurePosixPath
+
+from .files import in_name_order, special_file
+from .strict_yaml import decode_text
+
+ARCHIVE_SUFFIXES = (".tar.gz", ".tgz", ".tar", ".tar.bz2", ".tbz2", ".tar.xz", ".txz")
+MAX_MEMBER_BYTES = 1 << 30  # a 100 MP PNG is about 300 MB; a larger member is no camera's view
+MAX_CALIBRATION_BYTES = 1_000_000  # as any calibration file (strict_yaml.MAX_BYTES)
+CALIBRATION_MEMBERS = ("ost.yaml", "ost.txt")  # a camera's calibration, in the order preferred
+STEREO_CALIBRATION_MEMBERS = ("left.yaml", "right.yaml")
+
+
+class ArchiveError(ValueError):
+    """An archive that cannot be read, or holds nothing of one camera's; the message says why."""
+
+
+def is_archive(path: Path) -> bool:
+    """Whether a path names a tar archive (camera_calibration's `.tar.gz`, or another compression of one)."""
+    return path.name.lower().endswith(ARCHIVE_SUFFIXES)
+
+
+def _members(path: Path) -> dict[str, tarfile.TarInfo]:
+    """The archive's regular files by their base name (camera_calibration writes them at its top level)."""
+    problem = special_file(path)
+    if problem:
+        raise ArchiveError(problem)
+    try:
+        with tarfile.open(path, "r:*") as archive:
+            return {PurePosixPath(member.name).name: member for member in archive.getmembers() if member.isfile()}
+    except FileNotFoundError:
+        raise
+    except (tarfile.TarError, EOFError, OSError, zlib.error) as exc:
+        raise ArchiveError(f"not a readable tar archive ({exc})") from exc
+
+
+def view_names(path: Path, suffixes: Iterable[str]) -> list[str]:
+    """The archive's images (members whose names end in one of `suffixes`), in name order. camera_calibration's
+    stereo archive (left- and right- views, two cameras) is refused: one calibration needs one camera's."""
+    images = [name for name in _members(path) if PurePosixPath(name).suffix.lower() in set(suffixes)]
+    if not images:
+        raise ArchiveError("holds no image (camera_calibration saves its views as left-NNNN.png)")
+    sides = {side for side in ("left", "right") if any(name.startswith(f"{side}-") for name in images)}
+    if len(sides) == 2:
+        raise ArchiveError("holds a stereo pair's views (left-NNNN.png and right-NNNN.png): calibrate one camera at "
+                           "a time, e.g. tar xzf ARCHIVE --wildcards 'left-*' and calibrate on those images")
+    return [path.name for path in in_name_order(PurePosixPath(name) for name in images)]
+
+
+def read_members(path: Path, names: list[str]) -> Iterator[tuple[str, bytes | None, str]]:
+    """Each named member's bytes (or None and why), in the order given, one member in memory at a time."""
+    members = _members(path)
+    try:
+        with tarfile.open(path, "r:*") as archive:
+            for name in names:
+                member = members[name]
+                if member.size > MAX_MEMBER_BYTES:
+                    yield name, None, f"is {member.size} bytes, more than any camera's image"
+                    continue
+                handle = archive.extractfile(member)
+                yield name, (handle.read() if handle is not None else None), "" if handle else "cannot be read"
+    except (tarfile.TarError, EOFError, OSError, zlib.error) as exc:
+        raise ArchiveError(f"not a readable tar archive ({exc})") from exc
+
+
+def calibration_text(path: Path) -> tuple[str, str]:
+    """(member name, text) of the archive's calibration: `ost.yaml` (ROS 2's camera_info YAML), else `ost.txt`
+    (the INI ROS 1's `ost.ini` holds). A stereo pair's archive (left.yaml, right.yaml) is refused naming them."""
+    members = _members(path)
+    stereo = [name for name in STEREO_CALIBRATION_MEMBERS if name in members]
+    if stereo:  # its ost.txt then holds both cameras
+        raise ArchiveError(f"holds a stereo pair's calibrations ({' and '.join(stereo)}): extract the measured "
+                           f"camera's (tar xzf ARCHIVE {stereo[0]}) and give that file")
+    name = next((name for name in CALIBRATION_MEMBERS if name in members), None)
+    if name is None:
+        raise ArchiveError("holds no calibration (camera_calibration saves ost.yaml beside its views)")
+    if members[name].size > MAX_CALIBRATION_BYTES:
+        raise ArchiveError(f"its {name} is {members[name].size} bytes: larger than any calibration file")
+    (_, data, problem), = read_members(path, [name])
+    if data is None:
+        raise ArchiveError(f"its {name} {problem}")
+    try:
+        return name, decode_text(data)
+    except UnicodeDecodeError as exc:
+        raise ArchiveError(f"its {name} is not text ({exc})") from exc
