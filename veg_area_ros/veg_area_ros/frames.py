@@ -22,6 +22,7 @@ import numpy as np
 
 from .archive import ArchiveError, is_archive, read_members, view_names
 from .bit_depth import to_8_bit
+from .exif import capture_time
 from .files import in_name_order, special_file, too_many_pixels
 from .orientation import as_stored, is_tiff, orientation_note, stored_orientation, video_rotation_note
 
@@ -45,7 +46,7 @@ class Frame:
     name: str  # file name, or "video.mp4#123" for frame 123 of a video
     image: np.ndarray | None  # None where the frame could not be read
     problem: str = ""  # why image is None
-    time_s: float | None = None  # position in a video, seconds; a bag frame's header stamp
+    time_s: float | None = None  # position in a video, seconds; a bag frame's header stamp; a photo's EXIF time taken
     stamp: tuple[int, int] | None = None  # a bag frame's header stamp (sec, nanosec)
     camera_info: object | None = None  # a bag frame's latest recorded CameraInfoFields
     lost: int = 0  # frames of the input this entry stands for that could not be read (damage); 1 for any unreadable
@@ -108,14 +109,28 @@ def read_image(path: Path, grey: bool = False, notes: list[str] | None = None) -
     before decoding; a device or pipe is refused unread. A 16-bit file is read at the depth its values use
     (`to_8_bit`), what was assumed appended to `notes`; a floating-point one is refused. Pixels are read as
     stored, the EXIF orientation not applied (`orientation`), and said in `notes` where it would have been."""
+    data, problem = _file_bytes(path)
+    return decode_image_file(data, grey, notes) if data is not None else (None, problem)
+
+
+def _file_bytes(path: Path) -> tuple[bytes | None, str]:
     problem = special_file(path)
     if problem:
         return None, problem
     try:
-        data = path.read_bytes()
+        return path.read_bytes(), ""
     except OSError as exc:
         return None, f"cannot be read ({exc.strerror or exc})"
-    return decode_image_file(data, grey, notes)
+
+
+def read_photo(path: Path, grey: bool = False) -> Frame:
+    """An image file as a frame (`read_image`), its time_s the moment it was taken where its EXIF says so
+    (`exif.capture_time`: a timelapse's photos are a time series)."""
+    notes: list[str] = []
+    data, problem = _file_bytes(path)
+    image, problem = decode_image_file(data, grey, notes) if data is not None else (None, problem)
+    taken = capture_time(data) if data else None
+    return Frame(shown_name(path), image, problem, time_s=taken[0] if taken else None, notes=tuple(notes))
 
 
 def decode_image_file(data: bytes, grey: bool = False, notes: list[str] | None = None
@@ -499,15 +514,12 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
         elif suffix in VIDEO_SUFFIXES:
             yield from _greyed(iter_video(path, video_step, start, stop, spread, encoded), grey)
         elif suffix in IMAGE_SUFFIXES:
-            notes: list[str] = []
-            image, problem = read_image(path, grey, notes)
-            yield Frame(shown_name(path), image, problem, notes=tuple(notes))
+            yield read_photo(path, grey)
         else:
             # unknown extension: try as an image, then as a video, before giving up
-            notes = []
-            image, problem = read_image(path, grey, notes)
-            if image is not None:
-                yield Frame(shown_name(path), image, notes=tuple(notes))
+            photo = read_photo(path, grey)
+            if photo.image is not None:
+                yield photo
             elif video_frame_count(path) > 0:
                 yield from _greyed(iter_video(path, video_step), grey)
             else:

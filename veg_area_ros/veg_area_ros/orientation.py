@@ -13,78 +13,20 @@ No ROS here.
 
 from __future__ import annotations
 
-import struct
-
 import numpy as np
 
-ORIENTATION_TAG = 0x0112
-EXIF_PREFIX = b"Exif\x00\x00"
+from .exif import exif_tags
+
 # what a viewer does to the stored image for each tag
 SHOWN_AS = {2: "mirrored left to right", 3: "turned 180°", 4: "mirrored top to bottom",
             5: "mirrored along its diagonal", 6: "turned 90° clockwise", 7: "mirrored along its other diagonal",
             8: "turned 90° anticlockwise"}
 
 
-def _tiff_orientation(tiff: bytes) -> int:
-    """The orientation tag of a TIFF structure's first directory (EXIF's IFD0); 1 where there is none."""
-    if tiff.startswith(EXIF_PREFIX):
-        tiff = tiff[len(EXIF_PREFIX):]
-    order = {b"II": "<", b"MM": ">"}.get(tiff[:2])
-    if order is None:
-        return 1
-    try:
-        (directory,) = struct.unpack_from(order + "I", tiff, 4)
-        (count,) = struct.unpack_from(order + "H", tiff, directory)
-        for k in range(min(count, 1000)):
-            tag, kind = struct.unpack_from(order + "HH", tiff, directory + 2 + 12 * k)
-            if tag == ORIENTATION_TAG and kind == 3:  # a SHORT, stored first in the value field
-                (value,) = struct.unpack_from(order + "H", tiff, directory + 2 + 12 * k + 8)
-                return value if value in SHOWN_AS else 1
-    except struct.error:
-        pass
-    return 1
-
-
-def _jpeg_exif(data: bytes) -> bytes:
-    offset = 2
-    while offset + 4 <= len(data) and data[offset] == 0xFF:
-        marker = data[offset + 1]
-        if marker == 0xDA:  # start of scan: the metadata segments are all before it
-            break
-        (length,) = struct.unpack_from(">H", data, offset + 2)
-        if marker == 0xE1 and data[offset + 4:offset + 10] == EXIF_PREFIX:
-            return data[offset + 4:offset + 2 + length]
-        offset += 2 + length
-    return b""
-
-
-def _chunk(data: bytes, offset: int, big_endian: bool, wanted: bytes) -> bytes:
-    """The payload of the first chunk named `wanted` in a PNG's chunks (length, then name, then a CRC after the
-    payload) or a RIFF file's (name, then length; payloads padded to even), b"" where there is none."""
-    while offset + 8 <= len(data):
-        if big_endian:
-            length, kind = struct.unpack_from(">I4s", data, offset)
-        else:
-            kind, length = struct.unpack_from("<4sI", data, offset)
-        if kind == wanted:
-            return data[offset + 8:offset + 8 + length]
-        if kind == b"IEND":
-            break
-        offset += 8 + length + (4 if big_endian else length & 1)
-    return b""
-
-
 def stored_orientation(data: bytes) -> int:
     """The EXIF orientation (1-8) a JPEG, PNG, WebP or TIFF file records; 1 where it records none."""
-    if data[:2] == b"\xff\xd8":
-        return _tiff_orientation(_jpeg_exif(data))
-    if data[:8] == b"\x89PNG\r\n\x1a\n":
-        return _tiff_orientation(_chunk(data, 8, True, b"eXIf"))
-    if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
-        return _tiff_orientation(_chunk(data, 12, False, b"EXIF"))
-    if is_tiff(data):
-        return _tiff_orientation(data)
-    return 1
+    orientation = exif_tags(data)[0]
+    return orientation if orientation in SHOWN_AS else 1
 
 
 def is_tiff(data: bytes) -> bool:

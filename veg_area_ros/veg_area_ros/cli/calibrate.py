@@ -154,7 +154,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
             found.no_board.append(frame.name)
             frame_line(seen, f"[{seen}] {frame.name}: no {board.kind} board found")
             continue
-        if frame.time_s is not None:  # a video frame: the board held still for a while is one view, not many
+        if frame.position is not None:  # a video's (a bag's) frame: the board held still a while is one view
             video = frame.name.rsplit("#", 1)[0]
             if video in last_kept and same_pose(detection, last_kept[video], found.image_size):
                 found.repeated.append(frame.name)
