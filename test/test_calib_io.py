@@ -595,3 +595,64 @@ def test_colmaps_binary_cameras_bin_reads_as_its_text_export(tmp_path):
         binary.write_bytes(data)
         with pytest.raises(CalibrationFileError, match=problem):
             read_calibration(binary)
+
+
+BOUGUET_RESULTS = """% Intrinsic and Extrinsic Camera Parameters
+%
+% This script file can be directly executed under Matlab to recover the camera intrinsic and extrinsic parameters.
+
+%-- Focal length:
+fc = [ 657.464248165001490 ; 657.944634300328010 ];
+
+%-- Principal point:
+cc = [ 303.137587634543620 ; 242.564356758838330 ];
+
+%-- Skew coefficient:
+alpha_c = 0.000000000000000;
+
+%-- Distortion coefficients:
+kc = [ -0.255822003929106 ; 0.128128004017738 ; -0.000209289155519 ; 0.000033219592815 ; 0.000000000000000 ];
+
+%-- Focal length uncertainty:
+fc_error = [ 0.342147089426758 ; 0.366812106226208 ];
+
+%-- Image size:
+nx = 640;
+ny = 480;
+
+%-- Various other variables (may be ignored if you do not use the Matlab Calibration Toolbox):
+n_ima = 20;						% Number of calibration images
+est_dist = [ 1 ; 1 ; 1 ; 1 ; 0 ];	% Estimation indicator of the distortion coefficients
+
+%-- Image #1:
+omc_1 = [ 1.654173e+00 ; 1.651803e+00 ; -6.715856e-01 ];
+"""
+
+
+def test_the_bouguet_toolboxs_calib_results_m_projects_as_the_toolbox_does(tmp_path):
+    """The Camera Calibration Toolbox for Matlab's saved Calib_Results.m (common in older flume and PIV work) was
+    "not valid YAML". Read: every point lands where the toolbox's own projection puts it (kc(3), kc(4) tangential,
+    pixels from the upper-left pixel's centre, as OpenCV's); a skew, no image size or a short kc refused."""
+    path = tmp_path / "Calib_Results.m"
+    path.write_text(BOUGUET_RESULTS)
+    camera = read_calibration(path).camera
+    assert (camera.width, camera.height, camera.model) == (640, 480, "plumb_bob")
+    fc, cc = (657.464248165001490, 657.944634300328010), (303.137587634543620, 242.564356758838330)
+    kc = (-0.255822003929106, 0.128128004017738, -0.000209289155519, 0.000033219592815, 0.0)
+    rays = np.random.default_rng(3).uniform(-0.45, 0.45, (200, 2))
+    a, b = rays.T
+    r2 = a * a + b * b
+    radial = 1 + kc[0] * r2 + kc[1] * r2**2 + kc[4] * r2**3
+    xx = a * radial + 2 * kc[2] * a * b + kc[3] * (r2 + 2 * a * a)
+    yy = b * radial + kc[2] * (r2 + 2 * b * b) + 2 * kc[3] * a * b
+    toolbox = np.column_stack([fc[0] * xx + cc[0], fc[1] * yy + cc[1]])
+    assert np.abs(camera.normalized_to_pixels(rays) - toolbox).max() < 1e-9
+    for change, problem in [
+        (("alpha_c = 0.000000000000000;", "alpha_c = 0.0012;"), "skew"),
+        (("nx = 640;\nny = 480;", ""), "without nx, ny .*add nx = WIDTH"),
+        ((" ; 0.000000000000000 ];", " ];"), "kc holds 4 numbers, not 5"),
+        (("fc = [ 657.464248165001490 ;", "fc = [ 657.4x ;"), "fc is not numbers"),
+    ]:
+        path.write_text(BOUGUET_RESULTS.replace(*change))
+        with pytest.raises(CalibrationFileError, match=problem):
+            read_calibration(path)

@@ -57,14 +57,16 @@ FOREIGN_CALIBRATIONS = [  # one of each format another tool writes, as read_cali
     "  distortion_model: radtan\n  intrinsics: [520.0, 522.08, 326.0, 236.5]\n  resolution: [640, 480]\n",
     "[image]\n\nwidth\n640\n\nheight\n480\n\n[narrow_stereo]\n\ncamera matrix\n500 0 320\n0 500 240\n0 0 1\n\n"
     "distortion\n-0.2 0.05 0 0 0\n",
+    "%-- Focal length:\nfc = [ 657.46 ; 657.94 ];\ncc = [ 303.14 ; 242.56 ];\nalpha_c = 0.0;\n"
+    "kc = [ -0.2558 ; 0.1281 ; -0.0002 ; 0.00003 ; 0.0 ];\nnx = 640;\nny = 480;\n",
 ]
 
 
 @FUZZ
 @given(st.sampled_from(FOREIGN_CALIBRATIONS), st.integers(0, 400), st.integers(0, 12), st.text(max_size=12))
 def test_other_tools_calibration_files(base, at, cut, patch):
-    """Another tool's file (Metashape XML, COLMAP's cameras.txt, Kalibr, ost.ini) with a stretch replaced by any
-    text: read, or refused as a calibration file, never another exception."""
+    """Another tool's file (Metashape XML, COLMAP's cameras.txt, Kalibr, ost.ini, Calib_Results.m) with a stretch
+    replaced by any text: read, or refused as a calibration file, never another exception."""
     import tempfile
 
     from veg_area_ros.calib_io import read_calibration

@@ -31,8 +31,10 @@ from .files import write_atomic
 from .flat_port import PORT_KEY, FlatPortCamera, port_from_dict
 from .foreign_calibrations import (
     ForeignCalibrationError,
+    bouguet_content,
     colmap_binary_content,
     colmap_content,
+    is_bouguet_results,
     is_colmap_binary,
     is_colmap_cameras,
     is_kalibr_camchain,
@@ -186,8 +188,8 @@ def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
 
 def read_calibration(path: str | os.PathLike) -> CalibrationFile:
     """Read a camera_info YAML (or ROS 1's `ost.ini`, OpenCV's FileStorage YAML or XML, Kalibr's camchain,
-    Agisoft Metashape's calibration XML, COLMAP's cameras.txt or cameras.bin, camera_calibration's saved
-    calibrationdata.tar.gz); any
+    Agisoft Metashape's calibration XML, COLMAP's cameras.txt or cameras.bin, the Bouguet toolbox's
+    Calib_Results.m, camera_calibration's saved calibrationdata.tar.gz); any
     problem raises CalibrationFileError naming the file and the problem."""
     path = Path(path)
     try:
@@ -215,6 +217,8 @@ def read_calibration(path: str | os.PathLike) -> CalibrationFile:
             return from_camera_info_dict(metashape_content(text), path)
         if is_colmap_cameras(text):
             return from_camera_info_dict(colmap_content(text), path)
+        if is_bouguet_results(text):
+            return from_camera_info_dict(bouguet_content(text), path)
     except ForeignCalibrationError as exc:
         raise CalibrationFileError(f"{path}: {exc}") from exc
     try:

@@ -1,7 +1,7 @@
 """Calibration files other tools write, as the camera_info fields `calib_io` reads: ROS 1 cameracalibrator's
 `ost.ini`, OpenCV's FileStorage (its calibration sample's, its interactive calibrator's, a script's; YAML or XML),
-Kalibr's camchain YAML, Agisoft Metashape's calibration XML and COLMAP's cameras.txt or cameras.bin. Each gives
-one camera's fields or a ForeignCalibrationError saying what is wrong."""
+Kalibr's camchain YAML, Agisoft Metashape's calibration XML, COLMAP's cameras.txt or cameras.bin and the Bouguet
+toolbox's Calib_Results.m. Each gives one camera's fields or a ForeignCalibrationError saying what is wrong."""
 
 from __future__ import annotations
 
@@ -379,3 +379,45 @@ def colmap_binary_content(data: bytes) -> dict[str, Any]:
         raise ForeignCalibrationError(f"a COLMAP cameras.bin with {len(data) - offset} bytes after its {count} "
                                       "cameras: not a cameras.bin (images.bin and points3D.bin hold no calibration)")
     return colmap_content("\n".join(lines), source="cameras.bin")
+
+
+# `name = [ 1 ; 2 ];` or `name = 3;`: the assignments of a MATLAB script such as the Bouguet toolbox writes
+MATLAB_ASSIGNMENT = re.compile(r"^[ \t]*([A-Za-z_]\w*)[ \t]*=[ \t]*(\[[^\]\n]*\]|[^;%\n]+?)[ \t]*;", re.MULTILINE)
+BOUGUET_SIZES = {"fc": 2, "cc": 2, "kc": 5, "nx": 1, "ny": 1}
+
+
+def is_bouguet_results(text: str) -> bool:
+    """Whether a calibration file is Bouguet's Camera Calibration Toolbox for Matlab's Calib_Results.m."""
+    return {"fc", "cc", "kc"} <= {match.group(1) for match in MATLAB_ASSIGNMENT.finditer(text)}
+
+
+def bouguet_content(text: str) -> dict[str, Any]:
+    """The camera_info fields of the Bouguet toolbox's Calib_Results.m (its Save button): fc, cc (from the centre
+    of the upper-left pixel, as OpenCV counts), kc (k1 k2 p1 p2 k3, OpenCV's order), nx and ny. A skew (alpha_c)
+    is refused. Its uncertainties (the *_error vectors, about three standard deviations each, their correlations
+    not written) are not taken as the calibration's covariance."""
+    values: dict[str, list[float]] = {}
+    for name, raw in MATLAB_ASSIGNMENT.findall(text):
+        if name in (*BOUGUET_SIZES, "alpha_c") and name not in values:
+            try:
+                values[name] = [float(v) for v in re.split(r"[\s;,]+", raw.strip("[] \t")) if v]
+            except ValueError as exc:
+                raise ForeignCalibrationError(f"Calib_Results.m's {name} is not numbers: {raw.strip()}") from exc
+    missing = [name for name in BOUGUET_SIZES if name not in values]
+    if missing:
+        raise ForeignCalibrationError(f"a Bouguet toolbox Calib_Results.m without {', '.join(missing)}"
+                                      + (" (the image size: add nx = WIDTH; ny = HEIGHT;)"
+                                         if {"nx", "ny"} & set(missing) else ""))
+    for name, size in BOUGUET_SIZES.items():
+        if len(values[name]) != size:
+            raise ForeignCalibrationError(f"Calib_Results.m's {name} holds {len(values[name])} numbers, not {size}")
+    if any(values.get("alpha_c", [0.0])):
+        raise ForeignCalibrationError(f"Calib_Results.m has a skew (alpha_c = {values['alpha_c'][0]:g}); "
+                                      "camera_info's models have none: calibrate again with est_alpha = 0")
+    (fx, fy), (cx, cy), (width,), (height,) = values["fc"], values["cc"], values["nx"], values["ny"]
+    if not (float(width).is_integer() and float(height).is_integer()):
+        raise ForeignCalibrationError(f"Calib_Results.m's image size must be whole pixels, found {width}x{height}")
+    return {"camera_name": "bouguet", "image_width": int(width), "image_height": int(height),
+            "camera_matrix": {"rows": 3, "cols": 3, "data": [fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0]},
+            "distortion_model": "plumb_bob",
+            "distortion_coefficients": {"rows": 1, "cols": 5, "data": values["kc"]}}
