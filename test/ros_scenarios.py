@@ -1259,7 +1259,8 @@ def scenario_replay_into_recorder(options: dict, nodes: Nodes) -> dict:
 
 def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     """A camera driver in this probe publishing image_transport's compressed topic (image_raw/compressed, JPEG,
-    sensor data QoS) and camera_info; the area node started with image_transport:=compressed measures it, and a
+    sensor data QoS; with `transport` zstd, its zstd plugin's image_raw/zstd, the bgr8 rows zstd-compressed behind
+    the plugin's header) and camera_info; the area node started with that image_transport measures it, and a
     record node records both topics as they are published (closed with SIGINT at the end)."""
     import cv2
     import numpy as np
@@ -1273,29 +1274,39 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     from veg_area_ros.ros.qos import RESULT_QOS
     from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene
 
+    transport = options.get("transport", "compressed")
     rclpy.init()
     probe = Node("compressed_driver")
-    image_pub = probe.create_publisher(CompressedImage, "image_raw/compressed", qos_profile_sensor_data)
+    image_pub = probe.create_publisher(CompressedImage, f"image_raw/{transport}", qos_profile_sensor_data)
     info_pub = probe.create_publisher(CameraInfo, "camera_info", qos_profile_sensor_data)
     areas: list[float] = []
     probe.create_subscription(ProjectedArea, "projected_area", lambda m: areas.append(m.area_m2), RESULT_QOS)
-    jpeg = cv2.imencode(".jpg", render_scene(ENDOSCOPE, cube_scene(), 0.7), [cv2.IMWRITE_JPEG_QUALITY, 90])[1]
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
+    if transport == "zstd":  # zstd_image_transport's layout: height, width, is_bigendian, step, encoding, frame
+        from backports import zstd
+
+        jpeg = np.frombuffer(struct.pack("<IIBII", *frame.shape[:2], 0, frame.shape[1] * 3, 4) + b"bgr8"
+                             + zstd.compress(frame.tobytes(), 3), np.uint8)
+        image_format = "zstd"
+    else:
+        jpeg = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 90])[1]
+        image_format = "bgr8; jpeg compressed bgr8"
     published = 0
 
     def publish() -> None:
         nonlocal published
         stamp = probe.get_clock().now().to_msg()
-        message = CompressedImage(format="bgr8; jpeg compressed bgr8", data=jpeg.ravel().tobytes())
+        message = CompressedImage(format=image_format, data=jpeg.ravel().tobytes())
         message.header.stamp, message.header.frame_id = stamp, "camera"
         info_pub.publish(camera_to_info(ENDOSCOPE, "camera", stamp))
         image_pub.publish(message)
         published += 1
 
     recorder = nodes.start("record_node", output=str(Path("recorded").resolve()),
-                           topics=["image_raw/compressed", "camera_info"])
+                           topics=[f"image_raw/{transport}", "camera_info"])
     probe.create_timer(0.2, publish)
     try:
-        nodes.start("area_node", image_transport="compressed")
+        nodes.start("area_node", image_transport=transport)
         spin_for(probe, float(options["seconds"]), until=lambda: len(areas) >= 5)
     finally:
         probe.destroy_node()

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import struct
 from pathlib import Path
 
 import cv2
@@ -503,6 +504,78 @@ def test_the_area_node_measures_image_transports_compressed_topic_and_the_record
     assert len(measured) >= 5 and all("area_m2" in row for row in measured), rows
     assert all(abs(row["area_m2"] / core.area_m2 - 1) <= core.weight_error_bound for row in measured), (
         [row["area_m2"] for row in measured], core.area_m2)
+
+
+def test_the_area_node_measures_image_transports_zstd_topic_losslessly_and_its_bag_too(tmp_path):
+    """image_transport's zstd plugin (lossless, ROS 2 Jazzy on) on image_raw/zstd: the area node started with
+    image_transport:=zstd measures each frame exactly as the core measures the raw frame, and the bag the
+    record node wrote of that topic measures to the same Af (it was "cannot be decoded")."""
+    from ros_harness import run_scenario
+
+    from veg_area_ros.area import AreaMeasurer
+    from veg_area_ros.classify import Classifier
+    from veg_area_ros.sim.synthetic import scene_targets
+
+    result = run_scenario("compressed_driver", tmp_path, seconds=12.0, transport="zstd")
+    assert len(result["areas"]) >= 5, result["log"]
+    frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
+    core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
+    assert all(abs(area / core.area_m2 - 1) <= core.weight_error_bound for area in result["areas"]), (
+        result["areas"], core.area_m2)
+    assert result["recorder_exit"] == 0, result["log"]
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    rows, done = _measure(tmp_path, tmp_path / "recorded", "--calibration", "bag")
+    assert done.returncode == 0, done.stderr
+    measured = [row for row in rows if "area_m2" in row]
+    assert len(measured) >= 5 and all(row["area_m2"] == measured[0]["area_m2"] for row in measured), rows
+    assert abs(measured[0]["area_m2"] / core.area_m2 - 1) <= core.weight_error_bound, (measured[0], core.area_m2)
+
+
+def test_a_bag_of_video_packets_only_says_so_and_what_to_record(workspace):
+    """theora_image_transport's packets (or H.264 through ffmpeg_image_transport or Foxglove): a frame needs
+    the packets before it, and they are not decoded here. It said "image topics in the bag: []"; now it names the
+    video topic and what to record instead."""
+    from rosbags.typesys import get_types_from_msg
+
+    store = get_typestore(Stores.ROS2_KILTED)
+    store.register(get_types_from_msg("std_msgs/Header header\nuint8[] data\nint32 b_o_s\nint32 e_o_s\n"
+                                      "int64 granulepos\nint64 packetno\n", "theora_image_transport/msg/Packet"))
+    Packet = store.types["theora_image_transport/msg/Packet"]
+    bag = workspace / "theora"
+    with Writer(bag, version=Writer.VERSION_LATEST) as writer:
+        connection = writer.add_connection("/camera/image_raw/theora", "theora_image_transport/msg/Packet",
+                                           typestore=store)
+        for k in range(3):
+            packet = Packet(header=_header(k, "camera"), data=np.zeros(16, np.uint8), b_o_s=int(k == 0), e_o_s=0,
+                            granulepos=k, packetno=k)
+            writer.write(connection, (100 + k) * 10**9,
+                         store.serialize_cdr(packet, "theora_image_transport/msg/Packet"))
+    _, done = _measure(workspace, bag, "--calibration", "bag")
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    assert ("video packets (/camera/image_raw/theora (theora_image_transport/msg/Packet))"
+            in done.stderr.splitlines()[-1]), done.stderr
+    assert "image_raw/zstd" in done.stderr.splitlines()[-1]
+
+
+def test_a_zstd_image_that_claims_other_rows_is_refused_naming_it():
+    """zstd_image_transport's header says the rows' size: a frame whose rows inflate past it (a bomb, or another
+    image's header) or fall short is refused with the reason, never decoded as far as it goes."""
+    from backports import zstd
+
+    from veg_area_ros.cdr import ImageMessageError, decode_compressed_image, encode_compressed_image
+
+    frame = np.arange(48 * 64 * 3, dtype=np.uint8).reshape(48, 64, 3)
+
+    def message(height: int, rows: bytes) -> bytes:
+        data = struct.pack("<IIBII", height, 64, 0, 192, 4) + b"bgr8" + zstd.compress(rows, 3)
+        return encode_compressed_image(data, "zstd", 1, 0, "camera")
+
+    assert np.array_equal(decode_compressed_image(message(48, frame.tobytes())).pixels(), frame)
+    for height, rows, said in [(40, frame.tobytes(), "hold more bytes, not its 192 x 40"),
+                               (48, frame.tobytes()[:-192], "hold 9024 bytes, not its 192 x 48"),
+                               (48, bytes(10**8), "hold more bytes")]:
+        with pytest.raises(ImageMessageError, match=said):
+            decode_compressed_image(message(height, rows)).pixels()
 
 
 @pytest.mark.timeout(300)

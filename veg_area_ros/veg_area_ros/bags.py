@@ -484,6 +484,9 @@ def _mcap_profile(path: Path) -> str | None:
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 TRANSPORT_SUFFIXES = ("/compressed", "/compressedDepth", "/theora", "/zstd", "/ffmpeg")
+# inter-frame video (theora, H.264/H.265 through ffmpeg or Foxglove): a frame needs the packets before it
+VIDEO_PACKET_TYPES = ("theora_image_transport/msg/Packet", "ffmpeg_image_transport_msgs/msg/FFMPEGPacket",
+                      "foxglove_msgs/msg/CompressedVideo")
 
 
 def _image_connections(reader: Reader, path: str | Path, image_topic: str | None) -> list:
@@ -491,6 +494,11 @@ def _image_connections(reader: Reader, path: str | Path, image_topic: str | None
     `compressed` topic records it): the named one, else the only image topic."""
     images = [c for c in reader.connections if c.msgtype in IMAGE_TYPES]
     chosen = [c for c in images if image_topic is None or c.topic == image_topic]
+    if not images:
+        videos = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections if c.msgtype in VIDEO_PACKET_TYPES})
+        if videos:
+            raise BagError(f"{path}: its images are video packets ({', '.join(videos)}), which are not decoded "
+                           "here: record the camera's image_raw, image_raw/compressed or image_raw/zstd")
     if len({c.topic for c in chosen}) != 1:
         raise BagError(f"{path}: pick the image topic (--image-topic); image topics in the bag: "
                        f"{sorted({c.topic for c in images})}")

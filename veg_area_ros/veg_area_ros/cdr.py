@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 
 from .bit_depth import StreamDepth, to_8_bit
+from .files import MAX_IMAGE_PIXELS
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, no options
 # channels of each 8-bit encoding of sensor_msgs/image_encodings (8UC1/8UC3 read as cv_bridge reads them)
@@ -259,7 +260,8 @@ def decode_image(buffer) -> ImageFields:
 @dataclass(frozen=True)
 class CompressedImageFields:
     """sensor_msgs/CompressedImage as image_transport's `compressed` plugin writes it: `format` is
-    "<original encoding>; <jpeg|png> compressed <encoding of the compressed data>" (or a bare "jpeg"/"png")."""
+    "<original encoding>; <jpeg|png> compressed <encoding of the compressed data>" (or a bare "jpeg"/"png"); or
+    its `zstd` plugin's, format "zstd" (`zstd_image`)."""
     header: Header
     format: str
     data: memoryview  # a view into the CDR buffer
@@ -270,6 +272,8 @@ class CompressedImageFields:
         kind = self.format.lower()
         if "compresseddepth" in kind.replace(" ", ""):
             raise ImageMessageError(f"a depth image (format {self.format!r}) holds no grey levels to measure")
+        if kind.strip() == "zstd":
+            return zstd_image(self.header, self.data).pixels(depth, notes)
         image = cv2.imdecode(np.frombuffer(self.data, np.uint8), cv2.IMREAD_UNCHANGED)
         if image is None:
             raise ImageMessageError(f"the compressed image (format {self.format!r}, {len(self.data)} bytes) cannot "
@@ -286,6 +290,39 @@ class CompressedImageFields:
         if note and notes is not None:
             notes.append(note)
         return image
+
+
+MAX_IMAGE_BYTES = 8 * MAX_IMAGE_PIXELS  # four 16-bit channels
+ZSTD_IMAGE_HEADER = struct.Struct("<IIBII")  # height, width, is_bigendian, step, the encoding's length
+
+
+def zstd_image(header: Header, data: memoryview) -> ImageFields:
+    """The Image inside zstd_image_transport's CompressedImage (format "zstd"): a little-endian header (height,
+    width, is_bigendian, step, the encoding's length, the encoding) before the zstd frame of the rows. The rows are
+    never inflated past step x height bytes (a frame that claims more is refused)."""
+    if len(data) < ZSTD_IMAGE_HEADER.size:
+        raise ImageMessageError(f"a zstd image of {len(data)} bytes: shorter than its header")
+    height, width, is_bigendian, step, length = ZSTD_IMAGE_HEADER.unpack_from(data)
+    start = ZSTD_IMAGE_HEADER.size + length
+    if start > len(data) or length > 64:
+        raise ImageMessageError(f"a zstd image whose encoding ({length} bytes) runs past its {len(data)} bytes")
+    encoding = bytes(data[ZSTD_IMAGE_HEADER.size:start]).decode("ascii", "replace")
+    expected = step * height
+    if not 0 < expected <= MAX_IMAGE_BYTES:
+        raise ImageMessageError(f"a zstd image of {width}x{height} with {step}-byte rows: no camera's frame")
+    try:
+        from compression import zstd  # Python 3.14
+    except ImportError:
+        from backports import zstd
+    decompressor = zstd.ZstdDecompressor()
+    try:
+        rows = decompressor.decompress(bytes(data[start:]), max_length=expected)
+    except zstd.ZstdError as exc:
+        raise ImageMessageError(f"a zstd image that cannot be decompressed ({exc})") from exc
+    if len(rows) != expected or not decompressor.eof:
+        held = f"{len(rows)} bytes" if decompressor.eof else "more bytes"
+        raise ImageMessageError(f"a zstd image whose rows hold {held}, not its {step} x {height}")
+    return ImageFields(header, height, width, encoding, is_bigendian, step, memoryview(rows))
 
 
 def decode_compressed_image(buffer) -> CompressedImageFields:

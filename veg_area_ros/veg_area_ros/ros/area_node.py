@@ -62,7 +62,7 @@ SETTINGS = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px"
 TUNABLE = (*SETTINGS, "targets_file", "background_file")
 
 
-IMAGE_TRANSPORTS = ("raw", "compressed")
+IMAGE_TRANSPORTS = ("raw", "compressed", "zstd")
 
 class AreaNode(Node):
     def __init__(self, name: str = "area_node", **kwargs):
@@ -100,8 +100,9 @@ class AreaNode(Node):
         self.calibration_file = calibration_file = declare(
             self, "calibration_file", "", "Calibration YAML to start with ('' = wait for camera_info).", read_only=True)
         self.transport = declare(self, "image_transport", "raw", "How the camera's images come: 'raw' "
-                                 "(sensor_msgs/Image on image_raw) or 'compressed' (CompressedImage, JPEG or PNG, on "
-                                 "image_raw/compressed, as image_transport's compressed plugin publishes them).",
+                                 "(sensor_msgs/Image on image_raw), 'compressed' (CompressedImage, JPEG or PNG, on "
+                                 "image_raw/compressed, as image_transport's compressed plugin publishes them) or "
+                                 "'zstd' (lossless, on image_raw/zstd, as its zstd plugin publishes them).",
                                  choices=IMAGE_TRANSPORTS, read_only=True)
         if self.transport not in IMAGE_TRANSPORTS:
             raise ValueError(f"image_transport must be one of {', '.join(IMAGE_TRANSPORTS)}, got {self.transport!r}")
@@ -163,7 +164,7 @@ class AreaNode(Node):
         # what camera_info cannot carry (tone curve, medium, distance) from the node that serves the calibration
         self.create_subscription(String, "camera_info/metadata", self._on_info_metadata, LATCHED_QOS)
         self._take_unavailable = False
-        image_topic = "image_raw" if self.transport == "raw" else "image_raw/compressed"
+        image_topic = "image_raw" if self.transport == "raw" else f"image_raw/{self.transport}"
         self.create_subscription(Image if self.transport == "raw" else CompressedImage, image_topic, self._on_frame,
                                  IMAGE_QOS, raw=True)
         self.input_watch = InputWatch(self, image_topic)
