@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from helpers import run_cli
+from helpers import TEST_DATA, run_cli
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, Writer
 from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_typestore
@@ -529,6 +529,39 @@ def test_the_area_node_measures_image_transports_zstd_topic_losslessly_and_its_b
     measured = [row for row in rows if "area_m2" in row]
     assert len(measured) >= 5 and all(row["area_m2"] == measured[0]["area_m2"] for row in measured), rows
     assert abs(measured[0]["area_m2"] / core.area_m2 - 1) <= core.weight_error_bound, (measured[0], core.area_m2)
+
+
+def test_calibrate_takes_one_camera_of_a_stereo_pairs_bag(workspace):
+    """A calibration session recorded as a bag of both cameras of a stereo pair (OpenCV's real left and right
+    photos): calibrate ended in a Traceback saying to pick --image-topic, an option it did not have. Now it is
+    refused before any work naming the topics, and --image-topic picks a camera: its fit is the same photos'
+    from a folder. --image-topic without a bag is refused."""
+    left = sorted((TEST_DATA / "opencv-left").glob("*.jpg"))
+    right = sorted((TEST_DATA / "opencv-right").glob("*.jpg"))
+    bag = workspace / "stereo_session"
+    write_bag(bag, "sqlite3", [
+        ("/left/image_raw", "sensor_msgs/msg/Image",
+         [_image(cv2.imread(str(p)), k, "left") for k, p in enumerate(left)]),
+        ("/right/image_raw", "sensor_msgs/msg/Image",
+         [_image(cv2.imread(str(p)), k, "right") for k, p in enumerate(right)])])
+    board = ("--board", "chessboard:9x6:0.025", "--medium", "air", "--json")
+    done = run_cli("calibrate", str(bag), *board, "-o", str(workspace / "pair.yaml"), cwd=workspace)
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+    assert "['/left/image_raw', '/right/image_raw']" in done.stderr.splitlines()[-1], done.stderr
+    assert not (workspace / "pair.yaml").exists()
+    fits = {}
+    for name, source, options in [("bag", bag, ("--image-topic", "/right/image_raw")),
+                                  ("folder", TEST_DATA / "opencv-right", ())]:
+        done = run_cli("calibrate", str(source), *board, *options, "-o", str(workspace / f"{name}.yaml"),
+                       cwd=workspace)
+        assert done.returncode == 0, done.stderr
+        fits[name] = json.loads(done.stdout)
+    assert fits["bag"]["views_used"] == fits["folder"]["views_used"] >= 10
+    for key in ("fx", "fy", "cx", "cy", "dist"):
+        assert fits["bag"][key] == pytest.approx(fits["folder"][key], rel=1e-6, abs=1e-9), key
+    done = run_cli("calibrate", str(TEST_DATA / "opencv-right"), *board, "--image-topic", "/right/image_raw", "-o",
+                   str(workspace / "no_bag.yaml"), cwd=workspace)
+    assert done.returncode == 2 and "the inputs hold no bag" in done.stderr, done.stderr
 
 
 def test_a_bag_of_video_packets_only_says_so_and_what_to_record(workspace):

@@ -69,6 +69,9 @@ def add_parser(sub) -> None:
     cal.add_argument("--replace", "--force", dest="replace", action="store_true",
                      help="write the output even where the calibration it holds is judged better (by projection "
                           "uncertainty, views and coverage, not RMS: fewer views always fit with a lower RMS)")
+    cal.add_argument("--image-topic", default=None,
+                     help="image topic of a bag of board views (default: its only image topic; a stereo pair's "
+                          "bag holds two)")
     cal.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     cal.add_argument("--port", metavar="flat:DISTANCE_M:THICKNESS_M:N_GLASS",
                      help="an explicit flat port in front of the --lens air calibration: fitted (normal, distance) "
@@ -98,7 +101,8 @@ class BoardViews:
 
 
 def collect_views(files: list[Path], board, step: int, say, image_size: tuple[int, int] | None = None,
-                  size_source: str = "the first image", spread: bool = False) -> BoardViews:
+                  size_source: str = "the first image", spread: bool = False, image_topic: str | None = None
+                  ) -> BoardViews:
     """Detect the board in every frame (every `step`th of a video; `spread`: one in each run of `step` at a
     varying place, see frames.iter_video), with a progress line per frame for the first FRAME_LINES frames and
     then one every PROGRESS_EVERY_S (a frame that could not be read or has another size is always said).
@@ -130,7 +134,8 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
 
     # frames searched by two threads (OpenCV releases Python's lock), judged here in their order; a video's
     # frames also decoded in a thread of their own
-    frames = iter_frames(files, step, grey=True, spread=spread)  # the board is found in grey: colour costs time
+    # the board is found in grey: colour costs time
+    frames = iter_frames(files, step, image_topic, grey=True, spread=spread)
     if decodable_ahead(files):
         frames = prefetched(frames, depth=2 * DETECT_WORKERS)
     for frame, (detection, stats) in ordered_map(detect, frames, workers=DETECT_WORKERS):
@@ -179,8 +184,9 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
 
 
 def _board_and_files(args: argparse.Namespace, say: Callable[[str], None]):
+    from ..bags import BagError, bag_image_count
     from ..board import BoardSpec, BoardSpecError
-    from ..frames import InputError, expand_inputs
+    from ..frames import InputError, expand_inputs, is_bag
 
     try:
         board = BoardSpec.parse(args.board)
@@ -191,6 +197,15 @@ def _board_and_files(args: argparse.Namespace, say: Callable[[str], None]):
         files = expand_inputs(args.inputs, unread, archives=True)
     except InputError as exc:
         raise CliError(str(exc)) from exc
+    bags = [f for f in files if is_bag(f)]
+    if args.image_topic and not bags:
+        raise CliError(f"--image-topic {args.image_topic} picks a bag's image topic; the inputs hold no bag",
+                       EXIT_USAGE)
+    try:  # a bag with several image topics (a stereo pair, raw beside compressed) is refused before any work
+        for bag in bags:
+            bag_image_count(bag, args.image_topic)
+    except BagError as exc:
+        raise CliError(str(exc), EXIT_USAGE) from exc
     for note in unread:
         say(f"warning: {note}")
     return board, files
@@ -199,14 +214,14 @@ def _board_and_files(args: argparse.Namespace, say: Callable[[str], None]):
 HINT_FRAMES = 3  # frames a board spec's likely mistakes are tried on when it is found in none
 
 
-def _hint(board, files: list[Path], step: int) -> str:
+def _hint(board, files: list[Path], step: int, image_topic: str | None = None) -> str:
     """What board a few of the frames hold instead of `board`, said with the mistake, or ''."""
     from itertools import islice
 
     from ..board_hint import board_hint
     from ..frames import iter_frames
 
-    greys = [frame.image for frame in islice((f for f in iter_frames(files, step, grey=True, spread=True)
+    greys = [frame.image for frame in islice((f for f in iter_frames(files, step, image_topic, grey=True, spread=True)
                                                if f.image is not None), HINT_FRAMES)]
     return board_hint(board, greys)
 
@@ -268,7 +283,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if step <= 0:
         counts = [video_frame_count(f) for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
         step = max(1, max(counts, default=0) // VIEWS_PER_VIDEO)
-    found = collect_views(files, board, step, say, spread=args.video_step <= 0)
+    found = collect_views(files, board, step, say, spread=args.video_step <= 0, image_topic=args.image_topic)
 
     if args.medium == "unspecified":
         say("warning: --medium not given: the calibration is recorded with medium 'unspecified' (say air or water: "
@@ -276,7 +291,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if not found.views:
         if found.image_size is None:
             raise CliError(f"no readable image among the inputs ({len(found.unreadable)} unreadable)")
-        raise CliError(f"no {board} board found in any of {found.seen} images{_hint(board, files, step)}; "
+        hint = _hint(board, files, step, args.image_topic)
+        raise CliError(f"no {board} board found in any of {found.seen} images{hint}; "
                        "supported boards: chessboard, charuco, circles (asymmetric, or :symmetric)")
     try:
         result = calibrate(found.views, found.image_size, robust_loss=args.loss,
@@ -290,7 +306,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                        f"{result.camera.aspect:.3g}, principal point ({result.camera.xp:.0f}, {result.camera.yp:.0f}) "
                        f"px): is --board {board} the board in the images? Nothing was written")
 
-    tone = judge_tone_curve(found, files, board, result.camera, step, args.video_step <= 0, say)
+    tone = judge_tone_curve(found, files, board, result.camera, step, args.video_step <= 0, say, args.image_topic)
     summary = result.summary()
     summary.update(unreadable=found.unreadable, no_board=found.no_board, wrong_size=found.wrong_size,
                    repeated_poses=found.repeated, output=str(output), variety=found.guide.summary(),
@@ -322,7 +338,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, camera: BrownCamera, step: int,
-                     spread: bool, say: Callable[[str], None]) -> ToneChoice:
+                     spread: bool, say: Callable[[str], None], image_topic: str | None = None) -> ToneChoice:
     """Which tone curve the camera encodes light with, judged on the calibration's own chessboard views
     (tone_evidence): up to tone_evidence.MAX_TREND_VIEWS of them (MAX_VIEWS judge the curve), evenly over the
     board's sizes, read again one at a time (a frame is kept only while it is measured)."""
@@ -347,7 +363,7 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, cam
     ordered = sorted((f for f in files if shown_name(f) in read), key=lambda f: shown_name(f) not in read_first)
 
     def views():
-        for frame in iter_frames(ordered, step, grey=True, spread=spread):
+        for frame in iter_frames(ordered, step, image_topic, grey=True, spread=spread):
             if frame.name in wanted and frame.image is not None:
                 yield wanted.pop(frame.name), frame.image
 
@@ -389,7 +405,8 @@ def _calibrate_port(args: argparse.Namespace, say) -> int:
         if not args.board:
             raise CliError("give the board (--board) of the underwater views", EXIT_USAGE)
         board, files = _board_and_files(args, say)
-        found = collect_views(files, board, max(1, args.video_step), say, lens.image_size, "the lens calibration")
+        found = collect_views(files, board, max(1, args.video_step), say, lens.image_size, "the lens calibration",
+                              image_topic=args.image_topic)
         views = [(view.detection.object_points, view.detection.image_points) for view in found.views]
         if len(views) < 2:
             raise CliError(f"{len(views)} underwater view(s) with the board: a port fit needs 2 or more")
