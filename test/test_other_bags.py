@@ -176,6 +176,47 @@ def test_compressed_images_give_the_jpeg_files_af(workspace, scenes, storage):
     assert abs(from_bag[0]["area_m2"] / cube_scene().true_area_m2 - 1) < 0.005
 
 
+def _zstd(frame: np.ndarray, k: int, frame_id: str):
+    """image_transport's zstd plugin's message: its header (height, width, is_bigendian, step, encoding) and the
+    zstd frame of the bgr8 rows."""
+    from backports import zstd
+
+    height, width = frame.shape[:2]
+    data = struct.pack("<IIBII", height, width, 0, 3 * width, 4) + b"bgr8" + zstd.compress(frame.tobytes(), 3)
+    return TYPES.types["sensor_msgs/msg/CompressedImage"](header=_header(k, frame_id), format="zstd",
+                                                          data=np.frombuffer(data, np.uint8))
+
+
+def test_a_bag_of_one_cameras_every_transport_measures_its_raw_frames(workspace, scenes):
+    """`ros2 bag record -a` beside an image_transport camera keeps image_raw, image_raw/compressed and
+    image_raw/zstd, the same frames three times: it was "pick the image topic". The raw topic is measured (the
+    lossless zstd one measures the same Af); two cameras' topics still need --image-topic."""
+    frames = scenes["left"]
+    jpegs = [cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 85])[1].tobytes() for frame in frames]
+    bag = workspace / "record_all"
+    camera = [
+        ("/cam/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "cam") for k in range(FRAMES)]),
+        ("/cam/image_raw/compressed", "sensor_msgs/msg/CompressedImage",
+         [_compressed(jpeg, k, "cam") for k, jpeg in enumerate(jpegs)]),
+        ("/cam/image_raw/zstd", "sensor_msgs/msg/CompressedImage", [_zstd(f, k, "cam") for k, f in enumerate(frames)]),
+        ("/cam/image_raw", "sensor_msgs/msg/Image", [_image(f, k, "cam") for k, f in enumerate(frames)])]
+    write_bag(bag, "mcap", camera)
+    rows = {}
+    for name, options in [("chosen", ()), ("raw", ("--image-topic", "/cam/image_raw")),
+                          ("zstd", ("--image-topic", "/cam/image_raw/zstd")),
+                          ("jpeg", ("--image-topic", "/cam/image_raw/compressed"))]:
+        measured, done = _measure(workspace, bag, "--calibration", "bag", *options)
+        assert done.returncode == 0, done.stderr
+        rows[name] = [row["area_m2"] for row in measured]
+    assert rows["chosen"] == rows["raw"] == rows["zstd"] and len(rows["raw"]) == FRAMES
+    assert rows["jpeg"] != rows["raw"]  # JPEG's loss shows: the raw topic was the one measured
+    two = workspace / "two_cameras_all"
+    write_bag(two, "mcap", [*camera, ("/other/image_raw", "sensor_msgs/msg/Image",
+                                      [_image(f, k, "other") for k, f in enumerate(frames)])])
+    _, done = _measure(workspace, two, "--calibration", "bag")
+    assert done.returncode != 0 and "pick the image topic (--image-topic)" in done.stderr, done.stderr
+
+
 def _split(bag: Path, storage: str, parts: list[list[tuple[str, str, list]]], first: list[int]) -> None:
     """A bag split into several files as `ros2 bag record --max-bag-size` leaves it: one metadata.yaml that
     lists every file, each file a bag of its own part of the messages."""

@@ -489,11 +489,28 @@ VIDEO_PACKET_TYPES = ("theora_image_transport/msg/Packet", "ffmpeg_image_transpo
                       "foxglove_msgs/msg/CompressedVideo")
 
 
+def transport_base(topic: str) -> str:
+    """The image topic an image_transport topic carries (/cam/image_raw/compressed -> /cam/image_raw)."""
+    return next((topic[: -len(s)] for s in TRANSPORT_SUFFIXES if topic.endswith(s)), topic)
+
+
+# of one camera's image_transport topics, the one measured when none is named: lossless first
+TRANSPORT_PREFERENCE = ("", "/zstd", "/compressed")
+
+
 def _image_connections(reader: Reader, path: str | Path, image_topic: str | None) -> list:
     """The connections of the bag's image topic (sensor_msgs/Image, or CompressedImage as image_transport's
-    `compressed` topic records it): the named one, else the only image topic."""
+    `compressed` or `zstd` topic records it): the named one, else the only image topic, else, where every image
+    topic is one camera's image_transport topics (`ros2 bag record -a` keeps them all), its raw one (then zstd,
+    then compressed: the same frames, lossless first)."""
     images = [c for c in reader.connections if c.msgtype in IMAGE_TYPES]
     chosen = [c for c in images if image_topic is None or c.topic == image_topic]
+    bases = {transport_base(c.topic) for c in chosen}
+    if image_topic is None and len(bases) == 1 and len({c.topic for c in chosen}) > 1:
+        base = bases.pop()
+        best = next((base + suffix for suffix in TRANSPORT_PREFERENCE if any(c.topic == base + suffix
+                                                                             for c in chosen)), None)
+        chosen = [c for c in chosen if c.topic == best]
     if not images:
         videos = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections if c.msgtype in VIDEO_PACKET_TYPES})
         if videos:
@@ -508,8 +525,7 @@ def _image_connections(reader: Reader, path: str | Path, image_topic: str | None
 def sibling_camera_info(image_topic: str) -> str:
     """The camera_info topic that image_transport pairs with an image topic: `camera_info` in the image's
     namespace (/left/image_raw and /left/image_raw/compressed -> /left/camera_info)."""
-    base = next((image_topic[: -len(s)] for s in TRANSPORT_SUFFIXES if image_topic.endswith(s)), image_topic)
-    namespace = base.rsplit("/", 1)[0]
+    namespace = transport_base(image_topic).rsplit("/", 1)[0]
     return f"{namespace}/camera_info"
 
 
