@@ -29,17 +29,33 @@ def is_archive(path: Path) -> bool:
     return path.name.lower().endswith(ARCHIVE_SUFFIXES)
 
 
-def _members(path: Path) -> dict[str, tarfile.TarInfo]:
+READ_ERRORS = (tarfile.TarError, EOFError, OSError, zlib.error)
+
+
+def _by_name(archive: tarfile.TarFile) -> dict[str, tarfile.TarInfo]:
     """The archive's regular files by their base name (camera_calibration writes them at its top level)."""
+    return {PurePosixPath(member.name).name: member for member in archive.getmembers() if member.isfile()}
+
+
+def _open(path: Path) -> tarfile.TarFile:
     problem = special_file(path)
     if problem:
         raise ArchiveError(problem)
     try:
-        with tarfile.open(path, "r:*") as archive:
-            return {PurePosixPath(member.name).name: member for member in archive.getmembers() if member.isfile()}
+        return tarfile.open(path, "r:*")
     except FileNotFoundError:
         raise
-    except (tarfile.TarError, EOFError, OSError, zlib.error) as exc:
+    except READ_ERRORS as exc:
+        raise ArchiveError(f"not a readable tar archive ({exc})") from exc
+
+
+def _members(path: Path) -> dict[str, tarfile.TarInfo]:
+    try:
+        with _open(path) as archive:
+            return _by_name(archive)
+    except FileNotFoundError:
+        raise
+    except READ_ERRORS as exc:
         raise ArchiveError(f"not a readable tar archive ({exc})") from exc
 
 
@@ -58,9 +74,9 @@ def view_names(path: Path, suffixes: Iterable[str]) -> list[str]:
 
 def read_members(path: Path, names: list[str]) -> Iterator[tuple[str, bytes | None, str]]:
     """Each named member's bytes (or None and why), in the order given, one member in memory at a time."""
-    members = _members(path)
     try:
-        with tarfile.open(path, "r:*") as archive:
+        with _open(path) as archive:
+            members = _by_name(archive)
             for name in names:
                 member = members[name]
                 if member.size > MAX_MEMBER_BYTES:
@@ -68,7 +84,7 @@ def read_members(path: Path, names: list[str]) -> Iterator[tuple[str, bytes | No
                     continue
                 handle = archive.extractfile(member)
                 yield name, (handle.read() if handle is not None else None), "" if handle else "cannot be read"
-    except (tarfile.TarError, EOFError, OSError, zlib.error) as exc:
+    except READ_ERRORS as exc:
         raise ArchiveError(f"not a readable tar archive ({exc})") from exc
 
 
