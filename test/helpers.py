@@ -117,3 +117,27 @@ def fitted_conditions(setup: str, medium: str) -> dict:
     import json
 
     return json.loads(_fitted_conditions(setup, medium))
+
+
+# a camera_info YAML as ROS camera_calibration writes it (ost.yaml), from a real 640x480 camera
+OST_YAML = """image_width: 640
+image_height: 480
+camera_name: narrow_stereo
+camera_matrix:
+  rows: 3
+  cols: 3
+  data: [536.07, 0.0, 342.37, 0.0, 536.02, 235.54, 0.0, 0.0, 1.0]
+distortion_model: plumb_bob
+distortion_coefficients:
+  rows: 1
+  cols: 5
+  data: [-0.2651, -0.0467, 0.0018, -0.0003, 0.2523]
+rectification_matrix:
+  rows: 3
+  cols: 3
+  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]
+projection_matrix:
+  rows: 3
+  cols: 4
+  data: [536.07, 0, 342.37, 0, 0, 536.02, 235.54, 0, 0, 0, 1, 0]
+"""

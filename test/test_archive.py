@@ -9,33 +9,12 @@ import time
 import cv2
 import pytest
 import yaml
-from helpers import OPENCV_LEFT, run_cli
+from helpers import OPENCV_LEFT, OST_YAML, run_cli
 
 from veg_area_ros.calib_io import CalibrationFileError, read_calibration
 from veg_area_ros.sim.synthetic import scene_targets_content
 
 BOARD = "chessboard:9x6:1"
-OST_YAML = """image_width: 640
-image_height: 480
-camera_name: narrow_stereo
-camera_matrix:
-  rows: 3
-  cols: 3
-  data: [536.07, 0, 342.37, 0, 536.02, 235.54, 0, 0, 1]
-distortion_model: plumb_bob
-distortion_coefficients:
-  rows: 1
-  cols: 5
-  data: [-0.2651, -0.0467, 0.0018, -0.0003, 0.2523]
-rectification_matrix:
-  rows: 3
-  cols: 3
-  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]
-projection_matrix:
-  rows: 3
-  cols: 4
-  data: [443.2, 0, 345.1, 0, 0, 490.8, 234.9, 0, 0, 0, 1, 0]
-"""
 
 
 def _archive(path, members: dict[str, bytes]) -> None:

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from helpers import OST_YAML
 
 from veg_area_ros import calib_io
 from veg_area_ros.calib_io import CalibrationFileError, read_calibration, write_calibration
@@ -33,28 +34,8 @@ def test_round_trip_is_exact_and_in_ros_layout(tmp_path):
 
 
 def test_reads_a_file_as_camera_calibration_writes_it(tmp_path):
-    # the layout ROS's camera_calibration writes (ost.yaml), from a real 640x480 camera
-    text = """image_width: 640
-image_height: 480
-camera_name: narrow_stereo
-camera_matrix:
-  rows: 3
-  cols: 3
-  data: [536.07, 0.0, 342.37, 0.0, 536.02, 235.54, 0.0, 0.0, 1.0]
-distortion_model: plumb_bob
-distortion_coefficients:
-  rows: 1
-  cols: 5
-  data: [-0.2651, -0.0467, 0.0018, -0.0003, 0.2523]
-rectification_matrix:
-  rows: 3
-  cols: 3
-  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]
-projection_matrix:
-  rows: 3
-  cols: 4
-  data: [536.07, 0, 342.37, 0, 0, 536.02, 235.54, 0, 0, 0, 1, 0]
-"""
+    # the layout ROS's camera_calibration writes (ost.yaml), from a real 640x480 camera (helpers.OST_YAML)
+    text = OST_YAML
     path = tmp_path / "ost.yaml"
     path.write_text(text)
     camera = read_calibration(path).camera
