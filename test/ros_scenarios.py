@@ -1260,8 +1260,9 @@ def scenario_replay_into_recorder(options: dict, nodes: Nodes) -> dict:
 def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     """A camera driver in this probe publishing image_transport's compressed topic (image_raw/compressed, JPEG,
     sensor data QoS; with `transport` zstd, its zstd plugin's image_raw/zstd, the bgr8 rows zstd-compressed behind
-    the plugin's header) and camera_info; the area node started with that image_transport measures it, and a
-    record node records both topics as they are published (closed with SIGINT at the end)."""
+    the plugin's header) and camera_info; the area node started with that image_transport measures it, the
+    calibration node started with it looks at the frames (its own camera_info remapped aside), and a record node
+    records both topics as they are published (closed with SIGINT at the end)."""
     import cv2
     import numpy as np
     import rclpy
@@ -1269,7 +1270,7 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, CompressedImage
 
-    from veg_area_msgs.msg import ProjectedArea
+    from veg_area_msgs.msg import CalibrationProgress, ProjectedArea
     from veg_area_ros.ros.messages import camera_to_info
     from veg_area_ros.ros.qos import RESULT_QOS
     from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene
@@ -1281,6 +1282,9 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     info_pub = probe.create_publisher(CameraInfo, "camera_info", qos_profile_sensor_data)
     areas: list[float] = []
     probe.create_subscription(ProjectedArea, "projected_area", lambda m: areas.append(m.area_m2), RESULT_QOS)
+    looked = [0]
+    probe.create_subscription(CalibrationProgress, "calibration_node/progress",
+                              lambda m: looked.__setitem__(0, max(looked[0], m.frames_looked)), RESULT_QOS)
     frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
     if transport == "zstd":  # zstd_image_transport's layout: height, width, is_bigendian, step, encoding, frame
         from backports import zstd
@@ -1307,14 +1311,18 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     probe.create_timer(0.2, publish)
     try:
         nodes.start("area_node", image_transport=transport)
-        spin_for(probe, float(options["seconds"]), until=lambda: len(areas) >= 5)
+        nodes.start("calibration_node", image_transport=transport,
+                    camera_info_url=f"file://{Path('calibration.yaml').resolve()}",
+                    remap={"camera_info": "calibration/camera_info",
+                           "camera_info/metadata": "calibration/camera_info/metadata"})
+        spin_for(probe, float(options["seconds"]), until=lambda: len(areas) >= 5 and looked[0] >= 3)
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
     recorder.send_signal(signal.SIGINT)
     recorder.wait(20)
     return {"areas": areas, "published": published, "jpeg": np.asarray(jpeg).ravel().tolist(),
-            "recorder_exit": recorder.returncode}
+            "recorder_exit": recorder.returncode, "calibration_frames_looked": looked[0]}
 
 
 def scenario_mono16_driver(options: dict, nodes: Nodes) -> dict:

@@ -519,6 +519,7 @@ def test_the_area_node_measures_image_transports_compressed_topic_and_the_record
 
     result = run_scenario("compressed_driver", tmp_path, seconds=12.0)
     assert len(result["areas"]) >= 5, result["log"]
+    assert result["calibration_frames_looked"] >= 3, result["log"]  # the calibration node takes them too
     frame = cv2.imdecode(np.array(result["jpeg"], np.uint8), cv2.IMREAD_COLOR)
     core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
     assert all(abs(area / core.area_m2 - 1) <= core.weight_error_bound for area in result["areas"]), (
@@ -549,8 +550,9 @@ def test_the_area_node_measures_image_transports_compressed_topic_and_the_record
 
 def test_the_area_node_measures_image_transports_zstd_topic_losslessly_and_its_bag_too(tmp_path):
     """image_transport's zstd plugin (lossless, ROS 2 Jazzy on) on image_raw/zstd: the area node started with
-    image_transport:=zstd measures each frame exactly as the core measures the raw frame, and the bag the
-    record node wrote of that topic measures to the same Af (it was "cannot be decoded")."""
+    image_transport:=zstd measures each frame exactly as the core measures the raw frame (the calibration node
+    takes them as well), and the bag the record node wrote of that topic measures to the same Af (it was "cannot
+    be decoded")."""
     from ros_harness import run_scenario
 
     from veg_area_ros.area import AreaMeasurer
@@ -559,6 +561,7 @@ def test_the_area_node_measures_image_transports_zstd_topic_losslessly_and_its_b
 
     result = run_scenario("compressed_driver", tmp_path, seconds=12.0, transport="zstd")
     assert len(result["areas"]) >= 5, result["log"]
+    assert result["calibration_frames_looked"] >= 3, result["log"]  # the calibration node takes them too
     frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
     core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
     assert all(abs(area / core.area_m2 - 1) <= core.weight_error_bound for area in result["areas"]), (

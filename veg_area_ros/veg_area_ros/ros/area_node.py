@@ -27,7 +27,7 @@ from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 
 from veg_area_msgs.msg import ProjectedArea
@@ -37,7 +37,7 @@ from ..board import to_grey
 from ..board_hint import dictionary_hint
 from ..calib_io import metadata_for, read_calibration
 from ..camera_info import info_to_camera
-from ..cdr import decode_camera_info, decode_compressed_image, decode_image, stamp_ns, unstamped
+from ..cdr import decode_camera_info, stamp_ns, unstamped
 from ..classify import AREA_MODES, CHANNELS, OBJECTS, ClassifyError
 from ..frames import read_image
 from ..idealize import FrameSizeError
@@ -48,7 +48,16 @@ from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, TONE_CURVE_CHOICES, M
 from ..sources import default_targets
 from ..targets import TargetsError, TargetsNotFoundError, TargetsSpec
 from .health import CountedWarnings, InputWatch, publish_safely
-from .messages import ImageMessageError, image_bytes, projected_area, projected_area_vector
+from .messages import (
+    IMAGE_TRANSPORT_HELP,
+    IMAGE_TRANSPORTS,
+    ImageMessageError,
+    decode_transported,
+    image_bytes,
+    projected_area,
+    projected_area_vector,
+    transported_image,
+)
 from .params import declare, read_start_file
 from .qos import ANY_INFO_QOS, IMAGE_QOS, LATCHED_QOS, PER_FRAME_INFO_QOS, RESULT_QOS
 from .run import run_nodes
@@ -62,7 +71,6 @@ SETTINGS = ("threshold", "threshold_mode", "object", "channel", "roi", "open_px"
 TUNABLE = (*SETTINGS, "targets_file", "background_file")
 
 
-IMAGE_TRANSPORTS = ("raw", "compressed", "zstd")
 
 class AreaNode(Node):
     def __init__(self, name: str = "area_node", **kwargs):
@@ -99,13 +107,9 @@ class AreaNode(Node):
                                     choices=("drop", "measure"))
         self.calibration_file = calibration_file = declare(
             self, "calibration_file", "", "Calibration YAML to start with ('' = wait for camera_info).", read_only=True)
-        self.transport = declare(self, "image_transport", "raw", "How the camera's images come: 'raw' "
-                                 "(sensor_msgs/Image on image_raw), 'compressed' (CompressedImage, JPEG or PNG, on "
-                                 "image_raw/compressed, as image_transport's compressed plugin publishes them) or "
-                                 "'zstd' (lossless, on image_raw/zstd, as its zstd plugin publishes them).",
-                                 choices=IMAGE_TRANSPORTS, read_only=True)
-        if self.transport not in IMAGE_TRANSPORTS:
-            raise ValueError(f"image_transport must be one of {', '.join(IMAGE_TRANSPORTS)}, got {self.transport!r}")
+        self.transport = declare(self, "image_transport", "raw", IMAGE_TRANSPORT_HELP, choices=IMAGE_TRANSPORTS,
+                                 read_only=True)
+        image_type, image_topic = transported_image(self.transport)
         self.camera = None
         self.info_frame_id = ""  # the frame_id of the camera_info the calibration came from
         self.frames = FrameTally()
@@ -164,8 +168,7 @@ class AreaNode(Node):
         # what camera_info cannot carry (tone curve, medium, distance) from the node that serves the calibration
         self.create_subscription(String, "camera_info/metadata", self._on_info_metadata, LATCHED_QOS)
         self._take_unavailable = False
-        image_topic = "image_raw" if self.transport == "raw" else f"image_raw/{self.transport}"
-        self.create_subscription(Image if self.transport == "raw" else CompressedImage, image_topic, self._on_frame,
+        self.create_subscription(image_type, image_topic, self._on_frame,
                                  IMAGE_QOS, raw=True)
         self.input_watch = InputWatch(self, image_topic)
 
@@ -405,7 +408,7 @@ class AreaNode(Node):
 
     def _on_image(self, data: bytes) -> None:
         try:
-            fields = decode_image(data) if self.transport == "raw" else decode_compressed_image(data)
+            fields = decode_transported(self.transport, data)
             notes: list[str] = []
             frame = fields.pixels(self.bit_depth, notes)
         except ImageMessageError as exc:

@@ -32,14 +32,23 @@ from ..calib_io import (
 )
 from ..calibration import CalibrationError, View, calibrate, coverage_grid
 from ..camera_model import MODELS, BrownCamera
-from ..cdr import decode_image
 from ..feedback import FitView, fit_reach, render_feedback
 from ..guidance import CalibrationGuide
 from ..replacement import Judgement, judge
 from ..sources import DEFAULT_BOARD
 from ..tone_evidence import KeptFrames
 from .health import CountedWarnings, InputWatch, publish_safely
-from .messages import ImageMessageError, camera_to_info, image_bytes, info_to_camera, progress_message
+from .messages import (
+    IMAGE_TRANSPORT_HELP,
+    IMAGE_TRANSPORTS,
+    ImageMessageError,
+    camera_to_info,
+    decode_transported,
+    image_bytes,
+    info_to_camera,
+    progress_message,
+    transported_image,
+)
 from .params import declare, read_start_file
 from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
 from .run import run_nodes
@@ -68,6 +77,9 @@ class CalibrationNode(Node):
         url = declare(self, "camera_info_url", "file://" + os.path.expanduser("~/.ros/camera_info/veg_area.yaml"),
                       "Where the calibration is loaded from at start and written to (file://).", read_only=True)
         self.frame_id = declare(self, "frame_id", "camera", "frame_id of the published camera_info.", read_only=True)
+        self.transport = declare(self, "image_transport", "raw", IMAGE_TRANSPORT_HELP, choices=IMAGE_TRANSPORTS,
+                                 read_only=True)
+        image_type, image_topic = transported_image(self.transport)
         try:
             self.board = BoardSpec.parse(board_text)
         except BoardSpecError as exc:
@@ -97,8 +109,8 @@ class CalibrationNode(Node):
         self.metadata_pub = self.create_publisher(String, "camera_info/metadata", LATCHED_QOS)
         self.progress_pub = self.create_publisher(CalibrationProgress, "~/progress", RESULT_QOS)
         self.feedback_pub = self.create_publisher(Image, "~/feedback", IMAGE_QOS)
-        self.create_subscription(Image, "image_raw", self._on_image, IMAGE_QOS, raw=True)  # a view, no copy
-        self.input_watch = InputWatch(self, "image_raw")
+        self.create_subscription(image_type, image_topic, self._on_image, IMAGE_QOS, raw=True)  # a view, no copy
+        self.input_watch = InputWatch(self, image_topic)
         self.warn = CountedWarnings(self.get_logger())
         self.create_service(Trigger, "~/calibrate", self._on_calibrate)
         self.create_service(Trigger, "~/commit", self._on_commit)
@@ -151,7 +163,7 @@ class CalibrationNode(Node):
     def _look(self, data: bytes) -> None:
         try:
             notes: list[str] = []
-            image = decode_image(data).pixels(self.bit_depth, notes)
+            image = decode_transported(self.transport, data).pixels(self.bit_depth, notes)
         except ImageMessageError as exc:
             self.warn("frame ignored", str(exc))
             return

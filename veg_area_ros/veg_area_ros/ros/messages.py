@@ -9,18 +9,46 @@ import importlib
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Vector3Stamped
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from veg_area_msgs.msg import CalibrationProgress, ProjectedArea
 
 from ..area_result import AreaResult
 from ..camera_info import camera_info_fields, info_to_camera
 from ..camera_model import BrownCamera
-from ..cdr import ImageMessageError, encode_image, frame_pixels, image_layout
+from ..cdr import (
+    CompressedImageFields,
+    ImageFields,
+    ImageMessageError,
+    decode_compressed_image,
+    decode_image,
+    encode_image,
+    frame_pixels,
+    image_layout,
+)
 
 __all__ = ["ImageMessageError", "camera_to_info", "image_bytes", "image_to_msg", "info_to_camera", "message_class",
            "msg_to_image", "progress_as_dict", "progress_message", "projected_area", "projected_area_vector"]
 
+
+# image_transport's plugins whose frames the nodes take: raw Image on image_raw, and CompressedImage on
+# image_raw/<plugin> (JPEG or PNG from `compressed`, lossless rows from `zstd`)
+IMAGE_TRANSPORTS = ("raw", "compressed", "zstd")
+IMAGE_TRANSPORT_HELP = ("How the camera's images come: 'raw' (sensor_msgs/Image on image_raw), 'compressed' "
+                        "(CompressedImage, JPEG or PNG, on image_raw/compressed) or 'zstd' (lossless, on "
+                        "image_raw/zstd), as image_transport's plugins publish them.")
+
+
+def transported_image(transport: str) -> tuple[type, str]:
+    """The message type and topic of the camera's images through an image_transport plugin."""
+    if transport not in IMAGE_TRANSPORTS:
+        raise ValueError(f"image_transport must be one of {', '.join(IMAGE_TRANSPORTS)}, got {transport!r}")
+    return (Image, "image_raw") if transport == "raw" else (CompressedImage, f"image_raw/{transport}")
+
+
+def decode_transported(transport: str, data: bytes) -> ImageFields | CompressedImageFields:
+    """A serialized image message of `transported_image(transport)` as its fields (`pixels()` gives the frame)."""
+    return decode_image(data) if transport == "raw" else decode_compressed_image(data)
 
 def projected_area(result: AreaResult, stamp: Time, frame_id: str, calibration_source: str) -> ProjectedArea:
     """A frame's Af with every field named: the std and its terms, the classification, the calibration used
