@@ -76,7 +76,7 @@ def test_its_ost_yaml_is_the_calibration_it_holds(saved, tmp_path):
     assert read_calibration(ini_only).camera == archived
 
 
-def test_a_stereo_pairs_archive_a_broken_one_and_one_given_to_measure_are_refused_with_the_reason(saved, tmp_path):
+def test_a_stereo_pairs_archive_two_sessions_a_broken_one_or_one_given_to_measure_are_refused(saved, tmp_path):
     stereo = tmp_path / "stereo.tar.gz"
     _archive(stereo, {**_views("left"), **_views("right"), "left.yaml": OST_YAML.encode(),
                       "right.yaml": OST_YAML.encode(), "ost.txt": b"[image]\n"})
@@ -86,6 +86,12 @@ def test_a_stereo_pairs_archive_a_broken_one_and_one_given_to_measure_are_refuse
     assert not (tmp_path / "c.yaml").exists()
     with pytest.raises(CalibrationFileError, match=r"stereo pair's calibrations \(left.yaml and right.yaml\)"):
         read_calibration(tmp_path / "stereo.tar.gz")  # its ost.txt is the pair's: not one camera's
+    twice = tmp_path / "two_sessions.tar.gz"
+    _archive(twice, {f"{session}/{name}": data for session in ("monday", "tuesday")
+                     for name, data in list(_views().items())[:2]})
+    result = run_cli("calibrate", str(twice), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))
+    assert result.returncode != 0 and "holds monday/left-0000.png and tuesday/left-0000.png" in result.stderr, (
+        result.stderr)
     broken = tmp_path / "broken.tar.gz"
     broken.write_bytes((saved / "calibrationdata.tar.gz").read_bytes()[:5000])
     with pytest.raises(CalibrationFileError, match="not a readable tar archive"):

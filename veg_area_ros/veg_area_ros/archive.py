@@ -33,8 +33,17 @@ READ_ERRORS = (tarfile.TarError, EOFError, OSError, zlib.error)
 
 
 def _by_name(archive: tarfile.TarFile) -> dict[str, tarfile.TarInfo]:
-    """The archive's regular files by their base name (camera_calibration writes them at its top level)."""
-    return {PurePosixPath(member.name).name: member for member in archive.getmembers() if member.isfile()}
+    """The archive's regular files by their base name (camera_calibration writes them at its top level); two
+    files of one name in different folders (two sessions packed together) are refused, not one dropped."""
+    found: dict[str, tarfile.TarInfo] = {}
+    for member in archive.getmembers():
+        if member.isfile():
+            name = PurePosixPath(member.name).name
+            if name in found:
+                raise ArchiveError(f"holds {found[name].name} and {member.name}: two sessions in one archive; "
+                                   "give each its own")
+            found[name] = member
+    return found
 
 
 def _open(path: Path) -> tarfile.TarFile:
