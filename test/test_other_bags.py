@@ -608,6 +608,33 @@ def test_calibrate_takes_one_camera_of_a_stereo_pairs_bag(workspace):
     assert done.returncode == 2 and "the inputs hold no bag" in done.stderr, done.stderr
 
 
+def test_calibrate_samples_a_long_bag_as_a_video_and_measure_refuses_video_step_on_it(workspace):
+    """A calibration session's bag, the board held in each of 13 poses (OpenCV's real photos, 15 frames each):
+    every frame was searched (a 3-minute session at 30 Hz is 5400 board searches), and a slowly moving board
+    gave a view wherever it had moved 1 % of the diagonal, views many and correlated as a video's would be
+    unsampled. Now a bag is sampled as a video is (about 60 frames, one in each run at a varying place): of 195
+    frames 65 are searched, the same 13 poses as the photos, the same fit. `measure --video-step` on a bag, which
+    ignored it, is refused."""
+    photos = sorted((TEST_DATA / "opencv-left").glob("*.jpg"))
+    held = [_image(cv2.imread(str(p)), k, "cam") for k, p in enumerate(photos) for _ in range(15)]
+    bag = workspace / "session"
+    write_bag(bag, "mcap", [("/cam/image_raw", "sensor_msgs/msg/Image", held)])
+    board = ("--board", "chessboard:9x6:0.025", "--medium", "air", "--json")
+    fits = {}
+    for name, source in [("bag", bag), ("photos", TEST_DATA / "opencv-left")]:
+        done = run_cli("calibrate", str(source), *board, "-o", str(workspace / f"{name}.yaml"), cwd=workspace)
+        assert done.returncode == 0, done.stderr
+        fits[name] = (json.loads(done.stdout), done.stderr)
+    assert "65 frames: 13 views" in fits["bag"][1], fits["bag"][1]
+    assert fits["bag"][0]["views_used"] == fits["photos"][0]["views_used"] == 13
+    for key in ("fx", "fy", "cx", "cy", "dist"):
+        assert fits["bag"][0][key] == pytest.approx(fits["photos"][0][key], rel=1e-6, abs=1e-9), key
+    (workspace / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    _, done = _measure(workspace, bag, "--calibration", "none", "--video-step", "3")
+    assert done.returncode == 2 and "the inputs are bags (every frame of a bag is measured" in done.stderr, (
+        done.stderr)
+
+
 def test_a_bag_of_video_packets_only_says_so_and_what_to_record(workspace):
     """theora_image_transport's packets (or H.264 through ffmpeg_image_transport or Foxglove): a frame needs
     the packets before it, and they are not decoded here. It said "image topics in the bag: []"; now it names the

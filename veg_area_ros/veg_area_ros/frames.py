@@ -440,9 +440,11 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
                         f"the video is damaged or cut short ({index} of {declared} frames read)", lost=lost)
 
 
-def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: int | None = None) -> Iterator[Frame]:
+def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: int | None = None, step: int = 1,
+             spread: bool = False) -> Iterator[Frame]:
     """The bag's image messages number `start` up to `stop` (exclusive), each with the camera_info recorded
-    before it (read through the messages skipped)."""
+    before it (read through the messages skipped); every `step`-th, as `iter_video` takes a video's (`spread`:
+    one in each run of `step` at a varying place), the others never decoded."""
     from .bags import bag_image_count, iter_bag_frames
 
     declared = bag_image_count(path, image_topic)
@@ -455,7 +457,8 @@ def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: i
             if frame.index >= end:
                 break
             read = frame.index + 1
-            yield _bag_frame(path, frame)
+            if frame.index % step == (spread_offset(frame.index // step, step) if spread else 0):
+                yield _bag_frame(path, frame)
     except Exception as exc:  # rosbags raises its own classes for a damaged chunk: the rest is lost, said below
         problem = f" ({' '.join(str(exc).split())[:200]})"
     if read < end:  # the index lists more image messages than could be read: damaged chunks
@@ -497,18 +500,19 @@ def spread_offset(window: int, step: int) -> int:
 
 def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: str | None = None,
                 frame_range: tuple[int, int] | None = None, grey: bool = False,
-                spread: bool = False, encoded: bool = False) -> Iterator[Frame | Packet]:
+                spread: bool = False, encoded: bool = False, bag_step: int = 1) -> Iterator[Frame | Packet]:
     """Every frame of the inputs; unreadable ones come with image None and the reason. `frame_range`
     (start, stop): only those frames of a video or bag (one input). `grey`: every image in one channel (what
     a board's detection looks at; an image file is then decoded without its colour). `encoded`: Motion-JPEG
-    videos' frames as `Packet`s, for `decoded` (not with `grey`)."""
+    videos' frames as `Packet`s, for `decoded` (not with `grey`). `bag_step`: every Nth frame of a bag, as
+    `video_step` of a video (`spread` alike); calibrating samples a bag as a video, measuring takes every frame."""
     if encoded and grey:
         raise ValueError("encoded frames are decoded by `decoded`, in colour")
     start, stop = frame_range if frame_range is not None else (0, None)
     for path in expand_inputs(paths, archives=True):
         suffix = path.suffix.lower()
         if is_bag(path):
-            yield from _greyed(iter_bag(path, image_topic, start, stop), grey)
+            yield from _greyed(iter_bag(path, image_topic, start, stop, bag_step, spread), grey)
         elif is_archive(path):
             yield from iter_archive(path, grey)
         elif suffix in VIDEO_SUFFIXES:

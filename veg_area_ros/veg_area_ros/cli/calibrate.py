@@ -64,8 +64,9 @@ def add_parser(sub) -> None:
                      help="reject points beyond this many robust standard deviations")
     cal.add_argument("--no-outlier-rejection", action="store_true")
     cal.add_argument("--video-step", type=int, default=0,
-                     help=f"use every Nth video frame (0: about {VIEWS_PER_VIDEO} per video, one from each run of "
-                          "frames at a varying place, so no pose cycle of the camera is sampled at one phase)")
+                     help=f"use every Nth frame of a video or bag (0: about {VIEWS_PER_VIDEO} per video or bag, one "
+                          "from each run of frames at a varying place, so no pose cycle of the camera is sampled at "
+                          "one phase)")
     cal.add_argument("--replace", "--force", dest="replace", action="store_true",
                      help="write the output even where the calibration it holds is judged better (by projection "
                           "uncertainty, views and coverage, not RMS: fewer views always fit with a lower RMS)")
@@ -135,7 +136,7 @@ def collect_views(files: list[Path], board, step: int, say, image_size: tuple[in
     # frames searched by two threads (OpenCV releases Python's lock), judged here in their order; a video's
     # frames also decoded in a thread of their own
     # the board is found in grey: colour costs time
-    frames = iter_frames(files, step, image_topic, grey=True, spread=spread)
+    frames = iter_frames(files, step, image_topic, grey=True, spread=spread, bag_step=step)
     if decodable_ahead(files):
         frames = prefetched(frames, depth=2 * DETECT_WORKERS)
     for frame, (detection, stats) in ordered_map(detect, frames, workers=DETECT_WORKERS):
@@ -221,17 +222,18 @@ def _hint(board, files: list[Path], step: int, image_topic: str | None = None) -
     from ..board_hint import board_hint
     from ..frames import iter_frames
 
-    greys = [frame.image for frame in islice((f for f in iter_frames(files, step, image_topic, grey=True, spread=True)
-                                               if f.image is not None), HINT_FRAMES)]
+    frames = iter_frames(files, step, image_topic, grey=True, spread=True, bag_step=step)
+    greys = [frame.image for frame in islice((f for f in frames if f.image is not None), HINT_FRAMES)]
     return board_hint(board, greys)
 
 
 def cmd_calibrate(args: argparse.Namespace) -> int:
     from ..archive import is_archive
+    from ..bags import bag_image_count
     from ..calib_io import CalibrationFileError, fit_metadata, read_calibration, write_calibration
     from ..calibration import CalibrationError, calibrate
     from ..camera_model import implausibility
-    from ..frames import IMAGE_SUFFIXES, VIDEO_SUFFIXES, video_frame_count
+    from ..frames import IMAGE_SUFFIXES, VIDEO_SUFFIXES, is_bag, video_frame_count
     from ..replacement import judge
 
     say = progress(args.quiet)
@@ -281,7 +283,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
     step = args.video_step
     if step <= 0:
-        counts = [video_frame_count(f) for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
+        counts = [video_frame_count(f) for f in files if f.suffix.lower() in VIDEO_SUFFIXES] + [
+            bag_image_count(f, args.image_topic) for f in files if is_bag(f)]  # a bag is sampled as a video
         step = max(1, max(counts, default=0) // VIEWS_PER_VIDEO)
     found = collect_views(files, board, step, say, spread=args.video_step <= 0, image_topic=args.image_topic)
 
@@ -363,7 +366,7 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, cam
     ordered = sorted((f for f in files if shown_name(f) in read), key=lambda f: shown_name(f) not in read_first)
 
     def views():
-        for frame in iter_frames(ordered, step, image_topic, grey=True, spread=spread):
+        for frame in iter_frames(ordered, step, image_topic, grey=True, spread=spread, bag_step=step):
             if frame.name in wanted and frame.image is not None:
                 yield wanted.pop(frame.name), frame.image
 

@@ -117,7 +117,8 @@ def add_parser(sub) -> None:
 
 
 def _refuse_options_the_inputs_ignore(args: argparse.Namespace) -> None:
-    """--video-step where no input can be a video and --image-topic where none is a bag were ignored in silence.
+    """--video-step where no input can be a video (bags included) and --image-topic where none is a bag were ignored
+    in silence.
     Photos a folder holds that OpenCV does not read are said here, once, whoever measures (a batch's processes, a
     cluster's workers)."""
     from ..frames import IMAGE_SUFFIXES, InputError, expand_inputs, is_bag
@@ -129,8 +130,11 @@ def _refuse_options_the_inputs_ignore(args: argparse.Namespace) -> None:
         return  # said with its reason where the inputs are read
     for note in unread:
         print(f"warning: {note}", file=sys.stderr, flush=True)
-    if args.video_step > 1 and files and all(f.suffix.lower() in IMAGE_SUFFIXES for f in files):
-        raise CliError(f"--video-step {args.video_step} takes every Nth frame of a video; the inputs are images",
+    if args.video_step > 1 and files and all(f.suffix.lower() in IMAGE_SUFFIXES or is_bag(f) for f in files):
+        bags = sum(is_bag(f) for f in files)
+        kinds = ("images" if not bags else "images and bags" if bags < len(files) else
+                 "bags (every frame of a bag is measured; --start-time and --end-time trim it)")
+        raise CliError(f"--video-step {args.video_step} takes every Nth frame of a video; the inputs are {kinds}",
                        EXIT_USAGE)
     if args.image_topic and not any(is_bag(f) for f in files):
         raise CliError(f"--image-topic {args.image_topic} picks a bag's image topic; the inputs hold no bag",
