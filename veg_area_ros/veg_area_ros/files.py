@@ -13,6 +13,7 @@ import stat
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path, PurePath
+from typing import TypeVar
 
 # the largest sensors sold (200 MP phones, 150 MP medium format); measuring costs about 150 MB + 21 bytes a pixel
 # (10 MP 0.37 GB, 40 MP 1.0 GB), and a 20000x20000 PNG (400 MP) took 9 GB and minutes to decode before refusing
@@ -29,7 +30,10 @@ MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in
 
 
 
-def in_name_order(paths: Iterable[PurePath]) -> list:
+PathType = TypeVar("PathType", bound=PurePath)
+
+
+def in_name_order(paths: Iterable[PathType]) -> list[PathType]:
     """Files in the order a file browser shows them: numbers in names compared as numbers (frame_2 before
     frame_10, which plain text order put after frame_1), then the names as text."""
     def key(path: PurePath) -> tuple:
