@@ -1261,8 +1261,9 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
     """A camera driver in this probe publishing image_transport's compressed topic (image_raw/compressed, JPEG,
     sensor data QoS; with `transport` zstd, its zstd plugin's image_raw/zstd, the bgr8 rows zstd-compressed behind
     the plugin's header) and camera_info; the area node started with that image_transport measures it, the
-    calibration node started with it looks at the frames (its own camera_info remapped aside), and a record node
-    records both topics as they are published (closed with SIGINT at the end)."""
+    calibration node started with it looks at the frames (its own camera_info remapped aside), the console started
+    with it shows them in its camera view (one JPEG fetched as a page fetches it), and a record node records both
+    topics as they are published (closed with SIGINT at the end)."""
     import cv2
     import numpy as np
     import rclpy
@@ -1315,14 +1316,39 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
                     camera_info_url=f"file://{Path('calibration.yaml').resolve()}",
                     remap={"camera_info": "calibration/camera_info",
                            "camera_info/metadata": "calibration/camera_info/metadata"})
+        nodes.start("console_node", image_transport=transport, port=CONSOLE_PROBE_PORT)
         spin_for(probe, float(options["seconds"]), until=lambda: len(areas) >= 5 and looked[0] >= 3)
+        shown = console_frame("camera")
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
     recorder.send_signal(signal.SIGINT)
     recorder.wait(20)
     return {"areas": areas, "published": published, "jpeg": np.asarray(jpeg).ravel().tolist(),
-            "recorder_exit": recorder.returncode, "calibration_frames_looked": looked[0]}
+            "recorder_exit": recorder.returncode, "calibration_frames_looked": looked[0], "console_camera": shown}
+
+
+CONSOLE_PROBE_PORT = 18093
+
+
+def console_frame(view: str, seconds: float = 30.0) -> dict:
+    """One JPEG of a console view, asked for as a page asks (the first asks make the console subscribe):
+    its size in bytes and the frame size the console says, or what it answered last."""
+    import urllib.error
+    import urllib.request
+
+    deadline, answer = time.monotonic() + seconds, {}
+    while time.monotonic() < deadline:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{CONSOLE_PROBE_PORT}/api/frame/{view}", timeout=5) as reply:
+                body = reply.read()
+                answer = {"status": reply.status, "bytes": len(body), "size": reply.headers.get("X-Frame-Size")}
+                if reply.status == 200 and body[:2] == b"\xff\xd8":
+                    return answer
+        except (urllib.error.URLError, ConnectionError, TimeoutError) as exc:
+            answer = {"error": str(exc)}
+        time.sleep(0.3)
+    return answer
 
 
 def scenario_mono16_driver(options: dict, nodes: Nodes) -> dict:

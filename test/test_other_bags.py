@@ -520,6 +520,7 @@ def test_the_area_node_measures_image_transports_compressed_topic_and_the_record
     result = run_scenario("compressed_driver", tmp_path, seconds=12.0)
     assert len(result["areas"]) >= 5, result["log"]
     assert result["calibration_frames_looked"] >= 3, result["log"]  # the calibration node takes them too
+    assert result["console_camera"].get("size") == "640x480", result["console_camera"]  # and the console shows them
     frame = cv2.imdecode(np.array(result["jpeg"], np.uint8), cv2.IMREAD_COLOR)
     core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
     assert all(abs(area / core.area_m2 - 1) <= core.weight_error_bound for area in result["areas"]), (
@@ -562,6 +563,7 @@ def test_the_area_node_measures_image_transports_zstd_topic_losslessly_and_its_b
     result = run_scenario("compressed_driver", tmp_path, seconds=12.0, transport="zstd")
     assert len(result["areas"]) >= 5, result["log"]
     assert result["calibration_frames_looked"] >= 3, result["log"]  # the calibration node takes them too
+    assert result["console_camera"].get("size") == "640x480", result["console_camera"]  # and the console shows them
     frame = render_scene(ENDOSCOPE, cube_scene(), 0.7)
     core = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)).measure(frame)
     assert all(abs(area / core.area_m2 - 1) <= core.weight_error_bound for area in result["areas"]), (

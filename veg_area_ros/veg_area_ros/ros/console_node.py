@@ -28,7 +28,7 @@ from std_srvs.srv import Trigger
 
 from veg_area_msgs.msg import CalibrationProgress, ProjectedArea
 
-from ..cdr import ImageMessageError, decode_camera_info, decode_image
+from ..cdr import ImageMessageError, decode_camera_info
 from ..console_server import ConsoleServer
 from ..console_state import (
     TUNED,
@@ -43,7 +43,13 @@ from ..console_state import (
     folder_size,
     now,
 )
-from .messages import progress_as_dict
+from .messages import (
+    IMAGE_TRANSPORT_HELP,
+    IMAGE_TRANSPORTS,
+    decode_transported,
+    progress_as_dict,
+    transported_image,
+)
 from .params import declare
 from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
 from .run import lower_priority, run_nodes
@@ -93,8 +99,13 @@ class ConsoleNode(Node):
         self._recorder_lock = threading.Lock()
         self._parameters_asked_at: float | None = None  # a get_parameters call in flight since
         # the area node's preview: its overlay at a bounded rate (every frame's overlay would cost it a remap each)
+        transport = declare(self, "image_transport", "raw", f"{IMAGE_TRANSPORT_HELP} (the camera view; the "
+                            "overlay and the feedback are raw).", choices=IMAGE_TRANSPORTS, read_only=True)
+        camera_type, camera_topic = transported_image(transport)
         self.view_topics = {"area": "overlay/preview",
-                            "calibration": f"/{self.calibration_name}/feedback", "camera": "image_raw"}
+                            "calibration": f"/{self.calibration_name}/feedback", "camera": camera_topic}
+        self.view_types = {"area": Image, "calibration": Image, "camera": camera_type}
+        self.view_transports = {"area": "raw", "calibration": "raw", "camera": transport}
         self.view_subscriptions: dict = {}
         self.create_subscription(ProjectedArea, "projected_area", self._on_area, RESULT_QOS)
         self.create_subscription(String, "projected_area/info", self._on_info, RESULT_QOS)
@@ -137,7 +148,8 @@ class ConsoleNode(Node):
                                        "fx": k[0], "fy": k[4], "cx": k[2], "cy": k[5], "d": list(info.d)}
 
     def _on_view(self, view: str, data: bytes) -> None:
-        self.feeds[view].offer(lambda: decode_image(data).pixels())  # decoded only if a page is shown it
+        # decoded only if a page is shown it
+        self.feeds[view].offer(lambda: decode_transported(self.view_transports[view], data).pixels())
 
     def _look_around(self) -> None:
         """Which nodes are up, the area node's parameters, and the views' topics subscribed while shown."""
@@ -156,7 +168,8 @@ class ConsoleNode(Node):
             subscribed = view in self.view_subscriptions
             if feed.wanted(moment) and not subscribed:
                 self.view_subscriptions[view] = self.create_subscription(
-                    Image, self.view_topics[view], lambda data, v=view: self._on_view(v, data), IMAGE_QOS, raw=True)
+                    self.view_types[view], self.view_topics[view], lambda data, v=view: self._on_view(v, data),
+                    IMAGE_QOS, raw=True)
             elif subscribed and not feed.wanted(moment):
                 self.destroy_subscription(self.view_subscriptions.pop(view))
 
