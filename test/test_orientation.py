@@ -166,3 +166,26 @@ def test_a_phones_video_is_read_as_stored_and_says_its_rotation(tmp_path):
     assert len(rows["clip.mp4"]) == 3
     assert all(any("video rotation 90° not applied" in w for w in r["warnings"]) for r in rows["clip_upright.mp4"])
     assert not any("rotation" in w for r in rows["clip.mp4"] for w in r["warnings"])
+
+
+def test_a_phones_motion_photo_is_measured_as_its_still_and_a_cut_one_is_still_refused(tmp_path):
+    """A Pixel's or a Galaxy's motion photo is a JPEG with its short video (MP4) appended after the image's
+    end marker, as a camera's MPF preview is: judged by the file's last bytes it was refused as "a truncated
+    JPEG". Now the image ends at its own end marker: the still measures as the same JPEG alone does. A JPEG cut
+    inside its image data is still refused as truncated."""
+    write_calibration(tmp_path / "endoscope.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    still = cv2.imencode(".jpg", render_scene(ENDOSCOPE, cube_scene(), 0.7), [cv2.IMWRITE_JPEG_QUALITY, 95])[1]
+    video = b"\x00\x00\x00\x18ftypmp42\x00\x00\x00\x00mp42isom" + np.random.default_rng(7).bytes(20000)
+    (tmp_path / "still.jpg").write_bytes(still.tobytes())
+    (tmp_path / "PXL_20260502_100003.MP.jpg").write_bytes(still.tobytes() + video)
+    rows = {}
+    for name in ("still.jpg", "PXL_20260502_100003.MP.jpg"):
+        done = run_cli("measure", str(tmp_path / name), "--calibration", str(tmp_path / "endoscope.yaml"),
+                       "--targets", str(tmp_path / "targets.yaml"), "--json", cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        rows[name] = json.loads(done.stdout)
+    assert rows["PXL_20260502_100003.MP.jpg"]["area_m2"] == rows["still.jpg"]["area_m2"]
+    (tmp_path / "cut.jpg").write_bytes(still.tobytes()[: still.size // 2])
+    image, problem = read_image(tmp_path / "cut.jpg")
+    assert image is None and problem.startswith("is a truncated JPEG"), problem

@@ -169,11 +169,12 @@ def decode_image_file(data: bytes, grey: bool = False, notes: list[str] | None =
         if note and notes is not None:
             notes.append(note)
         return (cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if grey else image), ""
-    if not data.rstrip(b"\0\r\n ").endswith(b"\xff\xd9"):
-        return None, "is a truncated JPEG (no end-of-image marker)"
+    # the image ends at its first end-of-image marker: a phone's motion photo appends its video after it, a
+    # camera's MPF its preview (judging by the file's last bytes refused every motion photo as truncated)
     problem = jpeg_structure_problem(data)
     if problem:
-        return None, f"is a corrupt JPEG ({problem})"
+        cut = problem.startswith("no end-of-image marker") or "runs past the file" in problem
+        return None, f"is a {'truncated' if cut else 'corrupt'} JPEG ({problem})"
     image, warning = _decode_jpeg(data, mode)
     if image is None:
         return None, "is not an image OpenCV can decode"
