@@ -1318,7 +1318,7 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
                            "camera_info/metadata": "calibration/camera_info/metadata"})
         nodes.start("console_node", image_transport=transport, port=CONSOLE_PROBE_PORT)
         spin_for(probe, float(options["seconds"]), until=lambda: len(areas) >= 5 and looked[0] >= 3)
-        shown = console_frame("camera")
+        shown = console_frame("camera", probe)
     finally:
         probe.destroy_node()
         rclpy.try_shutdown()
@@ -1331,11 +1331,14 @@ def scenario_compressed_driver(options: dict, nodes: Nodes) -> dict:
 CONSOLE_PROBE_PORT = 18093
 
 
-def console_frame(view: str, seconds: float = 30.0) -> dict:
+def console_frame(view: str, probe, seconds: float = 30.0) -> dict:
     """One JPEG of a console view, asked for as a page asks (the first asks make the console subscribe):
-    its size in bytes and the frame size the console says, or what it answered last."""
+    its size in bytes and the frame size the console says, or what it answered last. The probe spins between
+    the asks (its timers publish the frames)."""
     import urllib.error
     import urllib.request
+
+    import rclpy
 
     deadline, answer = time.monotonic() + seconds, {}
     while time.monotonic() < deadline:
@@ -1347,7 +1350,9 @@ def console_frame(view: str, seconds: float = 30.0) -> dict:
                     return answer
         except (urllib.error.URLError, ConnectionError, TimeoutError) as exc:
             answer = {"error": str(exc)}
-        time.sleep(0.3)
+        spin_until = time.monotonic() + 0.3
+        while time.monotonic() < spin_until:
+            rclpy.spin_once(probe, timeout_sec=0.05)
     return answer
 
 
