@@ -47,6 +47,25 @@ def _saved(image: np.ndarray, suffix: str, orientation: int) -> bytes:
     return out.getvalue()
 
 
+def _cube_jpeg() -> bytes:
+    return cv2.imencode(".jpg", render_scene(ENDOSCOPE, cube_scene(), 0.7), [cv2.IMWRITE_JPEG_QUALITY, 95])[1].tobytes()
+
+
+def _measured(folder: Path, photos: dict[str, bytes]) -> dict[str, dict]:
+    """Each photo written to `folder` and measured by `veg-area measure` with the true camera and the scene's
+    targets: its JSON row."""
+    write_calibration(folder / "endoscope.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
+    (folder / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    rows = {}
+    for name, data in photos.items():
+        (folder / name).write_bytes(data)
+        done = run_cli("measure", str(folder / name), "--calibration", str(folder / "endoscope.yaml"),
+                       "--targets", str(folder / "targets.yaml"), "--json", cwd=folder)
+        assert done.returncode == 0, done.stderr
+        rows[name] = json.loads(done.stdout)
+    return rows
+
+
 @pytest.mark.parametrize("suffix", ["png", "tif", "webp"])
 @pytest.mark.parametrize("orientation", range(1, 9))
 def test_every_orientation_of_each_format_is_read_as_stored_and_said(tmp_path, suffix, orientation):
@@ -103,17 +122,8 @@ def test_photos_held_either_way_calibrate_as_the_sensor_and_measure(tmp_path):
     assert "5 of 13 frames: EXIF orientation 6 not applied" in fits["tagged"][1], fits["tagged"][1]
     assert "differs from" not in fits["tagged"][1] and "EXIF" not in fits["untagged"][1]
 
-    write_calibration(tmp_path / "endoscope.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
-    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
-    cube = cv2.imencode(".jpg", render_scene(ENDOSCOPE, cube_scene(), 0.7), [cv2.IMWRITE_JPEG_QUALITY, 95])[1]
-    (tmp_path / "cube.jpg").write_bytes(cube.tobytes())
-    (tmp_path / "cube_turned.jpg").write_bytes(tagged_jpeg(cube.tobytes(), 8))
-    rows = {}
-    for name in ("cube.jpg", "cube_turned.jpg"):
-        done = run_cli("measure", str(tmp_path / name), "--calibration", str(tmp_path / "endoscope.yaml"),
-                       "--targets", str(tmp_path / "targets.yaml"), "--json", cwd=tmp_path)
-        assert done.returncode == 0, done.stderr
-        rows[name] = json.loads(done.stdout)
+    cube = _cube_jpeg()
+    rows = _measured(tmp_path, {"cube.jpg": cube, "cube_turned.jpg": tagged_jpeg(cube, 8)})
     assert rows["cube_turned.jpg"]["area_m2"] == rows["cube.jpg"]["area_m2"]
     assert any("EXIF orientation 8 not applied" in w for w in rows["cube_turned.jpg"]["warnings"])
     assert not any("EXIF" in w for w in rows["cube.jpg"]["warnings"])
@@ -173,19 +183,10 @@ def test_a_phones_motion_photo_is_measured_as_its_still_and_a_cut_one_is_still_r
     end marker, as a camera's MPF preview is: judged by the file's last bytes it was refused as "a truncated
     JPEG". Now the image ends at its own end marker: the still measures as the same JPEG alone does. A JPEG cut
     inside its image data is still refused as truncated."""
-    write_calibration(tmp_path / "endoscope.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
-    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
-    still = cv2.imencode(".jpg", render_scene(ENDOSCOPE, cube_scene(), 0.7), [cv2.IMWRITE_JPEG_QUALITY, 95])[1]
+    still = _cube_jpeg()
     video = b"\x00\x00\x00\x18ftypmp42\x00\x00\x00\x00mp42isom" + np.random.default_rng(7).bytes(20000)
-    (tmp_path / "still.jpg").write_bytes(still.tobytes())
-    (tmp_path / "PXL_20260502_100003.MP.jpg").write_bytes(still.tobytes() + video)
-    rows = {}
-    for name in ("still.jpg", "PXL_20260502_100003.MP.jpg"):
-        done = run_cli("measure", str(tmp_path / name), "--calibration", str(tmp_path / "endoscope.yaml"),
-                       "--targets", str(tmp_path / "targets.yaml"), "--json", cwd=tmp_path)
-        assert done.returncode == 0, done.stderr
-        rows[name] = json.loads(done.stdout)
+    rows = _measured(tmp_path, {"still.jpg": still, "PXL_20260502_100003.MP.jpg": still + video})
     assert rows["PXL_20260502_100003.MP.jpg"]["area_m2"] == rows["still.jpg"]["area_m2"]
-    (tmp_path / "cut.jpg").write_bytes(still.tobytes()[: still.size // 2])
+    (tmp_path / "cut.jpg").write_bytes(still[: len(still) // 2])
     image, problem = read_image(tmp_path / "cut.jpg")
     assert image is None and problem.startswith("is a truncated JPEG"), problem
