@@ -252,14 +252,20 @@ def test_two_machines_camera_on_one_area_node_on_the_other(tmp_path):
     assert np.all(np.abs(areas / result["truth_m2"] - 1) <= 0.01)
 
 
-def test_skipped_frames_are_counted_exactly_when_the_camera_outruns_the_area_node(tmp_path):
+WINDOW_END_SHIFT = 2  # frames a window's end may move across it (camera_info after a newer frame's image)
+
+
+def test_skipped_frames_are_counted_when_the_camera_outruns_the_area_node(tmp_path):
     """The camera loops a still at up to 1000 Hz; the area node measures the newest frame and counts the rest.
-    Over a window, frames taken + frames counted skipped = frames the camera published (every camera_info)."""
+    Over a window, frames taken + frames counted skipped or lost = frames the camera published (every
+    camera_info), but for the window's two ends: camera_info and images are two topics, not ordered, and a
+    frame whose camera_info comes after a newer frame's image is counted at the next frame taken, so each end
+    may shift a frame or two across it (one CI run in many: 4445 counted of 4444 published)."""
     result = run_scenario("full_rate", tmp_path, seconds=6.0)
     published, received, dropped, lost = (result[k] for k in ("published_in_window", "received_in_window",
                                                               "dropped_in_window", "lost_in_window"))
     assert received >= 100 and dropped > 0, result  # it measured, and it really fell behind
-    assert received + dropped + lost == published, result
+    assert abs(received + dropped + lost - published) <= 2 * WINDOW_END_SHIFT, result
     areas = np.array(result["areas"])
     assert len(areas) and np.all(np.abs(areas / result["truth_m2"] - 1) <= 0.005), areas
     # said in the log, at most once every 10 s (frames are skipped with every frame at this rate)
