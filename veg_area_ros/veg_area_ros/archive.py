@@ -68,10 +68,9 @@ def _members(path: Path) -> dict[str, tarfile.TarInfo]:
         raise ArchiveError(f"not a readable tar archive ({exc})") from exc
 
 
-def view_names(path: Path, suffixes: Iterable[str]) -> list[str]:
-    """The archive's images (members whose names end in one of `suffixes`), in name order. camera_calibration's
-    stereo archive (left- and right- views, two cameras) is refused: one calibration needs one camera's."""
-    images = [name for name in _members(path) if PurePosixPath(name).suffix.lower() in set(suffixes)]
+def _views(members: dict[str, tarfile.TarInfo], suffixes: Iterable[str]) -> list[str]:
+    wanted = set(suffixes)
+    images = [name for name in members if PurePosixPath(name).suffix.lower() in wanted]
     if not images:
         raise ArchiveError("holds no image (camera_calibration saves its views as left-NNNN.png)")
     sides = {side for side in ("left", "right") if any(name.startswith(f"{side}-") for name in images)}
@@ -81,12 +80,19 @@ def view_names(path: Path, suffixes: Iterable[str]) -> list[str]:
     return [path.name for path in in_name_order(PurePosixPath(name) for name in images)]
 
 
-def read_members(path: Path, names: list[str]) -> Iterator[tuple[str, bytes | None, str]]:
-    """Each named member's bytes (or None and why), in the order given, one member in memory at a time."""
+def view_names(path: Path, suffixes: Iterable[str]) -> list[str]:
+    """The archive's images (members whose names end in one of `suffixes`), in name order. camera_calibration's
+    stereo archive (left- and right- views, two cameras) is refused: one calibration needs one camera's."""
+    return _views(_members(path), suffixes)
+
+
+def read_views(path: Path, suffixes: Iterable[str]) -> Iterator[tuple[str, bytes | None, str]]:
+    """Each of `view_names`' images: its name and bytes (or None and why), in name order, the archive opened
+    once and one image in memory at a time."""
     try:
         with _open(path) as archive:
             members = _by_name(archive)
-            for name in names:
+            for name in _views(members, suffixes):
                 member = members[name]
                 if member.size > MAX_MEMBER_BYTES:
                     yield name, None, f"is {member.size} bytes, more than any camera's image"
@@ -100,19 +106,26 @@ def read_members(path: Path, names: list[str]) -> Iterator[tuple[str, bytes | No
 def calibration_text(path: Path) -> tuple[str, str]:
     """(member name, text) of the archive's calibration: `ost.yaml` (ROS 2's camera_info YAML), else `ost.txt`
     (the INI ROS 1's `ost.ini` holds). A stereo pair's archive (left.yaml, right.yaml) is refused naming them."""
-    members = _members(path)
-    stereo = [name for name in STEREO_CALIBRATION_MEMBERS if name in members]
-    if stereo:  # its ost.txt then holds both cameras
-        raise ArchiveError(f"holds a stereo pair's calibrations ({' and '.join(stereo)}): extract the measured "
-                           f"camera's (tar xzf ARCHIVE {stereo[0]}) and give that file")
-    name = next((name for name in CALIBRATION_MEMBERS if name in members), None)
-    if name is None:
-        raise ArchiveError("holds no calibration (camera_calibration saves ost.yaml beside its views)")
-    if members[name].size > MAX_CALIBRATION_BYTES:
-        raise ArchiveError(f"its {name} is {members[name].size} bytes: larger than any calibration file")
-    (_, data, problem), = read_members(path, [name])
-    if data is None:
-        raise ArchiveError(f"its {name} {problem}")
+    try:
+        with _open(path) as archive:
+            members = _by_name(archive)
+            stereo = [name for name in STEREO_CALIBRATION_MEMBERS if name in members]
+            if stereo:  # its ost.txt then holds both cameras
+                raise ArchiveError(f"holds a stereo pair's calibrations ({' and '.join(stereo)}): extract the "
+                                   f"measured camera's (tar xzf ARCHIVE {stereo[0]}) and give that file")
+            name = next((name for name in CALIBRATION_MEMBERS if name in members), None)
+            if name is None:
+                raise ArchiveError("holds no calibration (camera_calibration saves ost.yaml beside its views)")
+            if members[name].size > MAX_CALIBRATION_BYTES:
+                raise ArchiveError(f"its {name} is {members[name].size} bytes: larger than any calibration file")
+            handle = archive.extractfile(members[name])
+            if handle is None:
+                raise ArchiveError(f"its {name} cannot be read")
+            data = handle.read()
+    except FileNotFoundError:
+        raise
+    except READ_ERRORS as exc:
+        raise ArchiveError(f"not a readable tar archive ({exc})") from exc
     try:
         return name, decode_text(data)
     except UnicodeDecodeError as exc:

@@ -20,7 +20,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .archive import ArchiveError, is_archive, read_members, view_names
+from .archive import ArchiveError, is_archive, read_views, view_names
 from .bit_depth import to_8_bit
 from .exif import capture_time
 from .files import in_name_order, special_file, too_many_pixels
@@ -535,7 +535,7 @@ def iter_archive(path: Path, grey: bool = False) -> Iterator[Frame]:
     """The images inside a tar archive (camera_calibration's saved views), in name order, each named
     ARCHIVE#MEMBER; an archive that cannot be read further ends with a frame saying why."""
     try:
-        for name, data, problem in read_members(path, view_names(path, IMAGE_SUFFIXES)):
+        for name, data, problem in read_views(path, IMAGE_SUFFIXES):
             notes: list[str] = []
             image, problem = decode_image_file(data, grey, notes) if data is not None else (None, problem)
             yield Frame(f"{shown_name(path)}#{name}", image, problem, notes=tuple(notes))
