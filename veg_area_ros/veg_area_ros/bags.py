@@ -47,6 +47,7 @@ from .cdr import (
     decode_compressed_image,
     decode_image,
     decode_string,
+    zstd_module,
 )
 from .files import os_reason, special_file, write_atomic
 from .strict_yaml import load_text, read_text
@@ -390,9 +391,7 @@ def recover_bag(broken: str | Path, output: str | Path) -> Recovery:
         (length,) = struct.unpack_from("<Q", content, at)
         inner = content[at + 8:at + 8 + length]
         if compression == "zstd":
-            from backports import zstd
-
-            inner = memoryview(zstd.decompress(bytes(inner)))
+            inner = memoryview(zstd_module().decompress(bytes(inner)))
         elif compression:
             raise ValueError(f"compression {compression!r} cannot be recovered")
         if len(inner) != size or (crc and zlib.crc32(inner) != crc):

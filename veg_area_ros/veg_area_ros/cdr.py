@@ -9,6 +9,7 @@ Tested byte for byte against rclpy's serialize_message.
 
 from __future__ import annotations
 
+import functools
 import struct
 from dataclasses import dataclass
 
@@ -292,6 +293,17 @@ class CompressedImageFields:
         return image
 
 
+@functools.cache
+def zstd_module():
+    """Python's zstd (compression.zstd from 3.14, its backport before), found once: a failed import is tried
+    again at every call, and a zstd stream decodes every frame."""
+    try:
+        from compression import zstd
+    except ImportError:
+        from backports import zstd
+    return zstd
+
+
 MAX_IMAGE_BYTES = 8 * MAX_IMAGE_PIXELS  # four 16-bit channels
 ZSTD_IMAGE_HEADER = struct.Struct("<IIBII")  # height, width, is_bigendian, step, the encoding's length
 
@@ -310,10 +322,7 @@ def zstd_image(header: Header, data: memoryview) -> ImageFields:
     expected = step * height
     if not 0 < expected <= MAX_IMAGE_BYTES:
         raise ImageMessageError(f"a zstd image of {width}x{height} with {step}-byte rows: no camera's frame")
-    try:
-        from compression import zstd  # Python 3.14
-    except ImportError:
-        from backports import zstd
+    zstd = zstd_module()
     decompressor = zstd.ZstdDecompressor()
     try:
         rows = decompressor.decompress(bytes(data[start:]), max_length=expected)
