@@ -2,9 +2,15 @@
 pages open on the measurement view (the area node then draws its overlay for the console, the console decodes
 it and makes small JPEGs, and two headless chromium pages show them), alternated in rounds in one run, confined
 to this machine like the tests. Two camera rates: a real camera's (the area node keeps up) and as fast as the
-camera node can (the area node saturated: any CPU the console takes shows).
+camera node can (any CPU the console takes shows). Two cameras: the synthetic one (it adds fresh noise to each
+frame it renders, and at full rate that, not the area node, is what fills a core) and a recorded video of the same
+scene (120 frames, 3 DN of fresh noise each, MJPG as a cheap camera's) played by the camera node as a real
+camera's frames arrive: cheap to read, so at full rate the area node is what cannot keep up.
+Each round measures the rate without pages in two windows in a row before opening the pages: their ratio is what
+the same conditions scatter by, the floor under any single round's ratio.
 
-    .venv/bin/python bench/console_load.py [--seconds 10] [--rounds 3] [--rates 30,200] [--console-nice N]
+    .venv/bin/python bench/console_load.py [--seconds 10] [--rounds 3] [--rates 30,200] [--cameras synthetic,video]
+                                           [--console-nice N]
 """
 
 from __future__ import annotations
@@ -82,7 +88,27 @@ def chromium_pids() -> list[int]:
     return found
 
 
-def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path, console_nice: int | None) -> dict:
+def recorded_video(path: Path, frames: int = 120, noise_dn: float = 3.0) -> Path:
+    """The synthetic camera's cube scene (under water, behind its port) as an MJPG video, fresh noise per frame:
+    more frames than the camera node keeps decoded for a loop, so every frame is decoded as it is played."""
+    import cv2
+    import numpy as np
+
+    from veg_area_ros.sim.synthetic import DISTANCE_M, cube_scene, render_scene
+    from veg_area_ros.sources import SyntheticSource
+
+    source = SyntheticSource(scene="cube")
+    clean = render_scene(source.camera, cube_scene(), DISTANCE_M, source.port, noise_sigma=0.0).astype(float)
+    rng = np.random.default_rng(5)
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 30, source.camera.image_size)
+    for _ in range(frames):
+        writer.write(np.clip(clean + rng.normal(0.0, noise_dn, clean.shape), 0, 255).astype(np.uint8))
+    writer.release()
+    return path
+
+
+def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path, console_nice: int | None,
+                 video: Path | None = None) -> dict:
     import rclpy
     from playwright.sync_api import sync_playwright
     from rclpy.node import Node
@@ -90,7 +116,8 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path,
     from veg_area_msgs.msg import ProjectedArea
     from veg_area_ros.ros.qos import RESULT_QOS
 
-    processes = [start("camera_node", rate_hz=rate_hz, synthetic_scene="cube", camera_info_url=f"file://{calibration}"),
+    source = {"synthetic_scene": "cube"} if video is None else {"source": str(video), "loop": True}
+    processes = [start("camera_node", rate_hz=rate_hz, camera_info_url=f"file://{calibration}", **source),
                  start("area_node"),
                  start("console_node", **({} if console_nice is None else {"cpu_nice": console_nice}))]
     stamps: list[float] = []
@@ -99,12 +126,13 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path,
     probe.create_subscription(ProjectedArea, "projected_area",
                               lambda m: stamps.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9), RESULT_QOS)
     roles = {"camera": [processes[0].pid], "area": [processes[1].pid], "console": [processes[2].pid]}
-    without, with_pages, cpu, loads = [], [], [], []
+    without, with_pages, cpu, loads, again = [], [], [], [], []
     try:
         spin(probe, 15.0)  # discovery, the first frames' weights
         with sync_playwright() as playwright:
             browser = playwright.chromium.launch(executable_path="/usr/bin/chromium", args=CHROMIUM_ARGS)
             for _ in range(rounds):
+                again.append(count_areas(probe, stamps, seconds))  # the same conditions twice: the noise floor
                 without.append(count_areas(probe, stamps, seconds))
                 pages = [browser.new_page() for _ in range(2)]
                 for page in pages:
@@ -135,7 +163,10 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path,
             except subprocess.TimeoutExpired:
                 process.kill()
     ratios = [w / n for w, n in zip(with_pages, without, strict=True)]
-    return {"camera_hz": rate_hz, "without_pages_hz": without, "with_two_pages_hz": with_pages, "ratios": ratios,
+    same = [n / a for n, a in zip(without, again, strict=True)]
+    return {"camera": "synthetic" if video is None else "video", "camera_hz": rate_hz,
+            "without_pages_hz": without, "with_two_pages_hz": with_pages, "ratios": ratios,
+            "without_pages_before_hz": again, "no_pages_twice_ratios": same,
             "last_frame_numbers_shown": shown, "console_load_per_round": loads,
             "cpu_cores_with_pages": {role: statistics.median(c[role] for c in cpu) for role in cpu[0]}}
 
@@ -146,13 +177,24 @@ def inside(args: argparse.Namespace) -> int:
 
     calibration = Path("true_camera.yaml").resolve()
     write_calibration(calibration, SyntheticSource(scene="cube").camera, "synthetic")
-    print(f"{'camera Hz':>9}  {'Af/s without pages':>24}  {'Af/s with two pages':>24}  ratio min / median / max")
-    for rate in (float(r) for r in args.rates.split(",")):
-        result = measure_rate(rate, args.seconds, args.rounds, calibration, args.console_nice)
+    cases = []
+    for camera in args.cameras.split(","):
+        if camera not in ("synthetic", "video"):
+            raise SystemExit(f"--cameras takes synthetic and/or video, got {camera!r}")
+        video = None if camera == "synthetic" else recorded_video(Path("cube.avi").resolve())
+        cases += [(camera, video, float(rate)) for rate in args.rates.split(",")]
+    print(f"{'camera':>9} {'Hz':>4}  {'Af/s without pages':>24}  {'Af/s with two pages':>24}  "
+          "ratio min / median / max; pooled")
+    for camera, video, rate in cases:
+        result = measure_rate(rate, args.seconds, args.rounds, calibration, args.console_nice, video)
         ratios = result["ratios"]
-        print(f"{rate:9.0f}  {' '.join(f'{v:7.1f}' for v in result['without_pages_hz']):>24}  "
+        pooled = sum(result["with_two_pages_hz"]) / sum(result["without_pages_hz"])
+        print(f"{camera:>9} {rate:4.0f}  {' '.join(f'{v:7.1f}' for v in result['without_pages_hz']):>24}  "
               f"{' '.join(f'{v:7.1f}' for v in result['with_two_pages_hz']):>24}  "
-              f"{min(ratios):.3f} / {statistics.median(ratios):.3f} / {max(ratios):.3f}", flush=True)
+              f"{min(ratios):.3f} / {statistics.median(ratios):.3f} / {max(ratios):.3f}; {pooled:.3f}", flush=True)
+        same = result["no_pages_twice_ratios"]
+        print(f"           no pages in two windows in a row (the noise floor): {min(same):.3f} / "
+              f"{statistics.median(same):.3f} / {max(same):.3f}", flush=True)
         print("           CPU (cores) with the pages open: " + ", ".join(
             f"{role} {value:.2f}" for role, value in result["cpu_cores_with_pages"].items()), flush=True)
         loads = result["console_load_per_round"]
@@ -169,6 +211,7 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--rates", default="30,200")
+    parser.add_argument("--cameras", default="synthetic,video", help="the synthetic camera's frames and/or a video's")
     parser.add_argument("--console-nice", type=int, default=None,
                         help="the console node's cpu_nice (default: the node's own default)")
     parser.add_argument("--inside", action="store_true", help=argparse.SUPPRESS)

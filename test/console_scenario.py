@@ -86,7 +86,7 @@ def scenario_console(options: dict, nodes) -> dict:
     area = nodes.start("area_node")
     console = nodes.start("console_node", record_folder=str(bags))
     open_console = nodes.start("console_node", name="open_console", host="0.0.0.0", port=8081, token=OPEN_TOKEN,
-                               cpu_nice=0)
+                               cpu_nice=0, results_per_s=1.0)  # thins the 10 Hz results in DDS
     rclpy.init()
     probe = Node("console_probe")
     infos: list[dict] = []
@@ -197,6 +197,18 @@ def scenario_console(options: dict, nodes) -> dict:
             on_server = [p[0] for p in api_state()["area"]["points"]]
             out["series_on_page"], out["series_on_server"] = on_page, on_server
             out["overlay_natural_width"] = page.evaluate("document.getElementById('frame').width")
+            # the open console takes one result a second (results_per_s), thinned by their stamps in DDS; this one
+            # takes 30 a second, so every result of a 10 Hz measurement
+            before = {"open": api_state(OPEN_CONSOLE)["area"], "whole": api_state()["area"]}
+            started = time.monotonic()
+            spin(8.0)
+            after_open, after_whole = api_state(OPEN_CONSOLE), api_state()
+            out["thinning"] = {"seconds": time.monotonic() - started, "open": after_open["thinned"],
+                               "whole": after_whole["thinned"], "thinned_note": page.inner_text("#thinned")}
+            for name, series in (("open", after_open["area"]), ("whole", after_whole["area"])):
+                out["thinning"][f"{name}_received"] = series["received"] - before[name]["received"]
+                out["thinning"][f"{name}_measured"] = (series["frames"]["measured"]
+                                                       - before[name]["frames"]["measured"])
             shot(page, "console-measurement")
 
             # --- a page nobody sees asks for nothing, and catches up once shown -------------------------------

@@ -330,6 +330,24 @@ def test_the_page_shows_the_overlay_and_af(console):
 
 
 @needs_browser
+def test_a_console_taking_fewer_results_has_them_thinned_in_dds_and_still_reads_every_frames_count(console):
+    """The open console takes one result a second (results_per_s): once it has read the results' rate from the
+    frame counter they carry, a content filter on their stamps passes one window a second, so it takes a few
+    of the 10 Hz measurement's results while the area node's counts it shows stay whole. The default console
+    (30 a second) takes every result of a measurement this slow, and its page says nothing of thinning."""
+    t = console["thinning"]
+    rate = t["whole_measured"] / t["seconds"]  # the area node's results a second meanwhile, by its own count
+    assert rate > 4.0, f"the 10 Hz camera's results came at {rate:.1f} Hz: too few to judge thinning"
+    assert t["whole"]["results"] is None and t["thinned_note"] == ""
+    assert abs(t["whole_received"] - t["whole_measured"]) <= 3, t
+    thinned = t["open"]["results"]
+    assert thinned is not None and thinned["per_s"] == 1.0, t
+    assert thinned["rate_hz"] == pytest.approx(rate, rel=0.5), t
+    assert 3 <= t["open_received"] < 0.5 * t["open_measured"], t
+    assert t["open_measured"] >= 0.6 * t["whole_measured"], t  # the counts a thinned result brings are the node's
+
+
+@needs_browser
 def test_a_page_nobody_sees_asks_for_nothing_and_catches_up_once_shown(console):
     """A tab in the background or a minimised window: no image and no state is fetched while the page is
     hidden (the standard visibility API says so); shown again, both loops resume and a newer image is drawn."""
@@ -450,6 +468,16 @@ def test_the_newest_result_is_read_from_its_json_only_when_asked():
     for broken in ("{not json", "[1, 2]"):
         series.add_info(broken)
         assert series.as_dict()["warnings"] == [] and series.as_dict()["frames"]["measured"] is None
+
+
+def test_the_newest_result_is_summarised_only_when_a_page_asks():
+    """The console node hands over each result's summary as a function (results come at the camera's rate):
+    made once a page reads the state, and only for the newest result."""
+    series, made = AreaSeries(), []
+    for k in range(50):
+        series.add_info(lambda k=k: made.append(k) or {"frames_measured": k, "warnings": []})
+    assert made == []
+    assert series.as_dict()["frames"]["measured"] == 49 and made == [49]
 
 
 def test_a_result_without_a_finite_af_is_counted_not_plotted():

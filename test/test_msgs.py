@@ -149,6 +149,30 @@ def test_a_frames_result_fills_every_field_and_rosbags_reads_the_bytes_alike(pre
         assert typestore().hash_rihs01(f"veg_area_msgs/msg/{name}") == expected, name
 
 
+def test_the_frame_counts_travel_in_the_result_and_an_unknown_one_as_minus_one(prefix):
+    """The area node's frame counts are fields of ProjectedArea (the console reads them there, not from the
+    JSON); a count the node cannot know (skipped frames without a camera_info per frame) is -1 in the message
+    and unknown (None) again on the console's page."""
+    from builtin_interfaces.msg import Time
+
+    from veg_area_ros.area import AreaMeasurer
+    from veg_area_ros.classify import Classifier
+    from veg_area_ros.ros.console_node import result_summary
+    from veg_area_ros.ros.messages import projected_area
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets
+
+    result = AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120.0)).measure(
+        render_scene(ENDOSCOPE, cube_scene(), 0.5))
+    counts = {"frames_received": 12, "frames_skipped": None, "frames_lost": 0, "frames_measured": 11}
+    msg = projected_area(result, Time(sec=3), "camera", "camera_info", counts)
+    assert (msg.frames_received, msg.frames_skipped, msg.frames_lost, msg.frames_measured) == (12, -1, 0, 11)
+    assert projected_area(result, Time(sec=3), "camera", "camera_info").frames_measured == -1  # none given
+    summary = result_summary(msg)
+    assert (summary["frames_received"], summary["frames_dropped"], summary["frames_lost"],
+            summary["frames_measured"]) == (12, None, 0, 11)
+    assert summary["warnings"] == result.warnings and summary["pixel_count"] == result.pixel_count
+
+
 def test_a_bag_recorded_before_a_field_was_added_reads_with_its_own_definition(tmp_path):
     """A bag whose ProjectedArea was recorded with a definition one field shorter than today's (as a recording
     from before a field is added will be; here without `calibration_std_m2`) is read with the definition it was
@@ -171,7 +195,8 @@ def test_a_bag_recorded_before_a_field_was_added_reads_with_its_own_definition(t
                                        "count_area_m2", "threshold")}
     fields.update(area_m2=0.0105, area_std_m2=1.5e-5, edge_trend_m2=2e-6, pixel_count=4321,
                   area_mode="subpixel", subpixel_applied=True, tone_curve="linear", calibrated=True,
-                  calibration_source="camera_info", warnings=["exposure: clipped"])
+                  calibration_source="camera_info", warnings=["exposure: clipped"], frames_received=9,
+                  frames_skipped=-1, frames_lost=0, frames_measured=8)
     header = old.types["std_msgs/msg/Header"](stamp=old.types["builtin_interfaces/msg/Time"](sec=3, nanosec=0),
                                               frame_id="camera")
     message = old.types[name](header=header, **fields)

@@ -158,7 +158,7 @@ class AreaSeries:
 
     points: deque = field(default_factory=lambda: deque(maxlen=SERIES_POINTS))  # (s since first, Af, std)
     first_stamp_s: float | None = None
-    latest: dict | str = field(default_factory=dict)
+    latest: dict | str | Callable[[], dict] = field(default_factory=dict)
     received: int = 0
     run: int = 0  # a new run (a replay that restarted) starts the points afresh
     appended: int = 0  # points appended in this run: a page asks only for those after the ones it has
@@ -178,9 +178,9 @@ class AreaSeries:
             self.points.append((round(stamp_s - self.first_stamp_s, 4), area_m2, std_m2))
             self.appended += 1
 
-    def add_info(self, summary: dict | str) -> None:
-        """The newest result's summary, or its JSON text (parsed only when a page reads it: results come at
-        the camera's rate, pages ask twice a second)."""
+    def add_info(self, summary: dict | str | Callable[[], dict]) -> None:
+        """The newest result's summary, its JSON text or what makes it (made only when a page reads it: results
+        come at the camera's rate, pages ask twice a second)."""
         with self._lock:
             self.latest = summary
 
@@ -190,6 +190,8 @@ class AreaSeries:
         polling twice a second is not sent the whole window each time."""
         with self._lock:
             latest = self.latest
+        if callable(latest):
+            latest = latest()
         if isinstance(latest, str):
             try:
                 latest = json.loads(latest)

@@ -277,6 +277,9 @@ function showArea(area) {
     (area.area_mode ? ` · mode ${area.area_mode}${area.subpixel_applied === false ? " (counted whole pixels)" : ""}` : "") +
     (area.threshold !== null && area.threshold !== undefined ? ` · threshold ${Number(area.threshold).toFixed(1)}` : "") +
     (area.calibrated === false ? " · UNCALIBRATED" : ""));
+  const thinned = state && state.thinned && state.thinned.results;
+  setText("thinned", thinned ? `the chart shows about ${Math.round(thinned.per_s)} of ` +
+    `${Math.round(thinned.rate_hz)} results a second (every one is published and recorded)` : "");
   setList("warnings", area.warnings);
 }
 

@@ -454,15 +454,18 @@ class AreaNode(Node):
             kind = warning.split(":", 1)[0]
             self.warn("Af less trustworthy", warning, like=kind)
         stamp = Time(sec=header.sec, nanosec=header.nanosec)
-        publish_safely(self, self.area_pub, projected_area(result, stamp, header.frame_id, source))
+        counts = {"frames_received": self.frames.received, "frames_skipped": self.frames.skipped,
+                  "frames_lost": self.frames.lost, "frames_measured": self.frames_measured}
+        publish_safely(self, self.area_pub, projected_area(result, stamp, header.frame_id, source, counts))
         if self.area_vector_pub.get_subscription_count() > 0:
             publish_safely(self, self.area_vector_pub, projected_area_vector(result, stamp, header.frame_id))
-        summary = result.summary()
-        summary.update(stamp={"sec": header.sec, "nanosec": header.nanosec}, frame_id=header.frame_id,
-                       frames_received=self.frames.received, frames_dropped=self.frames.skipped,
-                       frames_lost=self.frames.lost, weights_rebuilt=self.measurer.rebuilds,
-                       frames_measured=self.frames_measured)
-        publish_safely(self, self.info_pub, String(data=json.dumps(summary)))
+        if self.info_pub.get_subscription_count() > 0:  # the record as JSON costs its text: made only when read
+            summary = result.summary()
+            summary.update(stamp={"sec": header.sec, "nanosec": header.nanosec}, frame_id=header.frame_id,
+                           frames_received=self.frames.received, frames_dropped=self.frames.skipped,
+                           frames_lost=self.frames.lost, weights_rebuilt=self.measurer.rebuilds,
+                           frames_measured=self.frames_measured)
+            publish_safely(self, self.info_pub, String(data=json.dumps(summary)))
         # the images cost a remap each: made only for topics somebody listens to (rosbag2 counts)
         overlay = draw_overlay(result) if wanted[2] or preview else None
         for publisher, image, want in ((self.mask_pub, result.mask, wanted[0]),

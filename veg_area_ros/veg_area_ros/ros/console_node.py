@@ -23,12 +23,11 @@ from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
-from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from veg_area_msgs.msg import CalibrationProgress, ProjectedArea
 
-from ..cdr import ImageMessageError, decode_camera_info
+from ..cdr import ImageMessageError, decode_camera_info, stamp_ns
 from ..console_server import ConsoleServer
 from ..console_state import (
     TUNED,
@@ -43,7 +42,9 @@ from ..console_state import (
     folder_size,
     now,
 )
+from ..stream_thinning import StreamRate, Thinning
 from .messages import (
+    FRAME_COUNTS,
     IMAGE_TRANSPORT_HELP,
     IMAGE_TRANSPORTS,
     decode_transported,
@@ -59,6 +60,8 @@ FIT_TIMEOUT_S = 600.0  # a fit of many views with model auto takes minutes on a 
 CALL_TIMEOUT_S = 20.0
 RECORDER_STOP_S = 60.0  # the recorder writes its bag's summary when stopped
 CALIBRATION_SERVICES = {"fit": "calibrate", "commit": "commit", "discard": "discard"}
+CAMERA_INFO_PER_S = 2.0  # camera_info: only the served calibration is shown
+THINNED_SILENCE_S = 2.0  # a thinned stream that brought nothing for this long is taken whole again
 
 
 class ConsoleNode(Node):
@@ -107,11 +110,23 @@ class ConsoleNode(Node):
         self.view_types = {"area": Image, "calibration": Image, "camera": camera_type}
         self.view_transports = {"area": "raw", "calibration": "raw", "camera": transport}
         self.view_subscriptions: dict = {}
-        self.create_subscription(ProjectedArea, "projected_area", self._on_area, RESULT_QOS)
-        self.create_subscription(String, "projected_area/info", self._on_info, RESULT_QOS)
+        # results and camera_info come at the camera's rate: each is thinned to what the page shows, at the rate
+        # the results' frame counter tells, and camera_info's own (counted while it comes whole)
+        self.rates = {"results": StreamRate(), "camera_info": StreamRate()}
+        results_per_s = declare(self, "results_per_s", 30.0, "Results the console takes a second at most (the "
+                                "chart's points, the newest warnings and counts): a faster measurement's are "
+                                "thinned by their stamps in DDS (a content filter) before they cost the console or "
+                                "the area node anything; the page says so. Every result is still published.",
+                                low=1.0, high=1000.0, read_only=True)
+        self.thinned = {"results": Thinning(results_per_s), "camera_info": Thinning(CAMERA_INFO_PER_S)}
+        self.last_taken = {"results": now(), "camera_info": now()}
+        self.camera_infos_taken = 0
+        self.thinned_subscriptions = {
+            "results": self.create_subscription(ProjectedArea, "projected_area", self._on_area, RESULT_QOS),
+            "camera_info": self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, LATCHED_QOS,
+                                                    raw=True)}
         self.create_subscription(CalibrationProgress, f"/{self.calibration_name}/progress", self._on_progress,
                                  RESULT_QOS)
-        self.create_subscription(CameraInfo, "camera_info", self._on_camera_info, LATCHED_QOS, raw=True)
         self.get_client = self.create_client(GetParameters, f"/{self.area_name}/get_parameters")
         self.set_client = self.create_client(SetParametersAtomically, f"/{self.area_name}/set_parameters_atomically")
         self.calibration_clients = {action: self.create_client(Trigger, f"/{self.calibration_name}/{service}")
@@ -130,19 +145,24 @@ class ConsoleNode(Node):
     # --- what comes from the graph ---------------------------------------------------------------------------
     def _on_area(self, msg: ProjectedArea) -> None:
         stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self.last_taken["results"] = now()
+        self.rates["results"].add(stamp, msg.frames_measured)
         self.series.add_area(stamp, msg.area_m2, msg.area_std_m2)
-
-    def _on_info(self, msg: String) -> None:
-        self.series.add_info(msg.data)
+        self.series.add_info(lambda: result_summary(msg))
 
     def _on_progress(self, msg: CalibrationProgress) -> None:
         self.calibration_log.add_progress(progress_as_dict(msg))
 
     def _on_camera_info(self, data: bytes) -> None:
+        self.last_taken["camera_info"] = now()
         try:
             info = decode_camera_info(data)
+            stamp = stamp_ns(data) * 1e-9
         except (ImageMessageError, ValueError):
             return
+        self.camera_infos_taken += 1
+        if not self.thinned["camera_info"].filtered:
+            self.rates["camera_info"].add(stamp, self.camera_infos_taken)
         k = list(info.k)
         self.calibration_log.served = {"model": info.distortion_model, "width": info.width, "height": info.height,
                                        "fx": k[0], "fy": k[4], "cx": k[2], "cy": k[5], "d": list(info.d)}
@@ -163,6 +183,7 @@ class ConsoleNode(Node):
             future = self.get_client.call_async(GetParameters.Request(names=list(TUNED)))
             future.add_done_callback(self._got_parameters)
         self.load.update(cpu_pressure())
+        self._thin(moment)
         for view, feed in self.feeds.items():
             feed.max_rate_hz = self.load.image_rate_hz
             subscribed = view in self.view_subscriptions
@@ -172,6 +193,27 @@ class ConsoleNode(Node):
                     IMAGE_QOS, raw=True)
             elif subscribed and not feed.wanted(moment):
                 self.destroy_subscription(self.view_subscriptions.pop(view))
+
+    def _thin(self, moment: float) -> None:
+        """Move each fast stream's content filter to its rate; a filtered stream that went silent (its rate
+        fell, or its phase left every window) is taken whole until its rate is known again. camera_info is
+        thinned only while one node publishes it (a driver's, with every frame): a second publisher's one
+        message (a calibration node serving a new fit) must not fall between the windows."""
+        for stream, thinning in list(self.thinned.items()):
+            subscription = self.thinned_subscriptions[stream]
+            if thinning.filtered and moment - self.last_taken[stream] > THINNED_SILENCE_S:
+                self.rates[stream] = StreamRate()
+            rate = self.rates[stream].rate_hz
+            if stream == "camera_info" and self.count_publishers(subscription.topic_name) != 1:
+                rate = None
+            change = thinning.change(rate)
+            if change is False:
+                continue
+            try:
+                subscription.set_content_filter(*(change or ("", [])))
+            except Exception as exc:  # a middleware without content filters: the stream is taken whole
+                del self.thinned[stream]
+                self.get_logger().info(f"{subscription.topic_name} taken whole: no content filter here ({exc})")
 
     def _got_parameters(self, future) -> None:
         self._parameters_asked_at = None
@@ -197,7 +239,9 @@ class ConsoleNode(Node):
                           "calibration": {"name": self.calibration_name,
                                           "present": self.present[self.calibration_name]}},
                 "area": self.series.as_dict(shown), "calibration": self.calibration_log.as_dict(),
-                "parameters": self.parameters, "recording": recording, "load": self.load.as_dict()}
+                "parameters": self.parameters, "recording": recording, "load": self.load.as_dict(),
+                "thinned": {stream: {"rate_hz": thinning.applied_rate_hz, "per_s": thinning.per_s}
+                            if thinning.filtered else None for stream, thinning in self.thinned.items()}}
 
     # --- what the page asks for (from the server's worker threads) --------------------------------------------
     def _call(self, client, request, timeout: float, missing: str):
@@ -281,6 +325,16 @@ class ConsoleNode(Node):
             if self.recorder is not None and self.recorder.poll() is None:
                 self._stop_recorder()
         super().destroy_node()
+
+
+def result_summary(msg: ProjectedArea) -> dict:
+    """What the page shows of a result beside its Af (AreaSeries.as_dict): the warnings, the classification and
+    the area node's frame counts (None where it cannot know them)."""
+    counts = {name: None if getattr(msg, name) < 0 else getattr(msg, name) for name in FRAME_COUNTS}
+    return {"warnings": list(msg.warnings), "area_mode": msg.area_mode, "subpixel_applied": msg.subpixel_applied,
+            "threshold": msg.threshold, "calibrated": msg.calibrated, "pixel_count": msg.pixel_count,
+            "frames_measured": counts["frames_measured"], "frames_dropped": counts["frames_skipped"],
+            "frames_lost": counts["frames_lost"], "frames_received": counts["frames_received"]}
 
 
 def _named(name: str, value):

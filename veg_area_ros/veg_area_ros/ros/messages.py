@@ -50,9 +50,14 @@ def decode_transported(transport: str, data: bytes) -> ImageFields | CompressedI
     """A serialized image message of `transported_image(transport)` as its fields (`pixels()` gives the frame)."""
     return decode_image(data) if transport == "raw" else decode_compressed_image(data)
 
-def projected_area(result: AreaResult, stamp: Time, frame_id: str, calibration_source: str) -> ProjectedArea:
-    """A frame's Af with every field named: the std and its terms, the classification, the calibration used
-    and the warnings (the rest of the record stays in projected_area/info's JSON)."""
+FRAME_COUNTS = ("frames_received", "frames_skipped", "frames_lost", "frames_measured")
+
+
+def projected_area(result: AreaResult, stamp: Time, frame_id: str, calibration_source: str,
+                   frames: dict[str, int | None] | None = None) -> ProjectedArea:
+    """A frame's Af with every field named: the std and its terms, the classification, the calibration used,
+    the warnings and the node's frame counts (`frames`, FRAME_COUNTS; a count not known or not given: -1); the
+    rest of the record stays in projected_area/info's JSON."""
     msg = ProjectedArea()
     msg.header.stamp, msg.header.frame_id = stamp, frame_id
     msg.area_m2, msg.area_std_m2 = float(result.area_m2), float(result.area_std_m2)
@@ -67,6 +72,9 @@ def projected_area(result: AreaResult, stamp: Time, frame_id: str, calibration_s
     msg.subpixel_applied, msg.calibrated = bool(result.subpixel_applied), bool(result.calibrated)
     msg.calibration_source = calibration_source
     msg.warnings = [str(w) for w in result.warnings]
+    for name in FRAME_COUNTS:
+        count = (frames or {}).get(name)
+        setattr(msg, name, -1 if count is None else int(count))
     return msg
 
 
