@@ -199,7 +199,7 @@ class ConsoleNode(Node):
         fell, or its phase left every window) is taken whole until its rate is known again. camera_info is
         thinned only while one node publishes it (a driver's, with every frame): a second publisher's one
         message (a calibration node serving a new fit) must not fall between the windows."""
-        for stream, thinning in list(self.thinned.items()):
+        for stream, thinning in self.thinned.items():
             subscription = self.thinned_subscriptions[stream]
             if thinning.filtered and moment - self.last_taken[stream] > THINNED_SILENCE_S:
                 self.rates[stream] = StreamRate()
@@ -212,7 +212,7 @@ class ConsoleNode(Node):
             try:
                 subscription.set_content_filter(*(change or ("", [])))
             except Exception as exc:  # a middleware without content filters: the stream is taken whole
-                del self.thinned[stream]
+                thinning.filtered, thinning.per_s = False, 0.0  # for good: no windows are made for 0 a second
                 self.get_logger().info(f"{subscription.topic_name} taken whole: no content filter here ({exc})")
 
     def _got_parameters(self, future) -> None:
