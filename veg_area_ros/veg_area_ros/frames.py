@@ -25,6 +25,7 @@ from .bit_depth import to_8_bit
 from .exif import capture_time
 from .files import in_name_order, special_file, too_many_pixels
 from .orientation import as_stored, is_tiff, orientation_note, stored_orientation, video_rotation_note
+from .video_container import hdr_note
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".jpe", ".jfif", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp",
                   ".avif", ".jp2", ".j2k"}
@@ -410,8 +411,8 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
     if not capture.isOpened():
         yield Frame(shown_name(path), None, "is not a video OpenCV can open")
         return
-    note = video_rotation_note(capture.get(cv2.CAP_PROP_ORIENTATION_META))
-    notes = (note,) if note else ()
+    notes = tuple(note for note in (video_rotation_note(capture.get(cv2.CAP_PROP_ORIENTATION_META)), hdr_note(path))
+                  if note)
     fps = capture.get(cv2.CAP_PROP_FPS)
     declared = int(capture.get(cv2.CAP_PROP_FRAME_COUNT))
     if stop is not None:

@@ -1,0 +1,107 @@
+"""What a video's container says of how its levels encode light. No ROS here.
+
+Phones film HDR video by default (iPhones since 2020 in HLG, many Android phones in PQ, HDR10). OpenCV
+decodes such a stream to 8 bits without mapping its tones, so its grey levels follow the HLG or PQ curve, which
+is neither light (`linear`) nor sRGB: Otsu's threshold and the edges' shares then sit off the edges as on an
+sRGB video read as linear. An MP4 or QuickTime file (ISO base media) names the curve in its video sample
+entry's colour box (`colr`, `nclx` in MP4, `nclc` in QuickTime) as an ITU-T H.273 transfer code point. Only the
+boxes on the way there are read: `moov` whole (a few MB for hours of video), the rest skipped by its size."""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterator
+from pathlib import Path
+
+HDR_TRANSFERS = {16: "PQ (SMPTE ST 2084, HDR10)", 18: "HLG (ARIB STD-B67)"}  # H.273 transfer characteristics
+VISUAL_ENTRY_FIELDS = 78  # a visual sample entry's fixed fields before its child boxes (ISO/IEC 14496-12)
+STSD_FIELDS = 8  # version, flags and the entry count
+MAX_MOOV_BYTES = 512 * 1024 * 1024  # a movie header is a few MB even for hours; more is not a movie header
+
+
+def boxes(data: bytes, start: int = 0, end: int | None = None) -> Iterator[tuple[bytes, int, int]]:
+    """(type, body start, body end) of each box in data[start:end]; stops at the first one that does not fit."""
+    end = len(data) if end is None else end
+    offset = start
+    while offset + 8 <= end:
+        size, kind = struct.unpack_from(">I4s", data, offset)
+        header = 8
+        if size == 1 and offset + 16 <= end:
+            (size,), header = struct.unpack_from(">Q", data, offset + 8), 16
+        elif size == 0:
+            size = end - offset
+        if size < header or offset + size > end:
+            return
+        yield kind, offset + header, offset + size
+        offset += size
+
+
+def movie_header(path: Path) -> bytes | None:
+    """The body of the file's `moov` box, or None for a file that is not ISO base media or has none."""
+    try:
+        with open(path, "rb") as file:
+            file.seek(0, 2)
+            length, offset = file.tell(), 0
+            while offset + 8 <= length:
+                file.seek(offset)
+                head = file.read(16)
+                size, kind = struct.unpack_from(">I4s", head)
+                header = 8
+                if size == 1 and len(head) == 16:
+                    (size,), header = struct.unpack_from(">Q", head, 8), 16
+                elif size == 0:
+                    size = length - offset
+                if not all(32 <= c < 127 for c in kind) or size < header or offset + size > length:
+                    return None  # not a box: no ISO base media file
+                if kind == b"moov":
+                    if size - header > MAX_MOOV_BYTES:
+                        return None
+                    file.seek(offset + header)
+                    return file.read(size - header)
+                offset += size
+    except OSError:
+        return None
+    return None
+
+
+def transfer_characteristics(path: Path) -> int | None:
+    """The H.273 transfer code point the first video track's colour box names, or None where it names none."""
+    moov = movie_header(path)
+    if moov is None:
+        return None
+    for kind, start, end in boxes(moov):
+        if kind == b"trak":
+            found = _track_transfer(moov, start, end)
+            if found is not None:
+                return found
+    return None
+
+
+def _track_transfer(data: bytes, start: int, end: int) -> int | None:
+    inside = {kind: (s, e) for kind, s, e in boxes(data, start, end)}
+    if b"mdia" not in inside:
+        return None
+    media = {kind: (s, e) for kind, s, e in boxes(data, *inside[b"mdia"])}
+    handler = media.get(b"hdlr")
+    if handler is None or data[handler[0] + 8:handler[0] + 12] != b"vide" or b"minf" not in media:
+        return None
+    level = media[b"minf"]
+    for name in (b"stbl", b"stsd"):
+        level = next(((s, e) for kind, s, e in boxes(data, *level) if kind == name), None)
+        if level is None:
+            return None
+    for _, entry_start, entry_end in boxes(data, level[0] + STSD_FIELDS, level[1]):
+        for kind, s, e in boxes(data, entry_start + VISUAL_ENTRY_FIELDS, entry_end):
+            if kind == b"colr" and e - s >= 10 and data[s:s + 4] in (b"nclx", b"nclc"):
+                return struct.unpack_from(">H", data, s + 6)[0]
+    return None
+
+
+def hdr_note(path: Path) -> str:
+    """What a frame of an HDR video says of its levels ('' where the container names no HDR curve)."""
+    curve = HDR_TRANSFERS.get(transfer_characteristics(path))
+    if curve is None:
+        return ""
+    return (f"HDR video ({curve}): its grey levels follow that curve, which neither tone curve here reads "
+            "(linear, srgb), so the threshold and the edges' shares sit off the object's edges (a few % of Af on "
+            "a small object, as an sRGB video read as linear); film in SDR (a phone's HDR video off) to measure")
