@@ -190,7 +190,8 @@ def _zstd(frame: np.ndarray, k: int, frame_id: str):
 def test_a_bag_of_one_cameras_every_transport_measures_its_raw_frames(workspace, scenes):
     """`ros2 bag record -a` beside an image_transport camera keeps image_raw, image_raw/compressed and
     image_raw/zstd, the same frames three times: it was "pick the image topic". The raw topic is measured (the
-    lossless zstd one measures the same Af); two cameras' topics still need --image-topic."""
+    lossless zstd one measures the same Af), and the run says which and what it left; two cameras' topics still
+    need --image-topic."""
     frames = scenes["left"]
     jpegs = [cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 85])[1].tobytes() for frame in frames]
     bag = workspace / "record_all"
@@ -201,13 +202,16 @@ def test_a_bag_of_one_cameras_every_transport_measures_its_raw_frames(workspace,
         ("/cam/image_raw/zstd", "sensor_msgs/msg/CompressedImage", [_zstd(f, k, "cam") for k, f in enumerate(frames)]),
         ("/cam/image_raw", "sensor_msgs/msg/Image", [_image(f, k, "cam") for k, f in enumerate(frames)])]
     write_bag(bag, "mcap", camera)
-    rows = {}
+    rows, said = {}, {}
     for name, options in [("chosen", ()), ("raw", ("--image-topic", "/cam/image_raw")),
                           ("zstd", ("--image-topic", "/cam/image_raw/zstd")),
                           ("jpeg", ("--image-topic", "/cam/image_raw/compressed"))]:
         measured, done = _measure(workspace, bag, "--calibration", "bag", *options)
         assert done.returncode == 0, done.stderr
-        rows[name] = [row["area_m2"] for row in measured]
+        rows[name], said[name] = [row["area_m2"] for row in measured], done.stdout + done.stderr
+    assert ("record_all: measuring /cam/image_raw" in said["chosen"]
+            and "also recorded and not read: /cam/image_raw/compressed, /cam/image_raw/zstd" in said["chosen"])
+    assert "also recorded" not in said["raw"]  # named: no choice was made
     assert rows["chosen"] == rows["raw"] == rows["zstd"] and len(rows["raw"]) == FRAMES
     assert rows["jpeg"] != rows["raw"]  # JPEG's loss shows: the raw topic was the one measured
     two = workspace / "two_cameras_all"

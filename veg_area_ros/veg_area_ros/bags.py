@@ -549,9 +549,17 @@ def _decode_image(msgtype: str, data):
 
 
 def bag_image_count(path: str | Path, image_topic: str | None = None) -> int:
+    return bag_images(path, image_topic)[1]
+
+
+def bag_images(path: str | Path, image_topic: str | None = None) -> tuple[str, int, list[str]]:
+    """The bag's image topic that is read (`_image_connections`), its message count and the bag's other image
+    topics (a camera's other transports that `ros2 bag record -a` kept, which are not read)."""
     reader = _open_reader(path)
     try:
-        return sum(c.msgcount for c in _image_connections(reader, path, image_topic))
+        chosen = _image_connections(reader, path, image_topic)
+        others = sorted({c.topic for c in reader.connections if c.msgtype in IMAGE_TYPES} - {chosen[0].topic})
+        return chosen[0].topic, sum(c.msgcount for c in chosen), others
     finally:
         reader.close()
 

@@ -142,7 +142,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     input (a cluster task): the rows only, no file written and no verdict on the run."""
     import cv2
 
-    from ..bags import BagError, bag_image_count
+    from ..bags import BagError, bag_images
     from ..calib_io import CalibrationFileError, read_calibration, write_calibration
     from ..camera_info import info_to_camera
     from ..classify import ClassifyError
@@ -190,7 +190,13 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     if from_bag and len(bags) != len(files):
         raise CliError("--calibration bag needs rosbag2 inputs (their recorded camera_info)", EXIT_USAGE)
     try:
-        bag_frames = sum(bag_image_count(b, job.image_topic) for b in bags)
+        bag_frames = 0
+        for bag in bags:
+            topic, count, others = bag_images(bag, job.image_topic)
+            bag_frames += count
+            if others and job.image_topic is None:  # a choice among the bag's image topics is said
+                say(f"{bag.name}: measuring {topic} (the raw frames first, then zstd, then compressed: the same "
+                    f"frames, lossless first); also recorded and not read: {', '.join(others)}")
         # a calibration file for another camera than the one a bag's camera_info describes: said in each result
         other_camera = {} if file_camera is None else {
             b.name: problem for b in bags if (problem := _other_camera(b, job.image_topic, calibration))}
