@@ -20,6 +20,11 @@ EXIF_TIME = re.compile(r"(\d{4}):(\d\d):(\d\d) (\d\d):(\d\d):(\d\d)")
 EXIF_ZONE = re.compile(r"([+-])(\d\d):(\d\d)")
 
 
+def is_tiff(data: bytes) -> bool:
+    """Whether the bytes begin as a TIFF structure does (either byte order): a TIFF file, or an EXIF block."""
+    return data[:4] in (b"II*\x00", b"MM\x00*")
+
+
 def exif_tiff(data: bytes) -> bytes:
     """The TIFF structure of a JPEG's, PNG's, WebP's or TIFF's EXIF (from its byte-order mark), b"" if none."""
     if data[:2] == b"\xff\xd8":
@@ -31,7 +36,7 @@ def exif_tiff(data: bytes) -> bytes:
     else:
         block = data
     block = block.removeprefix(EXIF_PREFIX)
-    return block if block[:4] in (b"II*\x00", b"MM\x00*") else b""
+    return block if is_tiff(block) else b""
 
 
 def _jpeg_exif(data: bytes) -> bytes:

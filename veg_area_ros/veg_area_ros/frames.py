@@ -22,9 +22,9 @@ import numpy as np
 
 from .archive import ArchiveError, is_archive, read_views, view_names
 from .bit_depth import to_8_bit
-from .exif import capture_time
+from .exif import capture_time, is_tiff
 from .files import in_name_order, special_file, too_many_pixels
-from .orientation import as_stored, is_tiff, orientation_note, stored_orientation, video_rotation_note
+from .orientation import as_stored, orientation_note, stored_orientation, video_rotation_note
 from .video_container import hdr_note
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".jpe", ".jfif", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp",

@@ -29,11 +29,6 @@ def stored_orientation(data: bytes) -> int:
     return orientation if orientation in SHOWN_AS else 1
 
 
-def is_tiff(data: bytes) -> bool:
-    """OpenCV turns a TIFF by its orientation even when told not to: `as_stored` turns it back."""
-    return data[:4] in (b"II*\x00", b"MM\x00*")
-
-
 def as_stored(shown: np.ndarray, orientation: int) -> np.ndarray:
     """The stored grid of an image that was turned for showing by `orientation` (the inverse of SHOWN_AS)."""
     undo = {2: lambda x: x[:, ::-1], 3: lambda x: x[::-1, ::-1], 4: lambda x: x[::-1],
