@@ -22,7 +22,7 @@ from pathlib import Path
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo
 from std_srvs.srv import Trigger
 
 from veg_area_msgs.msg import CalibrationProgress, ProjectedArea
@@ -104,10 +104,9 @@ class ConsoleNode(Node):
         # the area node's preview: its overlay at a bounded rate (every frame's overlay would cost it a remap each)
         transport = declare(self, "image_transport", "raw", f"{IMAGE_TRANSPORT_HELP} (the camera view; the "
                             "overlay and the feedback are raw).", choices=IMAGE_TRANSPORTS, read_only=True)
-        camera_type, camera_topic = transported_image(transport)
+        _, camera_topic = transported_image(transport)
         self.view_topics = {"area": "overlay/preview",
                             "calibration": f"/{self.calibration_name}/feedback", "camera": camera_topic}
-        self.view_types = {"area": Image, "calibration": Image, "camera": camera_type}
         self.view_transports = {"area": "raw", "calibration": "raw", "camera": transport}
         self.view_subscriptions: dict = {}
         # results and camera_info come at the camera's rate: each is thinned to what the page shows, at the rate
@@ -189,7 +188,8 @@ class ConsoleNode(Node):
             subscribed = view in self.view_subscriptions
             if feed.wanted(moment) and not subscribed:
                 self.view_subscriptions[view] = self.create_subscription(
-                    self.view_types[view], self.view_topics[view], lambda data, v=view: self._on_view(v, data),
+                    transported_image(self.view_transports[view])[0], self.view_topics[view],
+                    lambda data, v=view: self._on_view(v, data),
                     IMAGE_QOS, raw=True)
             elif subscribed and not feed.wanted(moment):
                 self.destroy_subscription(self.view_subscriptions.pop(view))
