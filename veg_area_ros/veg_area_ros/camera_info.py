@@ -38,8 +38,8 @@ def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence
     if max(width, height) > MAX_IMAGE_SIDE:
         raise ValueError(f"camera_info image size {width}x{height} is beyond any camera "
                          f"(at most {MAX_IMAGE_SIDE} px a side)")
-    if too_many_pixels(width, height):
-        raise ValueError(f"camera_info image size {too_many_pixels(width, height)}")
+    if excess := too_many_pixels(width, height):
+        raise ValueError(f"camera_info image size {excess}")
     dist = np.asarray(d, float).ravel()
     matrix = np.asarray(k, float).ravel()
     if matrix.size != 9:

@@ -26,6 +26,8 @@ def too_many_pixels(width: int, height: int) -> str | None:
         return None
     return (f"{width}x{height} pixels ({width * height / 1e6:.0f} MP) is more than any camera's sensor "
             f"({MAX_IMAGE_PIXELS / 1e6:.0f} MP at most here)")
+
+
 MAX_IMAGE_SIDE = 32768  # pixels: twice the widest sensors made; larger sizes in a camera_info are corrupt
 
 

@@ -142,8 +142,8 @@ def decode_image_file(data: bytes, grey: bool = False, notes: list[str] | None =
     size = header_size(data)
     if size is not None:
         width, height = size
-        if too_many_pixels(width, height):
-            return None, f"declares {too_many_pixels(width, height)}"
+        if excess := too_many_pixels(width, height):
+            return None, f"declares {excess}"
         if min(width, height) < MIN_IMAGE_SIDE:
             return None, f"is {width}x{height} pixels, too small to hold a board or targets"
     orientation = stored_orientation(data)
