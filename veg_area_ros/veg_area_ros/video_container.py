@@ -1,11 +1,12 @@
 """What a video's container says of how its levels encode light. No ROS here.
 
 Phones film HDR video by default (iPhones since 2020 in HLG, many Android phones in PQ, HDR10). OpenCV
-decodes such a stream to 8 bits without mapping its tones, so its grey levels follow the HLG or PQ curve, which
-is neither light (`linear`) nor sRGB: Otsu's threshold and the edges' shares then sit off the edges as on an
-sRGB video read as linear. An MP4 or QuickTime file (ISO base media) names the curve in its video sample
-entry's colour box (`colr`, `nclx` in MP4, `nclc` in QuickTime) as an ITU-T H.273 transfer code point. Only the
-boxes on the way there are read: `moov` whole (a few MB for hours of video), the rest skipped by its size."""
+decodes such a stream to 8 bits, and its grey levels then encode light by neither `linear` nor `srgb` (the
+same samples tagged HLG or PQ decode markedly brighter than untagged): Otsu's threshold and the edges' shares
+sit off the edges as on an sRGB video read as linear. An MP4 or QuickTime file (ISO base media) names the curve
+in its video sample entry's colour box (`colr`, `nclx` in MP4, `nclc` in QuickTime) as an ITU-T H.273 transfer
+code point. Only the boxes on the way there are read: `moov` whole (a few MB for hours of video), the rest
+skipped by its size."""
 
 from __future__ import annotations
 
@@ -19,19 +20,27 @@ STSD_FIELDS = 8  # version, flags and the entry count
 MAX_MOOV_BYTES = 512 * 1024 * 1024  # a movie header is a few MB even for hours; more is not a movie header
 
 
+def box_header(head: bytes, at: int, room: int) -> tuple[bytes, int, int] | None:
+    """(type, header length, box size) of the box whose header starts at head[at:], where `room` bytes are left
+    for it (a size of 0: the rest); None where it does not fit in them."""
+    size, kind = struct.unpack_from(">I4s", head, at)
+    header = 8
+    if size == 1 and room >= 16 and at + 16 <= len(head):
+        (size,), header = struct.unpack_from(">Q", head, at + 8), 16
+    elif size == 0:
+        size = room
+    return None if size < header or size > room else (kind, header, size)
+
+
 def boxes(data: bytes, start: int = 0, end: int | None = None) -> Iterator[tuple[bytes, int, int]]:
     """(type, body start, body end) of each box in data[start:end]; stops at the first one that does not fit."""
     end = len(data) if end is None else end
     offset = start
     while offset + 8 <= end:
-        size, kind = struct.unpack_from(">I4s", data, offset)
-        header = 8
-        if size == 1 and offset + 16 <= end:
-            (size,), header = struct.unpack_from(">Q", data, offset + 8), 16
-        elif size == 0:
-            size = end - offset
-        if size < header or offset + size > end:
+        found = box_header(data, offset, end - offset)
+        if found is None:
             return
+        kind, header, size = found
         yield kind, offset + header, offset + size
         offset += size
 
@@ -44,15 +53,10 @@ def movie_header(path: Path) -> bytes | None:
             length, offset = file.tell(), 0
             while offset + 8 <= length:
                 file.seek(offset)
-                head = file.read(16)
-                size, kind = struct.unpack_from(">I4s", head)
-                header = 8
-                if size == 1 and len(head) == 16:
-                    (size,), header = struct.unpack_from(">Q", head, 8), 16
-                elif size == 0:
-                    size = length - offset
-                if not all(32 <= c < 127 for c in kind) or size < header or offset + size > length:
+                found = box_header(file.read(16), 0, length - offset)
+                if found is None or not all(32 <= c < 127 for c in found[0]):
                     return None  # not a box: no ISO base media file
+                kind, header, size = found
                 if kind == b"moov":
                     if size - header > MAX_MOOV_BYTES:
                         return None
