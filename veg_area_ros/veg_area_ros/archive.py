@@ -8,6 +8,7 @@ from __future__ import annotations
 import tarfile
 import zlib
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path, PurePosixPath
 
 from .files import in_name_order, special_file
@@ -58,14 +59,21 @@ def _open(path: Path) -> tarfile.TarFile:
         raise ArchiveError(f"not a readable tar archive ({exc})") from exc
 
 
-def _members(path: Path) -> dict[str, tarfile.TarInfo]:
+@contextmanager
+def _reading(path: Path) -> Iterator[tarfile.TarFile]:
+    """The archive open, what breaks in reading it said as an ArchiveError (a missing file stays one)."""
     try:
         with _open(path) as archive:
-            return _by_name(archive)
+            yield archive
     except FileNotFoundError:
         raise
     except READ_ERRORS as exc:
         raise ArchiveError(f"not a readable tar archive ({exc})") from exc
+
+
+def _members(path: Path) -> dict[str, tarfile.TarInfo]:
+    with _reading(path) as archive:
+        return _by_name(archive)
 
 
 def _views(members: dict[str, tarfile.TarInfo], suffixes: Iterable[str]) -> list[str]:
@@ -106,26 +114,21 @@ def read_views(path: Path, suffixes: Iterable[str]) -> Iterator[tuple[str, bytes
 def calibration_text(path: Path) -> tuple[str, str]:
     """(member name, text) of the archive's calibration: `ost.yaml` (ROS 2's camera_info YAML), else `ost.txt`
     (the INI ROS 1's `ost.ini` holds). A stereo pair's archive (left.yaml, right.yaml) is refused naming them."""
-    try:
-        with _open(path) as archive:
-            members = _by_name(archive)
-            stereo = [name for name in STEREO_CALIBRATION_MEMBERS if name in members]
-            if stereo:  # its ost.txt then holds both cameras
-                raise ArchiveError(f"holds a stereo pair's calibrations ({' and '.join(stereo)}): extract the "
-                                   f"measured camera's (tar xzf ARCHIVE {stereo[0]}) and give that file")
-            name = next((name for name in CALIBRATION_MEMBERS if name in members), None)
-            if name is None:
-                raise ArchiveError("holds no calibration (camera_calibration saves ost.yaml beside its views)")
-            if members[name].size > MAX_CALIBRATION_BYTES:
-                raise ArchiveError(f"its {name} is {members[name].size} bytes: larger than any calibration file")
-            handle = archive.extractfile(members[name])
-            if handle is None:
-                raise ArchiveError(f"its {name} cannot be read")
-            data = handle.read()
-    except FileNotFoundError:
-        raise
-    except READ_ERRORS as exc:
-        raise ArchiveError(f"not a readable tar archive ({exc})") from exc
+    with _reading(path) as archive:
+        members = _by_name(archive)
+        stereo = [name for name in STEREO_CALIBRATION_MEMBERS if name in members]
+        if stereo:  # its ost.txt then holds both cameras
+            raise ArchiveError(f"holds a stereo pair's calibrations ({' and '.join(stereo)}): extract the "
+                               f"measured camera's (tar xzf ARCHIVE {stereo[0]}) and give that file")
+        name = next((name for name in CALIBRATION_MEMBERS if name in members), None)
+        if name is None:
+            raise ArchiveError("holds no calibration (camera_calibration saves ost.yaml beside its views)")
+        if members[name].size > MAX_CALIBRATION_BYTES:
+            raise ArchiveError(f"its {name} is {members[name].size} bytes: larger than any calibration file")
+        handle = archive.extractfile(members[name])
+        if handle is None:
+            raise ArchiveError(f"its {name} cannot be read")
+        data = handle.read()
     try:
         return name, decode_text(data)
     except UnicodeDecodeError as exc:
