@@ -642,9 +642,9 @@ def test_calibrate_samples_a_long_bag_as_a_video_and_measure_refuses_video_step_
 
 
 def test_a_bag_of_video_packets_only_says_so_and_what_to_record(workspace):
-    """theora_image_transport's packets (or H.264 through ffmpeg_image_transport or Foxglove): a frame needs
-    the packets before it, and they are not decoded here. It said "image topics in the bag: []"; now it names the
-    video topic and what to record instead."""
+    """theora_image_transport's packets (Ogg packets whose stream headers go once to each subscriber) are not
+    decoded here (H.264 through ffmpeg_image_transport or Foxglove are: test_video_packet_bags). It said "image
+    topics in the bag: []"; now it names the video topic and what to record instead."""
     from rosbags.typesys import get_types_from_msg
 
     store = get_typestore(Stores.ROS2_KILTED)

@@ -16,6 +16,7 @@ import sqlite3
 import statistics
 import struct
 import sys
+import tempfile
 import time
 import zlib
 from collections.abc import Iterator
@@ -41,6 +42,7 @@ from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_
 from .cdr import (
     CameraInfoFields,
     CompressedImageFields,
+    Header,
     ImageFields,
     ImageMessageError,
     decode_camera_info,
@@ -51,6 +53,13 @@ from .cdr import (
 )
 from .files import os_reason, special_file, write_atomic
 from .strict_yaml import load_text, read_text
+from .video_packets import (
+    DECODED_VIDEO_TYPES,
+    UNDECODED_VIDEO_TYPES,
+    DecodedVideoFrame,
+    VideoPacketStream,
+    decode_video_packet,
+)
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
@@ -481,11 +490,10 @@ def _mcap_profile(path: Path) -> str | None:
     return head[21:21 + length].decode("utf-8", "replace") if 21 + length <= len(head) else None
 
 
-IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
-TRANSPORT_SUFFIXES = ("/compressed", "/compressedDepth", "/theora", "/zstd", "/ffmpeg")
-# inter-frame video (theora, H.264/H.265 through ffmpeg or Foxglove): a frame needs the packets before it
-VIDEO_PACKET_TYPES = ("theora_image_transport/msg/Packet", "ffmpeg_image_transport_msgs/msg/FFMPEGPacket",
-                      "foxglove_msgs/msg/CompressedVideo")
+# what a bag's camera frames are recorded as: Image, image_transport's compressed or zstd CompressedImage, and
+# inter-frame video packets (`video_packets`: Foxglove's CompressedVideo, ffmpeg_image_transport's FFMPEGPacket)
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", *DECODED_VIDEO_TYPES)
+TRANSPORT_SUFFIXES = ("/compressed", "/compressedDepth", "/theora", "/zstd", "/ffmpeg", "/foxglove")
 
 
 def transport_base(topic: str) -> str:
@@ -493,13 +501,14 @@ def transport_base(topic: str) -> str:
     return next((topic[: -len(s)] for s in TRANSPORT_SUFFIXES if topic.endswith(s)), topic)
 
 
-# of one camera's image_transport topics, the one measured when none is named: lossless first
-TRANSPORT_PREFERENCE = ("", "/zstd", "/compressed")
+# of one camera's image_transport topics, the one measured when none is named: lossless first, inter-frame last
+TRANSPORT_PREFERENCE = ("", "/zstd", "/compressed", "/foxglove", "/ffmpeg")
 
 
 def _image_connections(reader: Reader, path: str | Path, image_topic: str | None) -> list:
     """The connections of the bag's image topic (sensor_msgs/Image, or CompressedImage as image_transport's
-    `compressed` or `zstd` topic records it): the named one, else the only image topic, else, where every image
+    `compressed` or `zstd` topic records it, or video packets as its `foxglove` or `ffmpeg` topic records them):
+    the named one, else the only image topic, else, where every image
     topic is one camera's image_transport topics (`ros2 bag record -a` keeps them all), its raw one (then zstd,
     then compressed: the same frames, lossless first)."""
     images = [c for c in reader.connections if c.msgtype in IMAGE_TYPES]
@@ -511,10 +520,12 @@ def _image_connections(reader: Reader, path: str | Path, image_topic: str | None
                                                                              for c in chosen)), None)
         chosen = [c for c in chosen if c.topic == best]
     if not images:
-        videos = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections if c.msgtype in VIDEO_PACKET_TYPES})
+        videos = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections
+                         if c.msgtype in UNDECODED_VIDEO_TYPES})
         if videos:
-            raise BagError(f"{path}: its images are video packets ({', '.join(videos)}), which are not decoded "
-                           "here: record the camera's image_raw, image_raw/compressed or image_raw/zstd")
+            raise BagError(f"{path}: its images are theora video packets ({', '.join(videos)}), which are not "
+                           "decoded here: record the camera's image_raw, image_raw/compressed, image_raw/zstd or "
+                           "image_raw/foxglove (H.264)")
     if len({c.topic for c in chosen}) != 1:
         raise BagError(f"{path}: pick the image topic (--image-topic); image topics in the bag: "
                        f"{sorted({c.topic for c in images})}")
@@ -545,7 +556,27 @@ def _info_connections(reader: Reader, path: str | Path, image_topic: str) -> tup
 
 
 def _decode_image(msgtype: str, data):
+    if msgtype in DECODED_VIDEO_TYPES:
+        return decode_video_packet(msgtype, data)
     return decode_compressed_image(data) if msgtype == "sensor_msgs/msg/CompressedImage" else decode_image(data)
+
+
+def _video_frames(reader: Reader, images: list, folder: str) -> Iterator[DecodedVideoFrame]:
+    """The topic's video packets decoded in recording order (`VideoPacketStream`), one per message: the packets
+    are read here, the frames decoded as they are taken."""
+    stream = VideoPacketStream(folder, images[0].topic)
+    headers = []
+    for connection, _, data in reader.messages(connections=images):
+        try:
+            packet = decode_video_packet(connection.msgtype, data)
+        except ImageMessageError as exc:
+            stream.add_unreadable(str(exc))
+            headers.append(Header(0, 0, ""))
+            continue
+        stream.add(packet)
+        headers.append(packet.header)
+    return (DecodedVideoFrame(header, frame, problem, reordered)
+            for header, (frame, problem, reordered) in zip(headers, stream.frames(), strict=True))
 
 
 def bag_image_count(path: str | Path, image_topic: str | None = None) -> int:
@@ -584,13 +615,18 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
     `calib_io.metadata_message` makes it). Without a topic name: the only image topic (an error if there are
     several). An image whose frame_id differs from that camera_info's gets none, and the reason."""
     reader = _open_reader(path)
-    try:
+    with contextlib.ExitStack() as stack:
+        stack.callback(reader.close)
         images = _image_connections(reader, path, image_topic)
         infos, unpaired = _info_connections(reader, path, images[0].topic)
         metadata = [c for c in reader.connections if infos and c.topic == f"{infos[0].topic}/metadata"
                     and c.msgtype == "std_msgs/msg/String"][:1]
         camera_info = camera_metadata = None
         index = 0
+        video = None
+        if images[0].msgtype in DECODED_VIDEO_TYPES:
+            video = _video_frames(reader, images, stack.enter_context(
+                tempfile.TemporaryDirectory(prefix="veg-area-video-")))
         for connection, timestamp, data in reader.messages(connections=images + infos[:1] + metadata):
             if connection.msgtype == "sensor_msgs/msg/CameraInfo":
                 camera_info = decode_camera_info(data)
@@ -599,7 +635,7 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
                 with contextlib.suppress(ImageMessageError):  # undecodable: as if not recorded
                     camera_metadata = decode_string(data)
                 continue
-            image = _decode_image(connection.msgtype, data)
+            image = next(video) if video is not None else _decode_image(connection.msgtype, data)
             info, problem = camera_info, unpaired
             if info is not None and image.header.frame_id and info.header.frame_id and (
                     image.header.frame_id != info.header.frame_id):
@@ -608,8 +644,6 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
                                        "another camera's calibration")
             yield BagFrame(index, timestamp, image, info, problem, camera_metadata if info is not None else None)
             index += 1
-    finally:
-        reader.close()
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,46 @@
+"""Writes the H.264 and H.265 packet streams beside this file (PyAV's libx264 and libx265; run by hand:
+`pip install av numpy` in a scratch venv, then `python make_packets.py`). Each frame is a grey 160x120 image
+with a bright bar at x = 10 + 8 * (its capture number), so a decoded frame tells which capture it is.
+
+Each file is a run of packets in decode order, each as <uint32 capture number (pts)> <uint32 length> <bytes>.
+"""
+
+import struct
+from fractions import Fraction
+from pathlib import Path
+
+import av
+import numpy as np
+
+FRAMES = 12
+HERE = Path(__file__).parent
+
+
+def bar_frame(number: int) -> np.ndarray:
+    image = np.full((120, 160, 3), 60, np.uint8)
+    image[20:100, 10 + 8 * number:18 + 8 * number] = 230
+    return image
+
+
+def encode(codec: str, options: dict[str, str], name: str) -> None:
+    context = av.CodecContext.create(codec, "w")
+    context.width, context.height, context.pix_fmt = 160, 120, "yuv420p"
+    context.time_base, context.framerate = Fraction(1, 10), 10
+    context.options = options
+    packets = []
+    for number in range(FRAMES):
+        frame = av.VideoFrame.from_ndarray(bar_frame(number), format="rgb24").reformat(format="yuv420p")
+        frame.pts = number
+        packets += context.encode(frame)
+    packets += context.encode(None)
+    with (HERE / name).open("wb") as file:
+        for packet in packets:
+            data = bytes(packet)
+            file.write(struct.pack("<II", packet.pts, len(data)) + data)
+
+
+encode("libx264", {"bf": "0", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18"}, "h264_no_b.bin")
+encode("libx264", {"bf": "2", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18",
+                   "x264-params": "b-adapt=0"}, "h264_b.bin")
+encode("libx265", {"x265-params": "keyint=6:min-keyint=6:bframes=2:b-adapt=0:open-gop=1:scenecut=0:log-level=error",
+                   "crf": "18"}, "hevc_open_gop.bin")

@@ -1,0 +1,269 @@
+"""Bags of inter-frame video packets, as Foxglove's CompressedVideo transport and ffmpeg_image_transport record a
+camera: decoded in order, each frame paired with its own message (B-frames, a recording begun between keyframes,
+an H.265 stream begun at an open GOP's keyframe), and measured as a video's frames are."""
+
+from __future__ import annotations
+
+import json
+import struct
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import yaml
+from helpers import TEST_DATA, run_cli
+from rosbags.rosbag2 import Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from veg_area_ros.bags import iter_bag_frames
+from veg_area_ros.cdr import Header, ImageMessageError
+from veg_area_ros.video_packets import (
+    FFMPEG_PACKET,
+    FOXGLOVE_VIDEO,
+    VideoPacket,
+    VideoPacketStream,
+    codec_name,
+    decode_video_packet,
+    is_keyframe,
+)
+
+PACKETS = TEST_DATA / "video-packets"
+# the two messages as their packages define them (foxglove_msgs, ffmpeg_image_transport_msgs)
+DEFINITIONS = {
+    FOXGLOVE_VIDEO: "builtin_interfaces/Time timestamp\nstring frame_id\nuint8[] data\nstring format\n",
+    FFMPEG_PACKET: ("std_msgs/Header header\nint32 width\nint32 height\nstring encoding\nuint64 pts\nuint8 flags\n"
+                    "bool is_bigendian\nuint8[] data\n"),
+}
+STORE = get_typestore(Stores.ROS2_KILTED)
+for _name, _text in DEFINITIONS.items():
+    STORE.register(get_types_from_msg(_text, _name))
+START_S = 1000
+
+
+def stored_packets(name: str) -> list[tuple[int, bytes]]:
+    """(capture number, bytes) of a stream written by `video-packets/make_packets.py`, in decode order."""
+    data, packets, offset = (PACKETS / name).read_bytes(), [], 0
+    while offset < len(data):
+        number, length = struct.unpack_from("<II", data, offset)
+        packets.append((number, data[offset + 8:offset + 8 + length]))
+        offset += 8 + length
+    return packets
+
+
+def captured(frame: np.ndarray) -> int:
+    """Which capture a decoded bar frame is: its bar covers x = 10 + 8 * number to 8 pixels on."""
+    bright = np.flatnonzero(frame[60, :, 1] > 145)
+    return round(float(bright.mean() - 13.5) / 8)
+
+
+def stamp(number: int) -> tuple[int, int]:
+    """A 10 Hz camera's stamp of capture `number`."""
+    return START_S + number // 10, (number % 10) * 100_000_000
+
+
+def foxglove(number: int, data: bytes, video_format: str, frame_id: str = "camera"):
+    sec, nanosec = stamp(number)
+    return STORE.types[FOXGLOVE_VIDEO](
+        timestamp=STORE.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec), frame_id=frame_id,
+        data=np.frombuffer(data, np.uint8), format=video_format)
+
+
+def ffmpeg(number: int, data: bytes, encoding: str, key: bool, frame_id: str = "camera"):
+    sec, nanosec = stamp(number)
+    header = STORE.types["std_msgs/msg/Header"](stamp=STORE.types["builtin_interfaces/msg/Time"](
+        sec=sec, nanosec=nanosec), frame_id=frame_id)
+    return STORE.types[FFMPEG_PACKET](header=header, width=160, height=120, encoding=encoding, pts=number,
+                                      flags=int(key), is_bigendian=False, data=np.frombuffer(data, np.uint8))
+
+
+def write_video_bag(path: Path, topic: str, msgtype: str, messages: list, extra: list = ()) -> None:
+    """A bag as `ros2 bag record` writes it: the packets received in decode order, 1 ms apart."""
+    with Writer(path, version=Writer.VERSION_LATEST) as writer:
+        video = writer.add_connection(topic, msgtype, typestore=STORE)
+        others = [(writer.add_connection(t, m, typestore=STORE), m, ms) for t, m, ms in extra]
+        for k, message in enumerate(messages):
+            for connection, other_type, other_messages in others:
+                if k < len(other_messages):
+                    writer.write(connection, (START_S + k) * 10**9, STORE.serialize_cdr(other_messages[k], other_type))
+            writer.write(video, (START_S + k) * 10**9 + 1_000_000, STORE.serialize_cdr(message, msgtype))
+
+
+def test_codec_names_from_foxglove_formats_and_ffmpeg_encodings():
+    assert [codec_name(t) for t in ("h264", "h265", "vp9", "av1", "hevc;yuv420p;bgr8;bgr8", "libx264",
+                                    "h264_nvenc", "hevc_vaapi", "libx265", "libvpx-vp9", "mjpeg")] == [
+        "h264", "hevc", "vp9", "av1", "hevc", "h264", "h264", "hevc", "hevc", "vp9", "mjpeg"]
+
+
+def test_the_packets_fields_read_as_rosbags_serializes_them():
+    """The hand-read CDR of both messages against rosbags' own serializer."""
+    number, data = stored_packets("h264_no_b.bin")[0]
+    packet = decode_video_packet(FOXGLOVE_VIDEO, STORE.serialize_cdr(foxglove(number + 3, data, "h264", "left"),
+                                                                     FOXGLOVE_VIDEO))
+    assert (packet.header.sec, packet.header.nanosec, packet.header.frame_id) == (*stamp(3), "left")
+    assert packet.codec == "h264" and bytes(packet.data) == data and packet.keyframe_flag is None
+    packet = decode_video_packet(FFMPEG_PACKET, STORE.serialize_cdr(ffmpeg(5, data, "h264;yuv420p;bgr8;bgr8",
+                                                                           True, "right"), FFMPEG_PACKET))
+    assert (packet.header.sec, packet.header.nanosec, packet.header.frame_id) == (*stamp(5), "right")
+    assert packet.codec == "h264" and bytes(packet.data) == data and packet.keyframe_flag is True
+
+
+def decoded(name: str, codec: str, first: int = 0) -> list[tuple[int | None, str, bool]]:
+    """The stream's packets from the `first`-th on, each stamped with its capture time, as (capture number the
+    decoded frame shows, why it has none, whether it was reordered), per packet in decode order."""
+    with tempfile.TemporaryDirectory() as folder:
+        stream = VideoPacketStream(folder, "/camera/image_raw/foxglove")
+        for number, data in stored_packets(name)[first:]:
+            stream.add(VideoPacket(Header(*stamp(number), "camera"), codec, memoryview(data)))
+        return [(None if frame is None else captured(frame), problem, reordered)
+                for frame, problem, reordered in stream.frames()]
+
+
+@pytest.mark.parametrize("name, codec", [("h264_no_b.bin", "h264"), ("h264_b.bin", "h264"),
+                                         ("hevc_open_gop.bin", "hevc")])
+def test_each_packet_gets_the_frame_it_carries_also_with_b_frames(name, codec):
+    """With B-frames the decoder gives the frames in capture order, not the packets': each packet's frame is
+    the one its stamp names, and those paired out of the packets' order say so."""
+    numbers = [number for number, _ in stored_packets(name)]
+    results = decoded(name, codec)
+    assert [shown for shown, _, _ in results] == numbers
+    assert all(problem == "" for _, problem, _ in results)
+    reordered = [k for k, (_, _, moved) in enumerate(results) if moved]
+    assert bool(reordered) == (numbers != sorted(numbers))
+
+
+def test_a_recording_begun_between_keyframes_decodes_from_the_next_keyframe():
+    """`ros2 bag record` started while the camera streamed: the packets before the first keyframe cannot be
+    decoded (they were silently dropped by the decoder, shifting every later frame onto the wrong message)."""
+    packets = stored_packets("h264_b.bin")
+    keyframe = next(k for k, (_, data) in enumerate(packets) if k and is_keyframe(
+        VideoPacket(None, "h264", memoryview(data))))
+    results = decoded("h264_b.bin", "h264", first=2)
+    assert all(shown is None and "before the stream's first keyframe" in problem
+               for shown, problem, _ in results[:keyframe - 2])
+    assert [shown for shown, _, _ in results[keyframe - 2:]] == [number for number, _ in packets[keyframe:]]
+
+
+def test_an_h265_stream_begun_at_an_open_gops_keyframe_skips_its_leading_pictures():
+    """An H.265 CRA keyframe's leading (RASL) pictures refer to frames before it: begun there, the decoder drops
+    them, and they are said so, the frames after them still each on its own packet."""
+    packets = stored_packets("hevc_open_gop.bin")
+    cra = next(k for k, (_, data) in enumerate(packets) if k and is_keyframe(
+        VideoPacket(None, "hevc", memoryview(data))))
+    results = decoded("hevc_open_gop.bin", "hevc", first=cra)
+    leading = [k for k, (number, _) in enumerate(packets[cra:]) if number < packets[cra][0]]
+    assert leading, "the stored stream has leading pictures after its CRA"
+    for k, (shown, problem, _) in enumerate(results):
+        if k in leading:
+            assert shown is None and "leading picture" in problem
+        else:
+            assert shown == packets[cra + k][0] and problem == ""
+
+
+def test_a_stream_that_cannot_be_decoded_says_why():
+    data = stored_packets("h264_no_b.bin")[0][1]
+    with tempfile.TemporaryDirectory() as folder:
+        stream = VideoPacketStream(folder, "/cam/foxglove")
+        stream.add(VideoPacket(Header(1, 0, ""), "mjpeg", memoryview(data)))
+        stream.add(VideoPacket(Header(2, 0, ""), "h264", memoryview(data)))
+        problems = [problem for _, problem, _ in stream.frames()]
+    assert "'mjpeg' is not one read here" in problems[0] and "its codec is h264" in problems[1]
+    with tempfile.TemporaryDirectory() as folder:
+        stream = VideoPacketStream(folder, "/cam/foxglove")
+        stream.add(VideoPacket(Header(1, 0, ""), "h264", memoryview(struct.pack(">I", len(data)) + data[4:])))
+        assert "not in Annex B form" in next(stream.frames())[1]
+    with tempfile.TemporaryDirectory() as folder:  # a keyframe the decoder cannot read: no frame at all
+        stream = VideoPacketStream(folder, "/cam/foxglove")
+        stream.add(VideoPacket(Header(1, 0, ""), "h264", memoryview(b"\x00\x00\x01\x65" + bytes(64))))
+        with pytest.raises(ImageMessageError, match="decoded no frame of this h264 stream"):
+            list(stream.frames())
+
+
+def test_an_ffmpeg_image_transport_bag_is_read_in_capture_order_with_its_camera_info():
+    """FFMPEGPacket (its flags say the keyframes) with B-frames: every frame paired with its own stamp, the
+    camera_info recorded beside it, and the frames moved by the B-frames say so in their notes."""
+    from veg_area_ros.frames import iter_bag
+
+    packets = stored_packets("h264_b.bin")
+    info = STORE.types["sensor_msgs/msg/CameraInfo"](
+        header=STORE.types["std_msgs/msg/Header"](stamp=STORE.types["builtin_interfaces/msg/Time"](
+            sec=START_S, nanosec=0), frame_id="camera"), height=120, width=160, distortion_model="plumb_bob",
+        d=np.zeros(5), k=np.array([150.0, 0, 80, 0, 150, 60, 0, 0, 1]), r=np.eye(3).ravel(),
+        p=np.array([150.0, 0, 80, 0, 0, 150, 60, 0, 0, 0, 1, 0]), binning_x=0, binning_y=0,
+        roi=STORE.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
+                                                            do_rectify=False))
+    with tempfile.TemporaryDirectory() as folder:
+        bag = Path(folder) / "ffmpeg"
+        write_video_bag(bag, "/camera/image_raw/ffmpeg", FFMPEG_PACKET,
+                        [ffmpeg(number, data, "libx264", is_keyframe(VideoPacket(None, "h264", memoryview(data))))
+                         for number, data in packets], extra=[("/camera/camera_info", "sensor_msgs/msg/CameraInfo",
+                                                               [info])])
+        frames = list(iter_bag(bag))
+        assert len(list(iter_bag_frames(bag))) == len(packets)
+    assert [captured(f.image) for f in frames] == [number for number, _ in packets]
+    assert [f.time_s for f in frames] == [pytest.approx(s + ns / 1e9) for s, ns in (stamp(n) for n, _ in packets)]
+    assert all(f.camera_info is not None for f in frames)
+    moved = [f for f in frames if any("reorders its frames (B-frames)" in note for note in f.notes)]
+    assert moved and len(moved) < len(frames)
+
+
+def ivf_packets(path: Path) -> list[bytes]:
+    data, packets, offset = path.read_bytes(), [], 32
+    while offset < len(data):
+        (length,) = struct.unpack_from("<I", data, offset)
+        packets.append(data[offset + 12:offset + 12 + length])
+        offset += 12 + length
+    return packets
+
+
+def test_a_foxglove_vp9_bag_is_measured_as_the_same_video_file(tmp_path):
+    """A camera recorded through Foxglove's CompressedVideo transport (VP9, encoded here by OpenCV's FFmpeg):
+    `veg-area measure` finds the topic, measures every frame with the camera_info
+    recorded beside it, and each frame's Af is the Af of the same frame decoded from the video file."""
+    from veg_area_ros.camera_info import camera_info_fields
+    from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets_content
+
+    frames = [render_scene(ENDOSCOPE, cube_scene(), 0.7, seed=k) for k in range(4)]
+    video = tmp_path / "cube.ivf"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"VP90"), 10, (640, 480))
+    assert writer.isOpened(), "OpenCV's FFmpeg writes VP9"
+    for frame in frames:
+        writer.write(frame)
+    writer.release()
+    packets = ivf_packets(video)
+    assert len(packets) == len(frames)
+    fields = camera_info_fields(ENDOSCOPE)
+    info = STORE.types["sensor_msgs/msg/CameraInfo"](
+        header=STORE.types["std_msgs/msg/Header"](stamp=STORE.types["builtin_interfaces/msg/Time"](
+            sec=START_S, nanosec=0), frame_id="camera"), height=480, width=640,
+        distortion_model=fields["distortion_model"], d=np.array(fields["d"], float), k=np.array(fields["k"], float),
+        r=np.array(fields["r"], float), p=np.array(fields["p"], float), binning_x=0, binning_y=0,
+        roi=STORE.types["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0,
+                                                            do_rectify=False))
+    bag = tmp_path / "foxglove_bag"
+    write_video_bag(bag, "/camera/image_raw/foxglove", FOXGLOVE_VIDEO,
+                    [foxglove(k, data, "vp9") for k, data in enumerate(packets)],
+                    extra=[("/camera/camera_info", "sensor_msgs/msg/CameraInfo", [info])])
+    capture = cv2.VideoCapture(str(video), cv2.CAP_FFMPEG)
+    folder = tmp_path / "decoded"
+    folder.mkdir()
+    for k in range(len(frames)):
+        ok, frame = capture.read()
+        assert ok
+        cv2.imwrite(str(folder / f"frame{k}.png"), frame)
+    capture.release()
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    from veg_area_ros.calib_io import write_calibration
+
+    write_calibration(tmp_path / "camera.yaml", ENDOSCOPE, "camera", {"medium": "air"})
+    results = {}
+    for name, source, calibration in [("bag", bag, "bag"), ("files", folder, str(tmp_path / "camera.yaml"))]:
+        done = run_cli("measure", str(source), "--targets", str(tmp_path / "targets.yaml"), "--threshold", "120",
+                       "--calibration", calibration, "--json", "--csv", str(tmp_path / f"{name}.csv"), cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        results[name] = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    assert [r["area_m2"] for r in results["bag"]] == [r["area_m2"] for r in results["files"]]
+    assert len(results["bag"]) == len(frames)
+    assert [r["time_s"] for r in results["bag"]] == [pytest.approx(START_S + k / 10) for k in range(len(frames))]
+    assert abs(results["bag"][0]["area_m2"] / cube_scene().true_area_m2 - 1) < 0.01
