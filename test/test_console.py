@@ -459,17 +459,6 @@ def test_a_frame_is_decoded_only_when_a_page_is_shown_it():
     assert feed.jpeg(2.0)[0] is jpeg  # the last good image stays
 
 
-def test_the_newest_result_is_read_from_its_json_only_when_asked():
-    series = AreaSeries()
-    series.add_info(json.dumps({"warnings": ["clipped highlights: ..."], "frames_measured": 7, "threshold": 99.5}))
-    shown = series.as_dict()
-    assert shown["warnings"] == ["clipped highlights: ..."] and shown["frames"]["measured"] == 7
-    assert shown["threshold"] == 99.5
-    for broken in ("{not json", "[1, 2]"):
-        series.add_info(broken)
-        assert series.as_dict()["warnings"] == [] and series.as_dict()["frames"]["measured"] is None
-
-
 def test_the_newest_result_is_summarised_only_when_a_page_asks():
     """The console node hands over each result's summary as a function (results come at the camera's rate):
     made once a page reads the state, and only for the newest result."""

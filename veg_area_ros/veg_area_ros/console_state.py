@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import ipaddress
 import itertools
-import json
 import math
 import secrets
 import threading
@@ -178,9 +177,9 @@ class AreaSeries:
             self.points.append((round(stamp_s - self.first_stamp_s, 4), area_m2, std_m2))
             self.appended += 1
 
-    def add_info(self, summary: dict | str | Callable[[], dict]) -> None:
-        """The newest result's summary, its JSON text or what makes it (made only when a page reads it: results
-        come at the camera's rate, pages ask twice a second)."""
+    def add_info(self, summary: dict | Callable[[], dict]) -> None:
+        """The newest result's summary or what makes it (made only when a page reads it: results come at the
+        camera's rate, pages ask twice a second)."""
         with self._lock:
             self.latest = summary
 
@@ -192,12 +191,6 @@ class AreaSeries:
             latest = self.latest
         if callable(latest):
             latest = latest()
-        if isinstance(latest, str):
-            try:
-                latest = json.loads(latest)
-            except ValueError:
-                latest = {}
-            latest = latest if isinstance(latest, dict) else {}
         with self._lock:
             new = self.appended - shown[1] if shown is not None and shown[0] == self.run else len(self.points)
             new = min(max(new, 0), len(self.points))
@@ -205,7 +198,7 @@ class AreaSeries:
             return {"points": points, "complete": new == len(self.points), "run": self.run,
                     "appended": self.appended, "window": SERIES_POINTS, "received": self.received,
                     "warnings": latest.get("warnings", []),
-                    "frames": {"measured": latest.get("frames_measured"), "skipped": latest.get("frames_dropped"),
+                    "frames": {"measured": latest.get("frames_measured"), "skipped": latest.get("frames_skipped"),
                                "lost": latest.get("frames_lost"), "received": latest.get("frames_received")},
                     "area_mode": latest.get("area_mode"), "subpixel_applied": latest.get("subpixel_applied"),
                     "threshold": latest.get("threshold"), "calibrated": latest.get("calibrated"),

@@ -333,7 +333,7 @@ def result_summary(msg: ProjectedArea) -> dict:
     counts = {name: None if getattr(msg, name) < 0 else getattr(msg, name) for name in FRAME_COUNTS}
     return {"warnings": list(msg.warnings), "area_mode": msg.area_mode, "subpixel_applied": msg.subpixel_applied,
             "threshold": msg.threshold, "calibrated": msg.calibrated, "pixel_count": msg.pixel_count,
-            "frames_measured": counts["frames_measured"], "frames_dropped": counts["frames_skipped"],
+            "frames_measured": counts["frames_measured"], "frames_skipped": counts["frames_skipped"],
             "frames_lost": counts["frames_lost"], "frames_received": counts["frames_received"]}
 
 
