@@ -157,7 +157,7 @@ class AreaSeries:
 
     points: deque = field(default_factory=lambda: deque(maxlen=SERIES_POINTS))  # (s since first, Af, std)
     first_stamp_s: float | None = None
-    latest: dict | str | Callable[[], dict] = field(default_factory=dict)
+    latest: dict | Callable[[], dict] = field(default_factory=dict)
     received: int = 0
     run: int = 0  # a new run (a replay that restarted) starts the points afresh
     appended: int = 0  # points appended in this run: a page asks only for those after the ones it has
