@@ -543,8 +543,8 @@ def test_the_area_node_measures_image_transports_compressed_topic_and_the_record
     rows, done = _measure(tmp_path, bag, "--calibration", "bag")
     assert done.returncode == 0, done.stderr
     assert len(rows) == len(jpegs)
-    # the recorder may match the image topic before camera_info: frames before the first camera_info are
-    # said as not measured, never measured without it
+    # the recorder may match the image topic before camera_info: up to EARLY_FRAMES frames before the first
+    # camera_info are measured with it (and say so), more are said as not measured, never measured without it
     first = next(k for k, row in enumerate(rows) if "area_m2" in row)
     assert all("no camera_info recorded before this frame" in row["error"] for row in rows[:first]), rows[:first]
     measured = rows[first:]
@@ -939,3 +939,32 @@ def test_an_mcap_that_is_not_a_ros2_recording_is_named_as_such(workspace):
     assert done.returncode == 1 and not rows
     assert "an MCAP file of profile '', not a ROS 2 recording" in done.stderr, done.stderr
     assert "bag-recover" not in done.stderr
+
+
+def test_frames_recorded_before_the_first_camera_info_are_measured_with_it_and_say_so(workspace, scenes):
+    """`ros2 bag record` started between a driver's image and its camera_info: the first frames came before
+    any camera_info and were "no camera_info recorded before this frame". The frame whose camera_info (the same
+    stamp) is recorded just after it is measured as any other; one whose own was not recorded gets the first one
+    and says so; a bag with no camera_info at all still measures nothing with `--calibration bag`."""
+    frames = scenes["left"]
+    bag = workspace / "late_info"
+    with Writer(bag, version=Writer.VERSION_LATEST) as writer:
+        image = writer.add_connection("/cam/image_raw", "sensor_msgs/msg/Image", typestore=TYPES)
+        info = writer.add_connection("/cam/camera_info", "sensor_msgs/msg/CameraInfo", typestore=TYPES)
+        for k, frame in enumerate(frames):  # image k, then its camera_info; the first one's was not recorded
+            writer.write(image, (100 + k) * 10**9, TYPES.serialize_cdr(_image(frame, k, "cam"),
+                                                                   "sensor_msgs/msg/Image"))
+            if k:
+                writer.write(info, (100 + k) * 10**9 + 1000, TYPES.serialize_cdr(
+                    _info(ENDOSCOPE, k, "cam"), "sensor_msgs/msg/CameraInfo"))
+    rows, done = _measure(workspace, bag, "--calibration", "bag")
+    assert done.returncode == 0, done.stderr
+    assert [row.get("error", "") for row in rows] == [""] * FRAMES
+    early = [any("no camera_info was recorded before this frame" in w for w in row["warnings"]) for row in rows]
+    assert early == [True] + [False] * (FRAMES - 1)
+    assert all(abs(row["area_m2"] / cube_scene().true_area_m2 - 1) < 0.005 for row in rows)
+    none = workspace / "no_info"
+    write_bag(none, "mcap", [("/cam/image_raw", "sensor_msgs/msg/Image",
+                              [_image(f, k, "cam") for k, f in enumerate(frames)])])
+    rows, done = _measure(workspace, none, "--calibration", "bag")
+    assert done.returncode != 0 and "camera_info" in done.stderr, done.stderr

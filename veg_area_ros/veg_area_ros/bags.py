@@ -448,6 +448,14 @@ class BagFrame:
     camera_info: CameraInfoFields | None  # the latest camera_info of its camera recorded before this frame
     camera_info_problem: str = ""  # why camera_info is None although one was recorded
     camera_metadata: str | None = None  # the latest camera_info/metadata beside that camera_info, as recorded
+    camera_info_note: str = ""  # how its camera_info was paired with it, where not as usual
+
+
+# a camera's first frames recorded before its first camera_info (the recorder started between the two): held
+# until that camera_info comes, up to this many (their pixels are held with them)
+EARLY_FRAMES = 8
+EARLY_NOTE = ("no camera_info was recorded before this frame (the recording began between an image and its "
+              "camera_info): measured with the camera's first one, recorded just after it")
 
 
 def _open_reader(path: str | Path) -> Reader:
@@ -612,8 +620,10 @@ def bag_camera_info(path: str | Path, image_topic: str | None = None) -> tuple[s
 def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterator[BagFrame]:
     """The bag's image messages in recording order, each with its camera's camera_info last recorded before it
     (`_info_connections`) and the calibration metadata recorded beside it (`<camera_info>/metadata`, text as
-    `calib_io.metadata_message` makes it). Without a topic name: the only image topic (an error if there are
-    several). An image whose frame_id differs from that camera_info's gets none, and the reason."""
+    `calib_io.metadata_message` makes it). Frames recorded before the camera's first camera_info (up to
+    `EARLY_FRAMES`) get that one: theirs where its stamp is theirs, else with `EARLY_NOTE`. Without a topic name:
+    the only image topic (an error if there are several). An image whose frame_id differs from that
+    camera_info's gets none, and the reason."""
     reader = _open_reader(path)
     with contextlib.ExitStack() as stack:
         stack.callback(reader.close)
@@ -622,27 +632,46 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
         metadata = [c for c in reader.connections if infos and c.topic == f"{infos[0].topic}/metadata"
                     and c.msgtype == "std_msgs/msg/String"][:1]
         camera_info = camera_metadata = None
-        index = 0
+        early: list[tuple[int, object]] = []  # (timestamp, image) of frames recorded before any camera_info
         video = None
         if images[0].msgtype in DECODED_VIDEO_TYPES:
             video = _video_frames(reader, images, stack.enter_context(
                 tempfile.TemporaryDirectory(prefix="veg-area-video-")))
+        index = 0
+
+        def paired(timestamp: int, image, info: CameraInfoFields | None, note: str = "") -> BagFrame:
+            problem = unpaired
+            if info is not None and image.header.frame_id and info.header.frame_id and (
+                    image.header.frame_id != info.header.frame_id):
+                info, problem, note = None, (f"the camera_info on {infos[0].topic} is frame "
+                                             f"{info.header.frame_id!r}, the image on {images[0].topic} frame "
+                                             f"{image.header.frame_id!r}: another camera's calibration"), ""
+            return BagFrame(index, timestamp, image, info, problem, camera_metadata if info is not None else None,
+                            note)
+
         for connection, timestamp, data in reader.messages(connections=images + infos[:1] + metadata):
             if connection.msgtype == "sensor_msgs/msg/CameraInfo":
                 camera_info = decode_camera_info(data)
+                for held_timestamp, held in early:  # its own camera_info (the same stamp) or the next one
+                    same = held.header.nanoseconds == camera_info.header.nanoseconds
+                    yield paired(held_timestamp, held, camera_info, "" if same else EARLY_NOTE)
+                    index += 1
+                early = []
                 continue
             if connection.msgtype == "std_msgs/msg/String":
                 with contextlib.suppress(ImageMessageError):  # undecodable: as if not recorded
                     camera_metadata = decode_string(data)
                 continue
             image = next(video) if video is not None else _decode_image(connection.msgtype, data)
-            info, problem = camera_info, unpaired
-            if info is not None and image.header.frame_id and info.header.frame_id and (
-                    image.header.frame_id != info.header.frame_id):
-                info, problem = None, (f"the camera_info on {infos[0].topic} is frame {info.header.frame_id!r}, "
-                                       f"the image on {connection.topic} frame {image.header.frame_id!r}: "
-                                       "another camera's calibration")
-            yield BagFrame(index, timestamp, image, info, problem, camera_metadata if info is not None else None)
+            if camera_info is None and infos and len(early) < EARLY_FRAMES:
+                early.append((timestamp, image))
+                continue
+            for held_timestamp, held in [*early, (timestamp, image)]:
+                yield paired(held_timestamp, held, camera_info)
+                index += 1
+            early = []
+        for held_timestamp, held in early:  # no camera_info came after them either
+            yield paired(held_timestamp, held, None)
             index += 1
 
 

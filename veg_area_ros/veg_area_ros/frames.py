@@ -480,7 +480,7 @@ def _bag_frame(path: Path, frame) -> Frame:
     from .cdr import ImageMessageError
 
     header = frame.image.header
-    notes: list[str] = []
+    notes: list[str] = [frame.camera_info_note] if frame.camera_info_note else []
     try:
         image, problem = frame.image.pixels(notes=notes), ""
     except ImageMessageError as exc:
