@@ -168,7 +168,7 @@ def test_the_frame_counts_travel_in_the_result_and_an_unknown_one_as_minus_one(p
     assert (msg.frames_received, msg.frames_skipped, msg.frames_lost, msg.frames_measured) == (12, -1, 0, 11)
     assert projected_area(result, Time(sec=3), "camera", "camera_info").frames_measured == -1  # none given
     summary = result_summary(msg)
-    assert (summary["frames_received"], summary["frames_dropped"], summary["frames_lost"],
+    assert (summary["frames_received"], summary["frames_skipped"], summary["frames_lost"],
             summary["frames_measured"]) == (12, None, 0, 11)
     assert summary["warnings"] == result.warnings and summary["pixel_count"] == result.pixel_count
 

@@ -797,19 +797,20 @@ def test_the_af_plot_runs_in_seconds_from_the_first_frame():
 def test_a_runs_last_line_is_its_mean_with_its_uncertainty_and_what_was_not_measured(workspace, scenes):
     """A single input ends with its mean Af ± the uncertainty of that mean (not the frame-to-frame sd, which is
     named as such), frames measured of read, and the frames not measured by reason (they left the summary's
-    columns empty: here the first image came before any camera_info)."""
-    bag = workspace / "late_info"
-    write_bag(bag, "mcap", [("/image_raw", "sensor_msgs/msg/Image",
-                             [_image(frame, k, "cam") for k, frame in enumerate(scenes["left"])]),
-                            ("/camera_info", "sensor_msgs/msg/CameraInfo",
-                             [_info(ENDOSCOPE, k, "cam") for k in range(FRAMES)])])
+    columns empty: here the first image is another camera's, by its frame_id)."""
+    bag = workspace / "other_first"
+    write_bag(bag, "mcap", [("/camera_info", "sensor_msgs/msg/CameraInfo",
+                             [_info(ENDOSCOPE, k, "cam") for k in range(FRAMES)]),
+                            ("/image_raw", "sensor_msgs/msg/Image",
+                             [_image(frame, k, "cam" if k else "other") for k, frame in enumerate(scenes["left"])])])
     rows, done = _measure(workspace, bag, "--calibration", "bag")
     assert done.returncode == 0, done.stderr
     measured = [row["area_m2"] for row in rows if "area_m2" in row]
     assert len(measured) == FRAMES - 1
     line = next(line for line in done.stderr.splitlines() if line.startswith("Af = "))
     assert f"mean of {FRAMES - 1} of {FRAMES} frames and its uncertainty; frame-to-frame sd" in line
-    assert "not measured: no camera_info recorded before this frame: 1 frame" in line
+    assert "not measured: the camera_info on /camera_info is frame 'cam', the image on /image_raw frame" in line
+    assert line.endswith(": 1 frame"), line
     mean, uncertainty = (float(v) for v in line[len("Af = "):].split(" m²")[0].split(" ± "))
     assert mean == pytest.approx(np.mean(measured), rel=1e-5)
     assert uncertainty > 10 * np.std(measured, ddof=1) / np.sqrt(len(measured))  # the shared terms, once

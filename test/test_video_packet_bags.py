@@ -18,7 +18,7 @@ from rosbags.rosbag2 import Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from veg_area_ros.bags import iter_bag_frames
-from veg_area_ros.cdr import Header, ImageMessageError
+from veg_area_ros.cdr import Header
 from veg_area_ros.video_packets import (
     FFMPEG_PACKET,
     FOXGLOVE_VIDEO,
@@ -176,8 +176,7 @@ def test_a_stream_that_cannot_be_decoded_says_why():
     with tempfile.TemporaryDirectory() as folder:  # a keyframe the decoder cannot read: no frame at all
         stream = VideoPacketStream(folder, "/cam/foxglove")
         stream.add(VideoPacket(Header(1, 0, ""), "h264", memoryview(b"\x00\x00\x01\x65" + bytes(64))))
-        with pytest.raises(ImageMessageError, match="decoded no frame of this h264 stream"):
-            list(stream.frames())
+        assert "decoded no frame of this h264 stream" in next(stream.frames())[1]
 
 
 def test_an_ffmpeg_image_transport_bag_is_read_in_capture_order_with_its_camera_info():

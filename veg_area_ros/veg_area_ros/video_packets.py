@@ -223,7 +223,7 @@ class VideoPacketStream:
     def frames(self) -> Iterator[tuple[np.ndarray | None, str, bool]]:
         """Per added packet, in the order added: (frame, why it has none, whether it was paired by its stamp
         out of the packets' order). The frames are decoded one by one as they are taken (those a reordered
-        packet needs ahead are held). Raises ImageMessageError where no frame at all decodes."""
+        packet needs ahead are held)."""
         self._file.close()
         decodable = [i for i, stamp in enumerate(self.stamps) if stamp is not None]
         by_stamp = sorted(decodable, key=lambda i: (self.stamps[i], i))
@@ -249,10 +249,9 @@ class VideoPacketStream:
                 if wanted in held:
                     yield held.pop(wanted), "", wanted != order[index]
                 elif decoded == 0:
-                    raise ImageMessageError(
-                        f"{self.topic}: OpenCV's FFmpeg decoded no frame of this {self.codec} stream "
-                        f"({len(decodable)} packets from its first keyframe on); its build may have no "
-                        f"{self.codec} decoder: convert the recording, or record image_raw/compressed")
+                    yield None, (f"OpenCV's FFmpeg decoded no frame of this {self.codec} stream on {self.topic} "
+                                 f"({len(decodable)} packets from its first keyframe on): its build may have no "
+                                 f"{self.codec} decoder; convert the recording, or record image_raw/compressed"), False
                 else:
                     yield None, (f"the {self.codec} stream decoded {decoded} frames from {len(decodable)} packets "
                                  "(a damaged packet?): the frames cannot be told apart from here on"), False
