@@ -165,10 +165,10 @@ def test_a_stream_that_cannot_be_decoded_says_why():
     data = stored_packets("h264_no_b.bin")[0][1]
     with tempfile.TemporaryDirectory() as folder:
         stream = VideoPacketStream(folder, "/cam/foxglove")
-        stream.add(VideoPacket(Header(1, 0, ""), "mjpeg", memoryview(data)))
+        stream.add(VideoPacket(Header(1, 0, ""), "m/jpeg", memoryview(data)))
         stream.add(VideoPacket(Header(2, 0, ""), "h264", memoryview(data)))
         problems = [problem for _, problem, _ in stream.frames()]
-    assert "'mjpeg' is not one read here" in problems[0] and "its codec is h264" in problems[1]
+    assert "'m/jpeg' is not one read here" in problems[0] and "its codec is h264" in problems[1]
     with tempfile.TemporaryDirectory() as folder:
         stream = VideoPacketStream(folder, "/cam/foxglove")
         stream.add(VideoPacket(Header(1, 0, ""), "h264", memoryview(struct.pack(">I", len(data)) + data[4:])))

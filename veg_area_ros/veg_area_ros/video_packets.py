@@ -225,6 +225,9 @@ class VideoPacketStream:
         out of the packets' order). The frames are decoded one by one as they are taken (those a reordered
         packet needs ahead are held)."""
         self._file.close()
+        if self.codec in ANNEX_B or self.codec in IVF_FOURCC:  # named as FFmpeg's raw demuxers know it
+            suffix = ".ivf" if self.codec in IVF_FOURCC else f".{self.codec}"
+            self.path = self.path.rename(self.path.with_suffix(suffix))
         decodable = [i for i, stamp in enumerate(self.stamps) if stamp is not None]
         by_stamp = sorted(decodable, key=lambda i: (self.stamps[i], i))
         rank = {packet: position for position, packet in enumerate(by_stamp)}
