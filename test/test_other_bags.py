@@ -969,3 +969,67 @@ def test_frames_recorded_before_the_first_camera_info_are_measured_with_it_and_s
                               [_image(f, k, "cam") for k, f in enumerate(frames)])])
     rows, done = _measure(workspace, none, "--calibration", "bag")
     assert done.returncode != 0 and "camera_info" in done.stderr, done.stderr
+
+
+FOXGLOVE_IMAGES = {
+    "foxglove_msgs/msg/RawImage": ("builtin_interfaces/Time timestamp\nstring frame_id\nuint32 width\nuint32 height\n"
+                                   "string encoding\nuint32 step\nuint8[] data\n"),
+    "foxglove_msgs/msg/CompressedImage": ("builtin_interfaces/Time timestamp\nstring frame_id\nuint8[] data\n"
+                                          "string format\n"),
+}
+
+
+def test_foxglove_raw_and_compressed_images_are_measured_as_rosbag2s_own(workspace, scenes):
+    """Foxglove's own image schemas recorded in a ROS 2 bag (its SDK and bridge write them): RawImage (width
+    before height, `rgb8`, `uyvy`...) gives the Af of the same sensor_msgs/Image frames, CompressedImage that of
+    the same JPEG; the frames keep their timestamps."""
+    from rosbags.typesys import get_types_from_msg
+
+    store = get_typestore(Stores.ROS2_KILTED)
+    for name, text in FOXGLOVE_IMAGES.items():
+        store.register(get_types_from_msg(text, name))
+    frames = scenes["left"]
+    jpegs = [cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 85])[1].tobytes() for frame in frames]
+
+    def stamp(k: int):
+        return store.types["builtin_interfaces/msg/Time"](sec=100 + k, nanosec=250_000_000)
+
+    raw = [store.types["foxglove_msgs/msg/RawImage"](
+        timestamp=stamp(k), frame_id="cam", width=f.shape[1], height=f.shape[0], encoding="rgb8",
+        step=3 * f.shape[1], data=np.ascontiguousarray(f[:, :, ::-1]).ravel()) for k, f in enumerate(frames)]
+    compressed = [store.types["foxglove_msgs/msg/CompressedImage"](
+        timestamp=stamp(k), frame_id="cam", data=np.frombuffer(jpeg, np.uint8), format="jpeg")
+        for k, jpeg in enumerate(jpegs)]
+    rows = {}
+    for name, msgtype, messages in [("foxglove_raw", "foxglove_msgs/msg/RawImage", raw),
+                                    ("foxglove_jpeg", "foxglove_msgs/msg/CompressedImage", compressed),
+                                    ("ros_raw", "sensor_msgs/msg/Image",
+                                     [_image(f, k, "cam") for k, f in enumerate(frames)]),
+                                    ("ros_jpeg", "sensor_msgs/msg/CompressedImage",
+                                     [_compressed(jpeg, k, "cam") for k, jpeg in enumerate(jpegs)])]:
+        bag = workspace / name
+        with Writer(bag, version=Writer.VERSION_LATEST) as writer:
+            connection = writer.add_connection("/cam/image", msgtype, typestore=store)
+            for k, message in enumerate(messages):
+                writer.write(connection, (100 + k) * 10**9 + 300_000_000, store.serialize_cdr(message, msgtype))
+        write_calibration(workspace / "cam.yaml", ENDOSCOPE, "cam", {"medium": "air"})
+        measured, done = _measure(workspace, bag, "--calibration", str(workspace / "cam.yaml"))
+        assert done.returncode == 0, done.stderr
+        rows[name] = measured
+    assert [r["area_m2"] for r in rows["foxglove_raw"]] == [r["area_m2"] for r in rows["ros_raw"]]
+    assert [r["area_m2"] for r in rows["foxglove_jpeg"]] == [r["area_m2"] for r in rows["ros_jpeg"]]
+    assert len(rows["foxglove_raw"]) == FRAMES
+    assert [r["time_s"] for r in rows["foxglove_raw"]] == [pytest.approx(100.25 + k) for k in range(FRAMES)]
+
+
+def test_a_bag_without_the_asked_topics_is_said_so_without_reading_every_message(workspace, scenes):
+    """rosbags reads every message for an empty list of connections: a camera-only bag gave `vogel` "a topic
+    has another message type than expected", and measuring a bag with no camera_info with a calibration file
+    ended in a Traceback (the images were read as camera_info)."""
+    from veg_area_ros.bags import BagError, bag_camera_info, bag_run
+
+    bag = workspace / "camera_only"
+    write_bag(bag, "mcap", [("/cam/image_raw", "sensor_msgs/msg/Image", [_image(scenes["left"][0], 0, "cam")])])
+    with pytest.raises(BagError, match="no messages on /force"):
+        bag_run(bag)
+    assert bag_camera_info(bag) is None

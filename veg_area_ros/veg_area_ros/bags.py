@@ -40,6 +40,8 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
 from .cdr import (
+    FOXGLOVE_COMPRESSED_IMAGE,
+    FOXGLOVE_RAW_IMAGE,
     CameraInfoFields,
     CompressedImageFields,
     Header,
@@ -47,6 +49,8 @@ from .cdr import (
     ImageMessageError,
     decode_camera_info,
     decode_compressed_image,
+    decode_foxglove_compressed_image,
+    decode_foxglove_raw_image,
     decode_image,
     decode_string,
     zstd_module,
@@ -498,9 +502,13 @@ def _mcap_profile(path: Path) -> str | None:
     return head[21:21 + length].decode("utf-8", "replace") if 21 + length <= len(head) else None
 
 
-# what a bag's camera frames are recorded as: Image, image_transport's compressed or zstd CompressedImage, and
-# inter-frame video packets (`video_packets`: Foxglove's CompressedVideo, ffmpeg_image_transport's FFMPEGPacket)
-IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", *DECODED_VIDEO_TYPES)
+# what a bag's camera frames are recorded as: Image, image_transport's compressed or zstd CompressedImage,
+# Foxglove's RawImage and CompressedImage, and inter-frame video packets (`video_packets`: Foxglove's
+# CompressedVideo, ffmpeg_image_transport's FFMPEGPacket)
+IMAGE_DECODERS = {"sensor_msgs/msg/Image": decode_image, "sensor_msgs/msg/CompressedImage": decode_compressed_image,
+                  FOXGLOVE_RAW_IMAGE: decode_foxglove_raw_image,
+                  FOXGLOVE_COMPRESSED_IMAGE: decode_foxglove_compressed_image}
+IMAGE_TYPES = (*IMAGE_DECODERS, *DECODED_VIDEO_TYPES)
 TRANSPORT_SUFFIXES = ("/compressed", "/compressedDepth", "/theora", "/zstd", "/ffmpeg", "/foxglove")
 
 
@@ -566,7 +574,7 @@ def _info_connections(reader: Reader, path: str | Path, image_topic: str) -> tup
 def _decode_image(msgtype: str, data):
     if msgtype in DECODED_VIDEO_TYPES:
         return decode_video_packet(msgtype, data)
-    return decode_compressed_image(data) if msgtype == "sensor_msgs/msg/CompressedImage" else decode_image(data)
+    return IMAGE_DECODERS[msgtype](data)
 
 
 def _video_frames(reader: Reader, images: list, folder: str) -> Iterator[DecodedVideoFrame]:
@@ -610,6 +618,8 @@ def bag_camera_info(path: str | Path, image_topic: str | None = None) -> tuple[s
     try:
         images = _image_connections(reader, path, image_topic)
         infos, _ = _info_connections(reader, path, images[0].topic)
+        if not infos:  # rosbags reads every message for an empty list
+            return None
         for connection, _, data in reader.messages(connections=infos[:1]):
             return connection.topic, decode_camera_info(data)
         return None
@@ -727,7 +737,7 @@ def play_messages(path: str | Path, topics: list[str]) -> Iterator[tuple[str, in
     reader = _open_reader(path)
     try:
         wanted = [c for c in reader.connections if c.topic in topics]
-        for connection, timestamp, data in reader.messages(connections=wanted):
+        for connection, timestamp, data in reader.messages(connections=wanted) if wanted else ():
             yield connection.topic, timestamp, bytes(data)
     finally:
         reader.close()
@@ -754,7 +764,7 @@ def bag_run(path: str | Path, force_axis: str = "+x", velocity_axis: str = "+x",
     try:
         present = sorted({c.topic for c in reader.connections})
         connections = [c for c in reader.connections if c.topic in wanted]
-        for connection, _, data in reader.messages(connections=connections):
+        for connection, _, data in reader.messages(connections=connections) if connections else ():
             message = store.deserialize_cdr(data, connection.msgtype)
             name = wanted[connection.topic]
             if name == "force":

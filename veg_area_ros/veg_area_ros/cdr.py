@@ -334,6 +334,34 @@ def zstd_image(header: Header, data: memoryview) -> ImageFields:
     return ImageFields(header, height, width, encoding, is_bigendian, step, memoryview(rows))
 
 
+FOXGLOVE_RAW_IMAGE = "foxglove_msgs/msg/RawImage"
+FOXGLOVE_COMPRESSED_IMAGE = "foxglove_msgs/msg/CompressedImage"
+FOXGLOVE_ENCODINGS = {"uyvy": "yuv422", "yuyv": "yuv422_yuy2"}  # Foxglove's names for two of ROS's encodings
+
+
+def decode_foxglove_raw_image(buffer) -> ImageFields:
+    """Serialized foxglove_msgs/RawImage -> the fields of the Image it is: its timestamp and frame_id lie as a
+    std_msgs/Header does; then width before height, the encoding, step (16-bit data little-endian), the data."""
+    reader = _Reader(buffer)
+    header = reader.header()
+    width, height = reader.unpack("II")
+    encoding = reader.string()
+    (step,) = reader.unpack("I")
+    (length,) = reader.unpack("I")
+    return ImageFields(header, height, width, FOXGLOVE_ENCODINGS.get(encoding, encoding), 0, step,
+                       reader.take(length))
+
+
+def decode_foxglove_compressed_image(buffer) -> CompressedImageFields:
+    """Serialized foxglove_msgs/CompressedImage (timestamp, frame_id, data, format: jpeg, png, webp) -> the
+    fields of the CompressedImage it is."""
+    reader = _Reader(buffer)
+    header = reader.header()
+    (length,) = reader.unpack("I")
+    data = reader.take(length)
+    return CompressedImageFields(header, reader.string(), data)
+
+
 def decode_compressed_image(buffer) -> CompressedImageFields:
     """Serialized sensor_msgs/CompressedImage -> its fields, the data a view (no copy) of `buffer`."""
     reader = _Reader(buffer)
