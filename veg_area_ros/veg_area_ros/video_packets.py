@@ -21,6 +21,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from .bit_depth import StreamDepth
 from .cdr import Header, ImageMessageError, _Reader
 
 FOXGLOVE_VIDEO = "foxglove_msgs/msg/CompressedVideo"
@@ -152,7 +153,7 @@ class DecodedVideoFrame:
     problem: str = ""
     reordered: bool = False  # paired with its frame by its stamp out of the packets' order (B-frames)
 
-    def pixels(self, depth=None, notes: list[str] | None = None) -> np.ndarray:
+    def pixels(self, depth: StreamDepth | None = None, notes: list[str] | None = None) -> np.ndarray:
         if self.frame is None:
             raise ImageMessageError(self.problem)
         if self.reordered and notes is not None:
