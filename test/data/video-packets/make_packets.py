@@ -1,8 +1,9 @@
-"""Writes the H.264 and H.265 packet streams beside this file (PyAV's libx264 and libx265; run by hand:
+"""Writes the H.264, H.265 and AV1 packet streams beside this file (PyAV's libx264, libx265, libsvtav1; by hand:
 `pip install av numpy` in a scratch venv, then `python make_packets.py`). Each frame is a grey 160x120 image
 with a bright bar at x = 10 + 8 * (its capture number), so a decoded frame tells which capture it is.
 
-Each file is a run of packets in decode order, each as <uint32 capture number (pts)> <uint32 length> <bytes>.
+Each file is a run of packets in decode order, each as <uint32 capture number (pts)> <uint32 length> <bytes>
+(H.264 and H.265 in Annex B, AV1 in its low-overhead form).
 """
 
 import struct
@@ -44,3 +45,4 @@ encode("libx264", {"bf": "2", "g": "6", "keyint_min": "6", "sc_threshold": "0", 
                    "x264-params": "b-adapt=0"}, "h264_b.bin")
 encode("libx265", {"x265-params": "keyint=6:min-keyint=6:bframes=2:b-adapt=0:open-gop=1:scenecut=0:log-level=error",
                    "crf": "18"}, "hevc_open_gop.bin")
+encode("libsvtav1", {"g": "6", "preset": "8", "crf": "30"}, "av1.bin")  # no AV1 decoder in OpenCV's wheel
