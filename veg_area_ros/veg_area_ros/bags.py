@@ -526,7 +526,7 @@ def _image_connections(reader: Reader, path: str | Path, image_topic: str | None
     `compressed` or `zstd` topic records it, or video packets as its `foxglove` or `ffmpeg` topic records them):
     the named one, else the only image topic, else, where every image
     topic is one camera's image_transport topics (`ros2 bag record -a` keeps them all), its raw one (then zstd,
-    then compressed: the same frames, lossless first)."""
+    then compressed, then the video packets: the same frames, lossless first, inter-frame last)."""
     images = [c for c in reader.connections if c.msgtype in IMAGE_TYPES]
     chosen = [c for c in images if image_topic is None or c.topic == image_topic]
     bases = {transport_base(c.topic) for c in chosen}
