@@ -279,3 +279,22 @@ def test_an_av1_stream_is_decoded_where_opencv_can_and_else_each_row_says_why():
         assert all(shown is None and "decoded no frame of this av1 stream" in problem for shown, problem, _ in results)
     else:
         assert [shown for shown, _, _ in results] == [number for number, _ in packets]
+
+
+def test_of_one_cameras_transports_the_video_packets_come_last(tmp_path):
+    """`ros2 bag record -a` beside a camera that publishes image_raw/compressed and image_raw/foxglove: the JPEG
+    frames are read (each frame on its own), the video topic named as recorded and not read; named, it is read."""
+    from veg_area_ros.bags import bag_images
+
+    packets = stored_packets("h264_no_b.bin")
+    compressed = [STORE.types["sensor_msgs/msg/CompressedImage"](
+        header=STORE.types["std_msgs/msg/Header"](stamp=STORE.types["builtin_interfaces/msg/Time"](
+            sec=stamp(n)[0], nanosec=stamp(n)[1]), frame_id="camera"), format="jpeg",
+        data=np.frombuffer(cv2.imencode(".jpg", np.full((120, 160), 90, np.uint8))[1].tobytes(), np.uint8))
+        for n, _ in packets]
+    bag = tmp_path / "all"
+    write_video_bag(bag, "/camera/image_raw/foxglove", FOXGLOVE_VIDEO, [foxglove(n, d, "h264") for n, d in packets],
+                    extra=[("/camera/image_raw/compressed", "sensor_msgs/msg/CompressedImage", compressed)])
+    assert bag_images(bag) == ("/camera/image_raw/compressed", len(packets), ["/camera/image_raw/foxglove"])
+    named = list(iter_bag_frames(bag, "/camera/image_raw/foxglove"))
+    assert [captured(f.image.pixels()) for f in named] == [n for n, _ in packets]
