@@ -168,7 +168,9 @@ class _Writer:
         return b"".join(self.parts)  # the one copy of the pixels
 
 
-class _Reader:
+class CdrReader:
+    """Reads a serialized message's fields in order, each aligned as ROS 2's CDR aligns it."""
+
     def __init__(self, buffer) -> None:
         self.view = memoryview(buffer).cast("B")
         if len(self.view) < 4 or bytes(self.view[:2]) != b"\x00\x01":
@@ -188,6 +190,11 @@ class _Reader:
         (length,) = self.unpack("I")
         raw = self.take(length)
         return bytes(raw[:-1]).decode(errors="replace") if length else ""
+
+    def octets(self) -> memoryview:
+        """A uint8[] field: its length, then its bytes (a view, no copy)."""
+        (length,) = self.unpack("I")
+        return self.take(length)
 
     def take(self, length: int) -> memoryview:
         if self.offset + length > len(self.view):
@@ -248,14 +255,13 @@ class ImageFields:
 
 def decode_image(buffer) -> ImageFields:
     """Serialized sensor_msgs/Image -> its fields, the pixel data a view (no copy) of `buffer`."""
-    reader = _Reader(buffer)
+    reader = CdrReader(buffer)
     header = reader.header()
     height, width = reader.unpack("II")
     encoding = reader.string()
     (is_bigendian,) = reader.unpack("B")
     (step,) = reader.unpack("I")
-    (length,) = reader.unpack("I")
-    return ImageFields(header, height, width, encoding, is_bigendian, step, reader.take(length))
+    return ImageFields(header, height, width, encoding, is_bigendian, step, reader.octets())
 
 
 @dataclass(frozen=True)
@@ -342,33 +348,29 @@ FOXGLOVE_ENCODINGS = {"uyvy": "yuv422", "yuyv": "yuv422_yuy2"}  # Foxglove's nam
 def decode_foxglove_raw_image(buffer) -> ImageFields:
     """Serialized foxglove_msgs/RawImage -> the fields of the Image it is: its timestamp and frame_id lie as a
     std_msgs/Header does; then width before height, the encoding, step (16-bit data little-endian), the data."""
-    reader = _Reader(buffer)
+    reader = CdrReader(buffer)
     header = reader.header()
     width, height = reader.unpack("II")
     encoding = reader.string()
     (step,) = reader.unpack("I")
-    (length,) = reader.unpack("I")
-    return ImageFields(header, height, width, FOXGLOVE_ENCODINGS.get(encoding, encoding), 0, step,
-                       reader.take(length))
+    return ImageFields(header, height, width, FOXGLOVE_ENCODINGS.get(encoding, encoding), 0, step, reader.octets())
 
 
 def decode_foxglove_compressed_image(buffer) -> CompressedImageFields:
     """Serialized foxglove_msgs/CompressedImage (timestamp, frame_id, data, format: jpeg, png, webp) -> the
     fields of the CompressedImage it is."""
-    reader = _Reader(buffer)
+    reader = CdrReader(buffer)
     header = reader.header()
-    (length,) = reader.unpack("I")
-    data = reader.take(length)
+    data = reader.octets()
     return CompressedImageFields(header, reader.string(), data)
 
 
 def decode_compressed_image(buffer) -> CompressedImageFields:
     """Serialized sensor_msgs/CompressedImage -> its fields, the data a view (no copy) of `buffer`."""
-    reader = _Reader(buffer)
+    reader = CdrReader(buffer)
     header = reader.header()
     image_format = reader.string()
-    (length,) = reader.unpack("I")
-    return CompressedImageFields(header, image_format, reader.take(length))
+    return CompressedImageFields(header, image_format, reader.octets())
 
 
 def encode_compressed_image(data: bytes, image_format: str, sec: int, nanosec: int, frame_id: str) -> bytes:
@@ -415,11 +417,11 @@ def _camera_info_writer(info: CameraInfoFields) -> _Writer:
 
 def decode_string(buffer) -> str:
     """A std_msgs/String message's text."""
-    return _Reader(buffer).string()
+    return CdrReader(buffer).string()
 
 
 def decode_camera_info(buffer) -> CameraInfoFields:
-    reader = _Reader(buffer)
+    reader = CdrReader(buffer)
     header = reader.header()
     height, width = reader.unpack("II")
     model = reader.string()

@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from .bit_depth import StreamDepth
-from .cdr import Header, ImageMessageError, _Reader
+from .cdr import CdrReader, Header, ImageMessageError
 
 FOXGLOVE_VIDEO = "foxglove_msgs/msg/CompressedVideo"
 FFMPEG_PACKET = "ffmpeg_image_transport_msgs/msg/FFMPEGPacket"
@@ -59,12 +59,11 @@ def codec_name(text: str) -> str:
 
 def decode_video_packet(msgtype: str, buffer) -> VideoPacket:
     """Serialized CompressedVideo or FFMPEGPacket -> a VideoPacket, its data a view (no copy) of `buffer`."""
-    reader = _Reader(buffer)
+    reader = CdrReader(buffer)
     if msgtype == FOXGLOVE_VIDEO:
         sec, nanosec = reader.unpack("iI")
         frame_id = reader.string()
-        (length,) = reader.unpack("I")
-        data = reader.take(length)
+        data = reader.octets()
         return VideoPacket(Header(sec, nanosec, frame_id), codec_name(reader.string()), data)
     if msgtype == FFMPEG_PACKET:
         header = reader.header()
@@ -72,8 +71,7 @@ def decode_video_packet(msgtype: str, buffer) -> VideoPacket:
         encoding = reader.string()
         reader.unpack("Q")  # pts: the frames are paired with their messages by the stamps
         flags, _ = reader.unpack("BB")  # flags, is_bigendian
-        (length,) = reader.unpack("I")
-        return VideoPacket(header, codec_name(encoding), reader.take(length), bool(flags & AV_PKT_FLAG_KEY))
+        return VideoPacket(header, codec_name(encoding), reader.octets(), bool(flags & AV_PKT_FLAG_KEY))
     raise ImageMessageError(f"{msgtype} is not a video packet read here")
 
 
