@@ -298,3 +298,26 @@ def test_of_one_cameras_transports_the_video_packets_come_last(tmp_path):
     assert bag_images(bag) == ("/camera/image_raw/compressed", len(packets), ["/camera/image_raw/foxglove"])
     named = list(iter_bag_frames(bag, "/camera/image_raw/foxglove"))
     assert [captured(f.image.pixels()) for f in named] == [n for n, _ in packets]
+
+
+@pytest.mark.parametrize("name, codec", [("h264_b.bin", "h264"), ("hevc_open_gop.bin", "hevc")])
+def test_a_segment_of_a_video_bag_decodes_from_the_keyframes_it_needs_and_gives_the_same_frames(tmp_path, name,
+                                                                                                  codec):
+    """`--jobs` and a cluster measure a long bag in segments: each decoded the whole recording before its own
+    frames (quadratic in the bag's length). From each possible first frame, the frames from there on are the
+    whole decode's, and only the two keyframes' packets before it are decoded (an open GOP's leading pictures
+    refer to the one before)."""
+    packets = stored_packets(name)
+    twice = packets + [(number + len(packets), data) for number, data in packets]
+    bag = tmp_path / "twice"
+    write_video_bag(bag, "/camera/image_raw/foxglove", FOXGLOVE_VIDEO, [foxglove(n, d, codec) for n, d in twice])
+    whole = [f.image.pixels() for f in iter_bag_frames(bag)]
+    keyframes = [k for k, (_, data) in enumerate(twice) if is_keyframe(VideoPacket(None, codec, memoryview(data)))]
+    for start in range(len(twice)):
+        frames = list(iter_bag_frames(bag, start=start))
+        assert len(frames) == len(twice)
+        for k in range(start, len(twice)):
+            assert np.array_equal(frames[k].image.pixels(), whole[k]), (start, k)
+        before = [key for key in keyframes if key <= start]
+        first_decoded = before[-2] if len(before) >= 2 else 0
+        assert all("before the frames asked for" in frames[k].image.problem for k in range(first_decoded)), start

@@ -61,8 +61,10 @@ from .video_packets import (
     DECODED_VIDEO_TYPES,
     UNDECODED_VIDEO_TYPES,
     DecodedVideoFrame,
+    VideoPacket,
     VideoPacketStream,
     decode_video_packet,
+    is_keyframe,
 )
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -577,22 +579,43 @@ def _decode_image(msgtype: str, data):
     return IMAGE_DECODERS[msgtype](data)
 
 
-def _video_frames(reader: Reader, images: list, folder: str) -> Iterator[DecodedVideoFrame]:
+def _video_frames(reader: Reader, images: list, folder: str, start: int = 0) -> Iterator[DecodedVideoFrame]:
     """The topic's video packets decoded in recording order (`VideoPacketStream`), one per message: the packets
-    are read here, the frames decoded as they are taken."""
+    are read here, the frames decoded as they are taken. Frames before `start` are decoded only from the keyframe
+    before the last keyframe up to it (a segment of a long bag does not decode the whole recording before it; the
+    keyframe before gives an open GOP's leading pictures what they refer to)."""
     stream = VideoPacketStream(folder, images[0].topic)
     headers = []
-    for connection, _, data in reader.messages(connections=images):
+    held: list[list] = [[]]  # before `start`: the last two keyframes' packets (or why one cannot be read)
+    for index, (connection, _, data) in enumerate(reader.messages(connections=images)):
         try:
             packet = decode_video_packet(connection.msgtype, data)
         except ImageMessageError as exc:
-            stream.add_unreadable(str(exc))
-            headers.append(Header(0, 0, ""))
+            packet, header = str(exc), Header(0, 0, "")
+        else:
+            header = packet.header
+        headers.append(header)
+        if index <= start and isinstance(packet, VideoPacket) and is_keyframe(packet):
+            if len(held) == 2:
+                for _ in held.pop(0):
+                    stream.add_unreadable(BEFORE_SEGMENT)
+            held.append([])
+        if index < start:
+            held[-1].append(packet)
             continue
-        stream.add(packet)
-        headers.append(packet.header)
+        for item in [*(item for group in held for item in group), packet]:
+            if isinstance(item, str):
+                stream.add_unreadable(item)
+            else:
+                stream.add(item)
+        held = [[]]
+    for _ in (item for group in held for item in group):  # the recording ends before `start`
+        stream.add_unreadable(BEFORE_SEGMENT)
     return (DecodedVideoFrame(header, frame, problem, reordered)
             for header, (frame, problem, reordered) in zip(headers, stream.frames(), strict=True))
+
+
+BEFORE_SEGMENT = "not decoded: before the frames asked for and the keyframe they need"
 
 
 def bag_image_count(path: str | Path, image_topic: str | None = None) -> int:
@@ -627,13 +650,14 @@ def bag_camera_info(path: str | Path, image_topic: str | None = None) -> tuple[s
         reader.close()
 
 
-def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterator[BagFrame]:
+def iter_bag_frames(path: str | Path, image_topic: str | None = None, start: int = 0) -> Iterator[BagFrame]:
     """The bag's image messages in recording order, each with its camera's camera_info last recorded before it
     (`_info_connections`) and the calibration metadata recorded beside it (`<camera_info>/metadata`, text as
     `calib_io.metadata_message` makes it). Frames recorded before the camera's first camera_info (up to
     `EARLY_FRAMES`) get that one: theirs where its stamp is theirs, else with `EARLY_NOTE`. Without a topic name:
     the only image topic (an error if there are several). An image whose frame_id differs from that
-    camera_info's gets none, and the reason."""
+    camera_info's gets none, and the reason. `start`: the first frame the caller takes (the frames before it are
+    still given, for their camera_info; of video packets only those from the keyframe it needs are decoded)."""
     reader = _open_reader(path)
     with contextlib.ExitStack() as stack:
         stack.callback(reader.close)
@@ -646,7 +670,7 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None) -> Iterato
         video = None
         if images[0].msgtype in DECODED_VIDEO_TYPES:
             video = _video_frames(reader, images, stack.enter_context(
-                tempfile.TemporaryDirectory(prefix="veg-area-video-")))
+                tempfile.TemporaryDirectory(prefix="veg-area-video-")), start)
         index = 0
 
         def paired(timestamp: int, image, info: CameraInfoFields | None, note: str = "") -> BagFrame:

@@ -453,7 +453,7 @@ def iter_bag(path: Path, image_topic: str | None = None, start: int = 0, stop: i
     end = declared if stop is None else min(stop, declared)
     read, problem = start, ""
     try:
-        for frame in iter_bag_frames(path, image_topic):
+        for frame in iter_bag_frames(path, image_topic, start):
             if frame.index < start:
                 continue
             if frame.index >= end:
