@@ -75,13 +75,15 @@ def decode_video_packet(msgtype: str, buffer) -> VideoPacket:
     raise ImageMessageError(f"{msgtype} is not a video packet read here")
 
 
-def _nal_units(data: bytes) -> Iterator[bytes]:
-    """The NAL units of Annex B data (each after its 00 00 01 start code)."""
-    start = data.find(b"\x00\x00\x01")
-    while start >= 0:
-        begin = start + 3
-        start = data.find(b"\x00\x00\x01", begin)
-        yield data[begin:start if start >= 0 else len(data)]
+def _nal_types(codec: str, data: bytes) -> list[int]:
+    """The NAL unit types of Annex B data, each after its 00 00 01 start code (H.264: the low 5 bits of the
+    unit's first byte; H.265: 6 bits after its first)."""
+    types, start = [], data.find(b"\x00\x00\x01")
+    while 0 <= start < len(data) - 3:
+        byte = data[start + 3]
+        types.append(byte & 0x1F if codec == "h264" else (byte >> 1) & 0x3F)
+        start = data.find(b"\x00\x00\x01", start + 3)
+    return types
 
 
 def _av1_obu_types(data: bytes) -> Iterator[int]:
@@ -122,9 +124,9 @@ def is_keyframe(packet: VideoPacket) -> bool:
         return packet.keyframe_flag
     data = bytes(packet.data)
     if packet.codec == "h264":
-        return any(unit and unit[0] & 0x1F == 5 for unit in _nal_units(data))
+        return 5 in _nal_types("h264", data)
     if packet.codec == "hevc":
-        return any(unit and 16 <= (unit[0] >> 1) & 0x3F <= 23 for unit in _nal_units(data))
+        return any(16 <= kind <= 23 for kind in _nal_types("hevc", data))
     if packet.codec == "vp9":
         return _vp9_is_keyframe(data)
     if packet.codec == "vp8":
@@ -136,8 +138,7 @@ def is_keyframe(packet: VideoPacket) -> bool:
 
 def _hevc_skipped_leading(data: bytes) -> bool:
     """An H.265 picture that the decoder drops where decoding begins at a CRA: RASL (NAL types 8, 9)."""
-    types = [(unit[0] >> 1) & 0x3F for unit in _nal_units(data) if unit]
-    vcl = [t for t in types if t < 32]
+    vcl = [kind for kind in _nal_types("hevc", data) if kind < 32]
     return bool(vcl) and vcl[0] in (8, 9)
 
 
@@ -173,7 +174,7 @@ class VideoPacketStream:
         self.codec: str | None = None
         self.path = Path(folder) / "stream"
         self._file = self.path.open("wb")
-        self.stamps: list[int | None] = []  # per packet: its stamp (ns), None where it cannot be decoded
+        self.stamps: list[int] = []  # per packet: its stamp (ns)
         self.problems: list[str] = []  # per packet: why it has no frame ("" where it has one)
         self._started = False
         self._cra_leading = False  # began at an H.265 CRA: its RASL pictures are not output
@@ -195,8 +196,8 @@ class VideoPacketStream:
         elif not self._started:
             if is_keyframe(packet):
                 self._started = True
-                self._cra_leading = self.codec == "hevc" and not any(
-                    unit and (unit[0] >> 1) & 0x3F in (19, 20) for unit in _nal_units(bytes(packet.data)))
+                self._cra_leading = self.codec == "hevc" and not {19, 20} & set(
+                    _nal_types("hevc", bytes(packet.data)))
             else:
                 problem = ("recorded before the stream's first keyframe: an inter-frame video's frame cannot be "
                            "decoded without the keyframe before it")
@@ -210,13 +211,13 @@ class VideoPacketStream:
                 self._file.write(struct.pack("<IQ", len(packet.data), self._ivf_frames))
                 self._ivf_frames += 1
             self._file.write(packet.data)
-        self.stamps.append(None if problem else packet.header.nanoseconds)
+        self.stamps.append(packet.header.nanoseconds)
         self.problems.append(problem)
 
     def add_unreadable(self, problem: str) -> None:
         """A message whose packet cannot be read at all: it has no frame, and a frame after it that needed it
         shows the damage as the decoder conceals it."""
-        self.stamps.append(None)
+        self.stamps.append(0)
         self.problems.append(problem)
 
     def frames(self) -> Iterator[tuple[np.ndarray | None, str, bool]]:
@@ -227,7 +228,7 @@ class VideoPacketStream:
         if self.codec in ANNEX_B or self.codec in IVF_FOURCC:  # named as FFmpeg's raw demuxers know it
             suffix = ".ivf" if self.codec in IVF_FOURCC else f".{self.codec}"
             self.path = self.path.rename(self.path.with_suffix(suffix))
-        decodable = [i for i, stamp in enumerate(self.stamps) if stamp is not None]
+        decodable = [i for i, problem in enumerate(self.problems) if not problem]
         by_stamp = sorted(decodable, key=lambda i: (self.stamps[i], i))
         rank = {packet: position for position, packet in enumerate(by_stamp)}
         order = {packet: position for position, packet in enumerate(decodable)}
