@@ -195,8 +195,9 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
             topic, count, others = bag_images(bag, job.image_topic)
             bag_frames += count
             if others and job.image_topic is None:  # a choice among the bag's image topics is said
-                say(f"{bag.name}: measuring {topic} (the raw frames first, then zstd, then compressed: the same "
-                    f"frames, lossless first); also recorded and not read: {', '.join(others)}")
+                say(f"{bag.name}: measuring {topic} (the raw frames first, then zstd, then compressed, then video "
+                    "packets: the same frames, lossless first, inter-frame last); also recorded and not read: "
+                    f"{', '.join(others)}")
         # a calibration file for another camera than the one a bag's camera_info describes: said in each result
         other_camera = {} if file_camera is None else {
             b.name: problem for b in bags if (problem := _other_camera(b, job.image_topic, calibration))}
