@@ -20,6 +20,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from veg_area_ros.bags import iter_bag_frames
 from veg_area_ros.cdr import Header
 from veg_area_ros.video_packets import (
+    CONCEALED_NOTE,
     FFMPEG_PACKET,
     FOXGLOVE_VIDEO,
     VideoPacket,
@@ -109,13 +110,15 @@ def test_the_packets_fields_read_as_rosbags_serializes_them():
     assert packet.codec == "h264" and bytes(packet.data) == data and packet.keyframe_flag is True
 
 
-def decoded(name: str, codec: str, first: int = 0) -> list[tuple[int | None, str, bool]]:
-    """The stream's packets from the `first`-th on, each stamped with its capture time, as (capture number the
-    decoded frame shows, why it has none, whether it was reordered), per packet in decode order."""
+def decoded(name: str, codec: str, first: int = 0, packets: list[tuple[int, bytes]] | None = None,
+            stamped: bool = True) -> list[tuple[int | None, str, bool]]:
+    """The stream's packets from the `first`-th on, each stamped with its capture time (or all alike), as
+    (capture number the decoded frame shows, why it has none, whether it was reordered), per packet in decode
+    order."""
     with tempfile.TemporaryDirectory() as folder:
         stream = VideoPacketStream(folder, "/camera/image_raw/foxglove")
-        for number, data in stored_packets(name)[first:]:
-            stream.add(VideoPacket(Header(*stamp(number), "camera"), codec, memoryview(data)))
+        for number, data in (stored_packets(name) if packets is None else packets)[first:]:
+            stream.add(VideoPacket(Header(*stamp(number if stamped else 0), "camera"), codec, memoryview(data)))
         return [(None if frame is None else captured(frame), problem, reordered)
                 for frame, problem, reordered in stream.frames()]
 
@@ -124,13 +127,82 @@ def decoded(name: str, codec: str, first: int = 0) -> list[tuple[int | None, str
                                          ("hevc_open_gop.bin", "hevc")])
 def test_each_packet_gets_the_frame_it_carries_also_with_b_frames(name, codec):
     """With B-frames the decoder gives the frames in capture order, not the packets': each packet's frame is
-    the one its stamp names, and those paired out of the packets' order say so."""
+    the one it carries. H.264 frames come back with their packets' numbers; H.265's are paired by the stamps,
+    and those paired out of the packets' order say so."""
     numbers = [number for number, _ in stored_packets(name)]
     results = decoded(name, codec)
     assert [shown for shown, _, _ in results] == numbers
     assert all(problem == "" for _, problem, _ in results)
     reordered = [k for k, (_, _, moved) in enumerate(results) if moved]
-    assert bool(reordered) == (numbers != sorted(numbers))
+    assert bool(reordered) == (codec == "hevc" and numbers != sorted(numbers))
+
+
+def test_h264_frames_are_paired_by_the_decoders_numbers_even_where_the_stamps_say_nothing():
+    """A camera driver that stamps nothing (every stamp 0): the B-frame stream's frames still each reach the
+    packet that carries them, where pairing by the stamps would give them in the packets' order."""
+    numbers = [number for number, _ in stored_packets("h264_b.bin")]
+    assert numbers != sorted(numbers)
+    assert [shown for shown, _, _ in decoded("h264_b.bin", "h264", stamped=False)] == numbers
+
+
+@pytest.mark.parametrize("name", ["h264_no_b.bin", "h264_b.bin"])
+def test_a_packet_without_a_picture_costs_its_own_row_alone(name):
+    """A packet that holds no picture (here only an access unit delimiter where a frame was) is said so on its
+    own row, and not given to OpenCV's decoder (which stops at it). Every other packet keeps its own frame (a
+    missing frame shifted every later frame onto the next message without a word); those up to the next
+    keyframe may refer to the lost one, and say so."""
+    packets = stored_packets(name)
+    keyframes = [k for k, (_, data) in enumerate(packets) if is_keyframe(VideoPacket(None, "h264",
+                                                                                      memoryview(data)))]
+    lost = 4
+    resumed = next(key for key in keyframes if key > lost)
+    packets[lost] = (packets[lost][0], b"\x00\x00\x00\x01\x09\xf0")
+    results = decoded(name, "h264", packets=packets)
+    assert results[lost][0] is None and "holds no picture" in results[lost][1]
+    assert all(shown is not None for k, (shown, _, _) in enumerate(results) if k != lost)
+    assert [note == CONCEALED_NOTE for _, _, note in results] == [lost < k < resumed for k in range(len(packets))]
+    exact = [k for k in range(len(packets)) if k < lost or k >= resumed]
+    assert [results[k][0] for k in exact] == [packets[k][0] for k in exact]
+    if name == "h264_b.bin":  # nothing refers to the lost B-frame: the others are their own, not shifted
+        assert [shown for k, (shown, _, _) in enumerate(results) if k != lost] == [
+            number for k, (number, _) in enumerate(packets) if k != lost]
+
+
+@pytest.mark.parametrize("name", ["h264_no_b.bin", "h264_b.bin"])
+def test_a_damaged_packet_that_stops_the_decoder_loses_its_frames_up_to_the_next_keyframe_only(name):
+    """A packet whose slice data is zeros stops OpenCV's decoder (before, it cost an H.264 stream every frame):
+    its rows up to the next keyframe say why, and decoding resumes there, each frame on its own packet."""
+    packets = stored_packets(name)
+    keyframes = [k for k, (_, data) in enumerate(packets) if is_keyframe(VideoPacket(None, "h264",
+                                                                                      memoryview(data)))]
+    damaged = 4
+    resumed = next(key for key in keyframes if key > damaged)
+    packets[damaged] = (packets[damaged][0], packets[damaged][1][:5] + bytes(len(packets[damaged][1]) - 5))
+    results = decoded(name, "h264", packets=packets)
+    lost = [k for k, (shown, _, _) in enumerate(results) if shown is None]
+    assert damaged in lost and all(damaged - 3 <= k < resumed for k in lost)
+    assert all("decoder stopped at a damaged packet" in results[k][1] for k in lost)
+    assert [results[k][0] for k in range(len(packets)) if k not in lost] == [
+        packets[k][0] for k in range(len(packets)) if k not in lost]
+    assert results[resumed][0] == packets[resumed][0]
+
+
+def test_a_long_stream_is_decoded_in_chunks_begun_at_keyframes_with_the_same_frames(monkeypatch):
+    """The IVF files hold CHUNK_PACKETS packets at least, each begun at a keyframe: made small here, four
+    stream files give the same frames as one."""
+    import veg_area_ros.video_packets as video_packets
+
+    packets = stored_packets("h264_b.bin")
+    twice = packets + [(number + len(packets), data) for number, data in packets]
+    whole = decoded("", "h264", packets=twice)
+    monkeypatch.setattr(video_packets, "CHUNK_PACKETS", 4)
+    with tempfile.TemporaryDirectory() as folder:
+        stream = VideoPacketStream(folder, "/camera")
+        for number, data in twice:
+            stream.add(VideoPacket(Header(*stamp(number), "camera"), "h264", memoryview(data)))
+        chunked = [(captured(frame), problem, moved) for frame, problem, moved in stream.frames()]
+        assert len(list(Path(folder).glob("stream-*.ivf"))) == 4  # keyframes every 6 packets
+    assert chunked == whole and [shown for shown, _, _ in whole] == [number for number, _ in packets] * 2
 
 
 def test_a_recording_begun_between_keyframes_decodes_from_the_next_keyframe():
@@ -180,8 +252,8 @@ def test_a_stream_that_cannot_be_decoded_says_why():
 
 
 def test_an_ffmpeg_image_transport_bag_is_read_in_capture_order_with_its_camera_info():
-    """FFMPEGPacket (its flags say the keyframes) with B-frames: every frame paired with its own stamp, the
-    camera_info recorded beside it, and the frames moved by the B-frames say so in their notes."""
+    """FFMPEGPacket (its flags say the keyframes) with B-frames: every frame paired with its own stamp (by the
+    decoder's own numbers: no frame needs a note on its pairing), the camera_info recorded beside it."""
     from veg_area_ros.frames import iter_bag
 
     packets = stored_packets("h264_b.bin")
@@ -203,8 +275,7 @@ def test_an_ffmpeg_image_transport_bag_is_read_in_capture_order_with_its_camera_
     assert [captured(f.image) for f in frames] == [number for number, _ in packets]
     assert [f.time_s for f in frames] == [pytest.approx(s + ns / 1e9) for s, ns in (stamp(n) for n, _ in packets)]
     assert all(f.camera_info is not None for f in frames)
-    moved = [f for f in frames if any("reorders its frames (B-frames)" in note for note in f.notes)]
-    assert moved and len(moved) < len(frames)
+    assert not any("reorders its frames (B-frames)" in note for f in frames for note in f.notes)
 
 
 def ivf_packets(path: Path) -> list[bytes]:

@@ -611,8 +611,8 @@ def _video_frames(reader: Reader, images: list, folder: str, start: int = 0) -> 
         held = [[]]
     for _ in (item for group in held for item in group):  # the recording ends before `start`
         stream.add_unreadable(BEFORE_SEGMENT)
-    return (DecodedVideoFrame(header, frame, problem, reordered)
-            for header, (frame, problem, reordered) in zip(headers, stream.frames(), strict=True))
+    return (DecodedVideoFrame(header, frame, problem, note)
+            for header, (frame, problem, note) in zip(headers, stream.frames(), strict=True))
 
 
 BEFORE_SEGMENT = "not decoded: before the frames asked for and the keyframe they need"

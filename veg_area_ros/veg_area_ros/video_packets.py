@@ -2,21 +2,23 @@
 H.265, VP9, AV1; what `foxglove_compressed_video_transport` records) and ffmpeg_image_transport's FFMPEGPacket.
 
 A frame of such a stream needs the frames before it, so the packets are not decoded one by one: they are
-written back to back into one raw stream file (Annex B for H.264/H.265, IVF for VP8/VP9/AV1) that OpenCV's
-FFmpeg decodes in order. `VideoPacketStream` does that and pairs each decoded frame with its message: packets
-before the stream's first keyframe cannot be decoded and are said so; the decoder gives the frames in the order
-they were captured, which with B-frames is not the order of the packets, so frames are paired with the messages
-in the order of their stamps (the capture times), which is the packets' own order wherever there are no B-frames.
+written back to back into stream files that OpenCV's FFmpeg decodes in order, and `VideoPacketStream` pairs each
+decoded frame with its message. H.264, VP8, VP9 and AV1 go into IVF files whose timestamps number the packets,
+so each frame comes back with its own packet's number (exact with B-frames too); H.265, which FFmpeg's IVF reader
+does not take, goes into one Annex B stream whose frames come in capture order and are paired with the messages
+in the order of their stamps. Packets before the stream's first keyframe cannot be decoded and are said so.
 
 No ROS here: the messages are read from their CDR bytes.
 """
 
 from __future__ import annotations
 
+import itertools
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import cv2
 import numpy as np
@@ -30,7 +32,10 @@ DECODED_VIDEO_TYPES = (FOXGLOVE_VIDEO, FFMPEG_PACKET)
 # theora_image_transport's packets are Ogg packets whose stream headers are sent once to each subscriber
 UNDECODED_VIDEO_TYPES = ("theora_image_transport/msg/Packet",)
 ANNEX_B = ("h264", "hevc")
-IVF_FOURCC = {"vp8": b"VP80", "vp9": b"VP90", "av1": b"AV01"}
+# decoded from IVF files (FFmpeg's IVF reader takes H.264 as well, not H.265)
+IVF_FOURCC = {"h264": b"H264", "vp8": b"VP80", "vp9": b"VP90", "av1": b"AV01"}
+CHUNK_PACKETS = 240  # an IVF file holds this many packets at least, up to the next keyframe
+MAX_REORDER = 16  # H.264 holds back at most 16 frames to reorder them: a frame not given by then is dropped
 AV_PKT_FLAG_KEY = 1  # FFMPEGPacket.flags: libavcodec's packet flags
 
 
@@ -136,6 +141,15 @@ def is_keyframe(packet: VideoPacket) -> bool:
     return False
 
 
+def _closed_keyframe(packet: VideoPacket) -> bool:
+    """A keyframe that nothing after it refers past (an H.264 IDR; any VP8, VP9 or AV1 keyframe), so that
+    decoding can start again there without losing a frame: an H.264 I-frame flagged as a keyframe in an open GOP
+    is not one."""
+    if packet.codec == "h264":
+        return 5 in _nal_types("h264", bytes(packet.data))
+    return is_keyframe(packet)
+
+
 def _hevc_skipped_leading(data: bytes) -> bool:
     """An H.265 picture that the decoder drops where decoding begins at a CRA: RASL (NAL types 8, 9)."""
     vcl = [kind for kind in _nal_types("hevc", data) if kind < 32]
@@ -150,49 +164,59 @@ class DecodedVideoFrame:
     header: Header
     frame: np.ndarray | None
     problem: str = ""
-    reordered: bool = False  # paired with its frame by its stamp out of the packets' order (B-frames)
+    note: str = ""  # what makes the frame's pairing or its pixels less sure (REORDERED_NOTE, CONCEALED_NOTE)
 
     def pixels(self, depth: StreamDepth | None = None, notes: list[str] | None = None) -> np.ndarray:
         if self.frame is None:
             raise ImageMessageError(self.problem)
-        if self.reordered and notes is not None:
-            notes.append(REORDERED_NOTE)
+        if self.note and notes is not None:
+            notes.append(self.note)
         return self.frame
 
 
 REORDERED_NOTE = ("the video stream reorders its frames (B-frames): this frame was paired with its message by the "
                   "stamps, in the order the camera took them")
+LEADING_SKIPPED = "a leading picture of the CRA keyframe the stream begins at, which the decoder skips"
+CONCEALED_NOTE = ("a packet of the video stream since its last keyframe has no frame: this frame may refer to it, "
+                  "and the decoder then filled in what it lacked")
 
 
 class VideoPacketStream:
     """A bag topic's video packets decoded in order. `add` every packet in recording order (it is written to a
-    raw stream file in `folder`, or counted as undecodable before the first keyframe), then `frames()` pairs
-    each added packet with its decoded frame or the reason it has none."""
+    stream file in `folder`, or counted as undecodable before the first keyframe), then `frames()` pairs
+    each added packet with its decoded frame or the reason it has none.
+
+    H.264, VP8, VP9 and AV1 are written into IVF files whose timestamps number the packets, and the decoder
+    hands each frame back with its packet's number: the pairing is exact, B-frames too, and a packet the decoder
+    gives no frame for is that packet's row alone (`IvfChunk`). FFmpeg's IVF reader does not take H.265: it is
+    decoded as one Annex B stream and its frames paired with the packets by their stamps."""
 
     def __init__(self, folder: str | Path, topic: str) -> None:
         self.topic = topic
         self.codec: str | None = None
-        self.path = Path(folder) / "stream"
-        self._file = self.path.open("wb")
+        self.folder = Path(folder)
         self.stamps: list[int] = []  # per packet: its stamp (ns)
         self.problems: list[str] = []  # per packet: why it has no frame ("" where it has one)
+        self.frames_decoded = 0
         self._started = False
         self._cra_leading = False  # began at an H.265 CRA: its RASL pictures are not output
-        self._ivf_frames = 0
+        self._chunks: list[IvfChunk] = []
+        self._annex_b: BinaryIO | None = None
+        self.notes: list[str] = []  # per packet: CONCEALED_NOTE where a packet before it since a keyframe is lost
+        self._lost_since_keyframe = False
 
     def add(self, packet: VideoPacket) -> None:
         if self.codec is None:
             self.codec = packet.codec
-            if packet.codec in IVF_FOURCC:
-                self._file.write(b"DKIF" + struct.pack("<HH4sHHIII", 0, 32, IVF_FOURCC[packet.codec], 0, 0, 1000, 1,
-                                                       0) + bytes(4))
         problem = ""
         if packet.codec != self.codec:
             problem = f"its codec is {packet.codec}, the topic's first packet's {self.codec}"
-        elif self.codec not in ANNEX_B and self.codec not in IVF_FOURCC:
+        elif self.codec not in IVF_FOURCC and self.codec not in ANNEX_B:
             problem = f"the codec {self.codec!r} is not one read here (h264, h265/hevc, vp8, vp9, av1)"
         elif self.codec in ANNEX_B and not bytes(packet.data[:4]).startswith((b"\x00\x00\x01", b"\x00\x00\x00\x01")):
             problem = f"its {self.codec} data is not in Annex B form (start codes), as CompressedVideo requires"
+        elif self.codec == "h264" and not {1, 5} & set(_nal_types("h264", bytes(packet.data))):
+            problem = "it holds no picture (no slice NAL unit): the decoder would stop at it"
         elif not self._started:
             if is_keyframe(packet):
                 self._started = True
@@ -203,43 +227,80 @@ class VideoPacketStream:
                            "decoded without the keyframe before it")
         elif self._cra_leading:
             if _hevc_skipped_leading(bytes(packet.data)):
-                problem = "a leading picture of the CRA keyframe the stream begins at, which the decoder skips"
-            else:
-                self._cra_leading = False
+                self._add(packet.header.nanoseconds, LEADING_SKIPPED, lost=False)  # no later picture refers to it
+                return
+            self._cra_leading = False
         if not problem:
-            if self.codec in IVF_FOURCC:
-                self._file.write(struct.pack("<IQ", len(packet.data), self._ivf_frames))
-                self._ivf_frames += 1
-            self._file.write(packet.data)
-        self.stamps.append(packet.header.nanoseconds)
+            if self._lost_since_keyframe and _closed_keyframe(packet):
+                self._lost_since_keyframe = False
+            self._write(packet)
+        self._add(packet.header.nanoseconds, problem)
+
+    def _add(self, stamp: int, problem: str, lost: bool = True) -> None:
+        self.notes.append(CONCEALED_NOTE if self._lost_since_keyframe and not problem else "")
+        self._lost_since_keyframe |= bool(problem) and lost and self._started
+        self.stamps.append(stamp)
         self.problems.append(problem)
+
+    def _write(self, packet: VideoPacket) -> None:
+        if self.codec not in IVF_FOURCC:
+            if self._annex_b is None:
+                self._annex_b = (self.folder / f"stream.{self.codec}").open("wb")
+            self._annex_b.write(packet.data)
+            return
+        keyframe = _closed_keyframe(packet)
+        if not self._chunks or (keyframe and len(self._chunks[-1]) >= CHUNK_PACKETS):
+            if self._chunks:
+                self._chunks[-1].close()
+            self._chunks.append(IvfChunk(self.folder / f"stream-{len(self._chunks):05d}.ivf", self.codec))
+        self._chunks[-1].add(packet.data, keyframe)
 
     def add_unreadable(self, problem: str) -> None:
         """A message whose packet cannot be read at all: it has no frame, and a frame after it that needed it
         shows the damage as the decoder conceals it."""
-        self.stamps.append(0)
-        self.problems.append(problem)
+        self._add(0, problem)
 
-    def frames(self) -> Iterator[tuple[np.ndarray | None, str, bool]]:
-        """Per added packet, in the order added: (frame, why it has none, whether it was paired by its stamp
-        out of the packets' order). The frames are decoded one by one as they are taken (those a reordered
-        packet needs ahead are held)."""
-        self._file.close()
-        if self.codec in ANNEX_B or self.codec in IVF_FOURCC:  # named as FFmpeg's raw demuxers know it
-            suffix = ".ivf" if self.codec in IVF_FOURCC else f".{self.codec}"
-            self.path = self.path.rename(self.path.with_suffix(suffix))
+    def frames(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
+        """Per added packet, in the order added: (frame, why it has none, what makes it less sure: its pairing
+        by the stamps out of the packets' order, a packet it may refer to lost). The frames are decoded one by
+        one as they are taken (those a reordered packet needs ahead are held)."""
+        if self.codec in IVF_FOURCC:
+            return self._frames_by_number()
+        if self._annex_b is not None:
+            self._annex_b.close()
+        return self._frames_by_stamp()
+
+    def _no_decoder(self) -> str:
+        return (f"OpenCV's FFmpeg decoded no frame of this {self.codec} stream on {self.topic} up to here: a damaged "
+                f"keyframe, or a build with no {self.codec} decoder (then convert the recording, or record "
+                "image_raw/compressed)")
+
+    def _frames_by_number(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
+        if self._chunks:
+            self._chunks[-1].close()
+        decoded = itertools.chain.from_iterable(chunk.decode(self) for chunk in self._chunks)
+        for problem, note in zip(self.problems, self.notes, strict=True):
+            if problem:
+                yield None, problem, ""
+                continue
+            frame, problem = next(decoded)
+            if frame is None and not self.frames_decoded:
+                problem = self._no_decoder()
+            yield frame, problem, note
+
+    def _frames_by_stamp(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
         decodable = [i for i, problem in enumerate(self.problems) if not problem]
         by_stamp = sorted(decodable, key=lambda i: (self.stamps[i], i))
         rank = {packet: position for position, packet in enumerate(by_stamp)}
         order = {packet: position for position, packet in enumerate(decodable)}
-        capture = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG) if decodable else None
+        capture = cv2.VideoCapture(str(self._annex_b.name), cv2.CAP_FFMPEG) if decodable else None
         held: dict[int, np.ndarray] = {}
         decoded = 0
         ended = False
         try:
             for index, problem in enumerate(self.problems):
                 if problem:
-                    yield None, problem, False
+                    yield None, problem, ""
                     continue
                 wanted = rank[index]
                 while wanted not in held and not ended:
@@ -250,15 +311,90 @@ class VideoPacketStream:
                     held[decoded] = frame
                     decoded += 1
                 if wanted in held:
-                    yield held.pop(wanted), "", wanted != order[index]
+                    yield held.pop(wanted), "", REORDERED_NOTE if wanted != order[index] else self.notes[index]
                 elif decoded == 0:
-                    yield None, (f"OpenCV's FFmpeg decoded no frame of this {self.codec} stream on {self.topic} "
-                                 f"({len(decodable)} packets from its first keyframe on): its build may have no "
-                                 f"{self.codec} decoder; convert the recording, or record image_raw/compressed"), False
+                    yield None, self._no_decoder(), ""
                 else:
                     yield None, (f"the {self.codec} stream decoded {decoded} frames from {len(decodable)} packets "
-                                 "(a damaged packet?): the frames cannot be told apart from here on"), False
+                                 "(a damaged packet?): the frames cannot be told apart from here on"), ""
         finally:
             if capture is not None:
                 capture.release()
 
+
+class IvfChunk:
+    """Packets of one stream from a keyframe on, in an IVF file: each framed with its position in the chunk as its
+    timestamp (in a 1/1000 s time base, so that OpenCV gives it back as CAP_PROP_POS_MSEC with its frame).
+    Where the decoder stops (a damaged packet), it is started again from the chunk's next keyframe, which these
+    codecs' keyframes allow (nothing after one refers to anything before it)."""
+
+    STOPPED = ("the decoder stopped at a damaged packet before this one's frame: decoding resumed at the next "
+               "keyframe")
+    DROPPED = "the decoder gave no frame for this packet (damaged, or it holds no picture)"
+
+    def __init__(self, path: Path, codec: str) -> None:
+        self.path = path
+        self.fourcc = IVF_FOURCC[codec]
+        self.offsets: list[int] = []  # of each position's frame header in the file
+        self.keyframes: list[int] = []
+        self._file = path.open("wb")
+        self._file.write(self._header())
+
+    def _header(self) -> bytes:
+        return b"DKIF" + struct.pack("<HH4sHHIII", 0, 32, self.fourcc, 0, 0, 1000, 1, 0) + bytes(4)
+
+    def __len__(self) -> int:
+        return len(self.offsets)
+
+    def add(self, data: memoryview, keyframe: bool) -> None:
+        if keyframe:
+            self.keyframes.append(len(self.offsets))
+        self.offsets.append(self._file.tell())
+        self._file.write(struct.pack("<IQ", len(data), len(self.offsets) - 1))
+        self._file.write(data)
+
+    def close(self) -> None:
+        self._file.close()
+
+    def _from(self, first: int) -> Path:
+        """The chunk from position `first` (a keyframe) on, renumbered from 0, as a file of its own."""
+        path = self.path.with_name(f"{self.path.stem}-from-{first}.ivf")
+        with self.path.open("rb") as source, path.open("wb") as target:
+            target.write(self._header())
+            for position in range(first, len(self.offsets)):
+                source.seek(self.offsets[position])
+                size, _ = struct.unpack("<IQ", source.read(12))
+                target.write(struct.pack("<IQ", size, position - first))
+                target.write(source.read(size))
+        return path
+
+    def decode(self, stream: VideoPacketStream) -> Iterator[tuple[np.ndarray | None, str]]:
+        """Per position in order: its frame, or why it has none; counts the frames in `stream.frames_decoded`
+        (where no capture has given a frame, the decoder is not restarted at every keyframe)."""
+        held: dict[int, np.ndarray] = {}  # frames the decoder gave ahead of the position asked for
+        base, restarted = 0, False
+        capture: cv2.VideoCapture | None = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
+        try:
+            for position in range(len(self.offsets)):
+                problem = self.DROPPED
+                while position not in held and len(held) <= MAX_REORDER:
+                    if capture is None or position < base:
+                        problem = self.STOPPED
+                        break
+                    ok, frame = capture.read() if capture.isOpened() else (False, None)
+                    if ok:
+                        number = base + round(capture.get(cv2.CAP_PROP_POS_MSEC))
+                        stream.frames_decoded += 1
+                        if position <= number < len(self.offsets):
+                            held.setdefault(number, frame)
+                        continue
+                    capture.release()
+                    capture = None
+                    later = [key for key in self.keyframes if key > position]
+                    if later and (stream.frames_decoded or not restarted):
+                        base, restarted = later[0], True
+                        capture = cv2.VideoCapture(str(self._from(base)), cv2.CAP_FFMPEG)
+                yield (held.pop(position), "") if position in held else (None, problem)
+        finally:
+            if capture is not None:
+                capture.release()
