@@ -19,6 +19,7 @@ import sys
 import tempfile
 import time
 import zlib
+from collections import deque
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -579,40 +580,52 @@ def _decode_image(msgtype: str, data):
     return IMAGE_DECODERS[msgtype](data)
 
 
-def _video_frames(reader: Reader, images: list, folder: str, start: int = 0) -> Iterator[DecodedVideoFrame]:
-    """The topic's video packets decoded in recording order (`VideoPacketStream`), one per message: the packets
-    are read here, the frames decoded as they are taken. Frames before `start` are decoded only from the keyframe
-    before the last keyframe up to it (a segment of a long bag does not decode the whole recording before it; the
-    keyframe before gives an open GOP's leading pictures what they refer to)."""
-    stream = VideoPacketStream(folder, images[0].topic)
-    headers = []
-    held: list[list] = [[]]  # before `start`: the last two keyframes' packets (or why one cannot be read)
-    for index, (connection, _, data) in enumerate(reader.messages(connections=images)):
-        try:
-            packet = decode_video_packet(connection.msgtype, data)
-        except ImageMessageError as exc:
-            packet, header = str(exc), Header(0, 0, "")
-        else:
-            header = packet.header
-        headers.append(header)
-        if index <= start and isinstance(packet, VideoPacket) and is_keyframe(packet):
-            if len(held) == 2:
-                for _ in held.pop(0):
-                    stream.add_unreadable(BEFORE_SEGMENT)
-            held.append([])
-        if index < start:
-            held[-1].append(packet)
-            continue
-        for item in [*(item for group in held for item in group), packet]:
-            if isinstance(item, str):
-                stream.add_unreadable(item)
+def _video_frames(path: str | Path, topic: str, folder: str, start: int = 0) -> Iterator[DecodedVideoFrame]:
+    """The topic's video packets decoded in recording order (`VideoPacketStream`), one per message, read by a
+    reader of their own a keyframe's chunk ahead of the caller's: the frames are decoded as the bag is read,
+    not after a pass over the whole recording. Frames before `start` are decoded only from the keyframe
+    before the last keyframe up to it (a segment of a long bag does not decode the whole recording before it;
+    the keyframe before gives an open GOP's leading pictures what they refer to)."""
+    reader = _open_reader(path)
+    try:
+        stream = VideoPacketStream(folder, topic)
+        headers: deque[Header] = deque()
+
+        def taken(results: Iterator[tuple]) -> Iterator[DecodedVideoFrame]:
+            for frame, problem, note in results:
+                yield DecodedVideoFrame(headers.popleft(), frame, problem, note)
+
+        held: list[list] = [[]]  # before `start`: the last two keyframes' packets (or why one cannot be read)
+        images = [connection for connection in reader.connections
+                  if connection.topic == topic and connection.msgtype in DECODED_VIDEO_TYPES]
+        for index, (connection, _, data) in enumerate(reader.messages(connections=images)):
+            try:
+                packet = decode_video_packet(connection.msgtype, data)
+            except ImageMessageError as exc:
+                packet, header = str(exc), Header(0, 0, "")
             else:
-                stream.add(item)
-        held = [[]]
-    for _ in (item for group in held for item in group):  # the recording ends before `start`
-        stream.add_unreadable(BEFORE_SEGMENT)
-    return (DecodedVideoFrame(header, frame, problem, note)
-            for header, (frame, problem, note) in zip(headers, stream.frames(), strict=True))
+                header = packet.header
+            headers.append(header)
+            if index <= start and isinstance(packet, VideoPacket) and is_keyframe(packet):
+                if len(held) == 2:
+                    for _ in held.pop(0):
+                        stream.add_unreadable(BEFORE_SEGMENT)
+                held.append([])
+            if index < start:
+                held[-1].append(packet)
+                continue
+            for item in [*(item for group in held for item in group), packet]:
+                if isinstance(item, str):
+                    stream.add_unreadable(item)
+                else:
+                    stream.add(item)
+                yield from taken(stream.ready())
+            held = [[]]
+        for _ in (item for group in held for item in group):  # the recording ends before `start`
+            stream.add_unreadable(BEFORE_SEGMENT)
+        yield from taken(stream.frames())
+    finally:
+        reader.close()
 
 
 BEFORE_SEGMENT = "not decoded: before the frames asked for and the keyframe they need"
@@ -669,8 +682,9 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None, start: int
         early: list[tuple[int, object]] = []  # (timestamp, image) of frames recorded before any camera_info
         video = None
         if images[0].msgtype in DECODED_VIDEO_TYPES:
-            video = _video_frames(reader, images, stack.enter_context(
+            video = _video_frames(path, images[0].topic, stack.enter_context(
                 tempfile.TemporaryDirectory(prefix="veg-area-video-")), start)
+            stack.callback(video.close)  # before its folder is removed
         index = 0
 
         def paired(timestamp: int, image, info: CameraInfoFields | None, note: str = "") -> BagFrame:

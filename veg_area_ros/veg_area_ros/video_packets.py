@@ -13,7 +13,6 @@ No ROS here: the messages are read from their CDR bytes.
 
 from __future__ import annotations
 
-import itertools
 import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -201,6 +200,8 @@ class VideoPacketStream:
         self._started = False
         self._cra_leading = False  # began at an H.265 CRA: its RASL pictures are not output
         self._chunks: list[IvfChunk] = []
+        self._decoded = self._decode_chunks()
+        self._taken = 0  # the packets whose results have been given
         self._annex_b: BinaryIO | None = None
         self.notes: list[str] = []  # per packet: CONCEALED_NOTE where a packet before it since a keyframe is lost
         self._lost_since_keyframe = False
@@ -252,7 +253,8 @@ class VideoPacketStream:
         if not self._chunks or (keyframe and len(self._chunks[-1]) >= CHUNK_PACKETS):
             if self._chunks:
                 self._chunks[-1].close()
-            self._chunks.append(IvfChunk(self.folder / f"stream-{len(self._chunks):05d}.ivf", self.codec))
+            self._chunks.append(IvfChunk(self.folder / f"stream-{len(self._chunks):05d}.ivf", self.codec,
+                                         len(self.problems)))
         self._chunks[-1].add(packet.data, keyframe)
 
     def add_unreadable(self, problem: str) -> None:
@@ -260,12 +262,22 @@ class VideoPacketStream:
         shows the damage as the decoder conceals it."""
         self._add(0, problem)
 
-    def frames(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
-        """Per added packet, in the order added: (frame, why it has none, what makes it less sure: its pairing
-        by the stamps out of the packets' order, a packet it may refer to lost). The frames are decoded one by
-        one as they are taken (those a reordered packet needs ahead are held)."""
+    def ready(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
+        """As `frames()`, for the packets added so far whose frames can be decoded now: those before the IVF
+        chunk being written (each chunk begins at a keyframe, so nothing in it refers to a later one). Take them
+        all before the next `add`: a long recording is decoded as it is read, a chunk's file removed once its
+        frames are out. H.265 gives its frames at `frames()` only."""
         if self.codec in IVF_FOURCC:
-            return self._frames_by_number()
+            yield from self._frames_by_number(self._chunks[-1].first if self._chunks else len(self.problems))
+
+    def frames(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
+        """Per added packet not yet given by `ready()`, in the order added: (frame, why it has none, what makes
+        it less sure: its pairing by the stamps out of the packets' order, a packet it may refer to lost). The
+        frames are decoded one by one as they are taken (those a reordered packet needs ahead are held)."""
+        if self.codec in IVF_FOURCC or not self._started:
+            if self._chunks:
+                self._chunks[-1].close()
+            return self._frames_by_number(len(self.problems))
         if self._annex_b is not None:
             self._annex_b.close()
         return self._frames_by_stamp()
@@ -275,15 +287,20 @@ class VideoPacketStream:
                 f"keyframe, or a build with no {self.codec} decoder (then convert the recording, or record "
                 "image_raw/compressed)")
 
-    def _frames_by_number(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
-        if self._chunks:
-            self._chunks[-1].close()
-        decoded = itertools.chain.from_iterable(chunk.decode(self) for chunk in self._chunks)
-        for problem, note in zip(self.problems, self.notes, strict=True):
+    def _decode_chunks(self) -> Iterator[tuple[np.ndarray | None, str]]:
+        done = 0
+        while done < len(self._chunks):  # the list grows as packets are added
+            yield from self._chunks[done].decode(self)
+            done += 1
+
+    def _frames_by_number(self, until: int) -> Iterator[tuple[np.ndarray | None, str, str]]:
+        while self._taken < until:
+            problem, note = self.problems[self._taken], self.notes[self._taken]
+            self._taken += 1
             if problem:
                 yield None, problem, ""
                 continue
-            frame, problem = next(decoded)
+            frame, problem = next(self._decoded)
             if frame is None and not self.frames_decoded:
                 problem = self._no_decoder()
             yield frame, problem, note
@@ -332,11 +349,13 @@ class IvfChunk:
                "keyframe")
     DROPPED = "the decoder gave no frame for this packet (damaged, or it holds no picture)"
 
-    def __init__(self, path: Path, codec: str) -> None:
+    def __init__(self, path: Path, codec: str, first: int) -> None:
         self.path = path
+        self.first = first  # the stream's index of its first packet
         self.fourcc = IVF_FOURCC[codec]
         self.offsets: list[int] = []  # of each position's frame header in the file
         self.keyframes: list[int] = []
+        self._restarts: list[Path] = []  # the files decoding was started again from
         self._file = path.open("wb")
         self._file.write(self._header())
 
@@ -356,9 +375,14 @@ class IvfChunk:
     def close(self) -> None:
         self._file.close()
 
+    def remove(self) -> None:
+        for path in [self.path, *self._restarts]:
+            path.unlink(missing_ok=True)
+
     def _from(self, first: int) -> Path:
         """The chunk from position `first` (a keyframe) on, renumbered from 0, as a file of its own."""
         path = self.path.with_name(f"{self.path.stem}-from-{first}.ivf")
+        self._restarts.append(path)
         with self.path.open("rb") as source, path.open("wb") as target:
             target.write(self._header())
             for position in range(first, len(self.offsets)):
@@ -370,7 +394,8 @@ class IvfChunk:
 
     def decode(self, stream: VideoPacketStream) -> Iterator[tuple[np.ndarray | None, str]]:
         """Per position in order: its frame, or why it has none; counts the frames in `stream.frames_decoded`
-        (where no capture has given a frame, the decoder is not restarted at every keyframe)."""
+        (where no capture has given a frame, the decoder is not restarted at every keyframe). The chunk's files
+        are removed as its last frame is given."""
         held: dict[int, np.ndarray] = {}  # frames the decoder gave ahead of the position asked for
         base, restarted = 0, False
         capture: cv2.VideoCapture | None = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
@@ -394,7 +419,13 @@ class IvfChunk:
                     if later and (stream.frames_decoded or not restarted):
                         base, restarted = later[0], True
                         capture = cv2.VideoCapture(str(self._from(base)), cv2.CAP_FFMPEG)
-                yield (held.pop(position), "") if position in held else (None, problem)
+                result = (held.pop(position), "") if position in held else (None, problem)
+                if position == len(self.offsets) - 1:  # its files go before the last frame is given
+                    if capture is not None:
+                        capture.release()
+                        capture = None
+                    self.remove()
+                yield result
         finally:
             if capture is not None:
                 capture.release()
