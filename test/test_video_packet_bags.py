@@ -127,22 +127,52 @@ def decoded(name: str, codec: str, first: int = 0, packets: list[tuple[int, byte
                                          ("hevc_open_gop.bin", "hevc")])
 def test_each_packet_gets_the_frame_it_carries_also_with_b_frames(name, codec):
     """With B-frames the decoder gives the frames in capture order, not the packets': each packet's frame is
-    the one it carries. H.264 frames come back with their packets' numbers; H.265's are paired by the stamps,
-    and those paired out of the packets' order say so."""
+    the one it carries (they come back with their packets' numbers), and nothing needs saying."""
     numbers = [number for number, _ in stored_packets(name)]
     results = decoded(name, codec)
     assert [shown for shown, _, _ in results] == numbers
-    assert all(problem == "" for _, problem, _ in results)
-    reordered = [k for k, (_, _, moved) in enumerate(results) if moved]
-    assert bool(reordered) == (codec == "hevc" and numbers != sorted(numbers))
+    assert all(problem == "" and note == "" for _, problem, note in results)
 
 
-def test_h264_frames_are_paired_by_the_decoders_numbers_even_where_the_stamps_say_nothing():
+@pytest.mark.parametrize("name, codec", [("h264_b.bin", "h264"), ("hevc_open_gop.bin", "hevc")])
+def test_frames_are_paired_by_the_decoders_numbers_even_where_the_stamps_say_nothing(name, codec):
     """A camera driver that stamps nothing (every stamp 0): the B-frame stream's frames still each reach the
     packet that carries them, where pairing by the stamps would give them in the packets' order."""
-    numbers = [number for number, _ in stored_packets("h264_b.bin")]
+    numbers = [number for number, _ in stored_packets(name)]
     assert numbers != sorted(numbers)
-    assert [shown for shown, _, _ in decoded("h264_b.bin", "h264", stamped=False)] == numbers
+    assert [shown for shown, _, _ in decoded(name, codec, stamped=False)] == numbers
+
+
+def test_an_h265_keyframe_the_decoder_stops_at_costs_the_frames_up_to_the_next_keyframe():
+    """Its open GOP's keyframe damaged, the H.265 decoder stops: the rows up to the next keyframe say why and
+    decoding resumes there (its transport stream copied from that packet on), each frame on its own packet."""
+    packets = stored_packets("hevc_open_gop.bin")
+    twice = packets + [(number + len(packets), data) for number, data in packets]
+    damaged = next(k for k, (_, data) in enumerate(packets) if k and is_keyframe(
+        VideoPacket(None, "hevc", memoryview(data))))
+    twice[damaged] = (twice[damaged][0], twice[damaged][1][:6] + bytes(len(twice[damaged][1]) - 6))
+    results = decoded("", "hevc", packets=twice)
+    lost = [k for k, (shown, _, _) in enumerate(results) if shown is None]
+    assert damaged in lost and all(k < len(packets) for k in lost)
+    assert all("decoder stopped at a damaged packet" in results[k][1] for k in lost)
+    kept = [k for k in range(len(twice)) if k not in lost]
+    assert [results[k][0] for k in kept] == [twice[k][0] % len(packets) for k in kept]
+    assert kept[-len(packets):] == list(range(len(packets), len(twice)))
+
+
+def test_an_h265_packet_the_decoder_drops_costs_its_own_rows_not_the_frames_after():
+    """A damaged H.265 packet (its slice data zeros): the decoder gives no frame for it, or for those that refer to
+    it, and goes on; those rows say so and every other packet keeps its own frame (paired by the stamps' order,
+    every later frame moved onto the message before it, and only the last row said that something was off)."""
+    packets = stored_packets("hevc_open_gop.bin")
+    damaged = 5
+    packets[damaged] = (packets[damaged][0], packets[damaged][1][:6] + bytes(len(packets[damaged][1]) - 6))
+    results = decoded("", "hevc", packets=packets)
+    lost = [k for k, (shown, _, _) in enumerate(results) if shown is None]
+    assert damaged in lost and len(lost) < 4
+    assert all("gave no frame for this packet" in results[k][1] for k in lost)
+    kept = [k for k in range(len(packets)) if k not in lost]
+    assert [results[k][0] for k in kept] == [packets[k][0] for k in kept]
 
 
 @pytest.mark.parametrize("name", ["h264_no_b.bin", "h264_b.bin"])

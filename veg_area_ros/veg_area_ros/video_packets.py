@@ -3,10 +3,10 @@ H.265, VP9, AV1; what `foxglove_compressed_video_transport` records) and ffmpeg_
 
 A frame of such a stream needs the frames before it, so the packets are not decoded one by one: they are
 written back to back into stream files that OpenCV's FFmpeg decodes in order, and `VideoPacketStream` pairs each
-decoded frame with its message. H.264, VP8, VP9 and AV1 go into IVF files whose timestamps number the packets,
-so each frame comes back with its own packet's number (exact with B-frames too); H.265, which FFmpeg's IVF reader
-does not take, goes into one Annex B stream whose frames come in capture order and are paired with the messages
-in the order of their stamps. Packets before the stream's first keyframe cannot be decoded and are said so.
+decoded frame with its message. The files number the packets (IVF files; H.265 in MPEG transport streams; each
+packet's timestamp its number), and the decoder hands each frame back with its own packet's number: exact with
+B-frames, without stamps, and where the decoder drops or stops at a damaged packet.
+Packets before the stream's first keyframe cannot be decoded and are said so.
 
 No ROS here: the messages are read from their CDR bytes.
 """
@@ -17,7 +17,6 @@ import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO
 
 import cv2
 import numpy as np
@@ -31,10 +30,13 @@ DECODED_VIDEO_TYPES = (FOXGLOVE_VIDEO, FFMPEG_PACKET)
 # theora_image_transport's packets are Ogg packets whose stream headers are sent once to each subscriber
 UNDECODED_VIDEO_TYPES = ("theora_image_transport/msg/Packet",)
 ANNEX_B = ("h264", "hevc")
-# decoded from IVF files (FFmpeg's IVF reader takes H.264 as well, not H.265)
+# the files the packets are written to: IVF, but FFmpeg's IVF reader takes no H.265, and an H.264 transport stream
+# of fewer than 7 frames is not opened (FFmpeg guesses H.264's reordering from 7 decoded frames)
 IVF_FOURCC = {"h264": b"H264", "vp8": b"VP80", "vp9": b"VP90", "av1": b"AV01"}
-CHUNK_PACKETS = 240  # an IVF file holds this many packets at least, up to the next keyframe
-MAX_REORDER = 16  # H.264 holds back at most 16 frames to reorder them: a frame not given by then is dropped
+TS_STREAM_TYPES = {"hevc": 0x24}
+CHUNK_PACKETS = 240  # a stream file holds this many packets at least, up to the next keyframe
+MAX_REORDER = 16  # H.264 and H.265 hold back at most 16 frames to reorder them: one not given by then is dropped
+TS_PMT_PID, TS_VIDEO_PID = 0x1000, 0x100
 AV_PKT_FLAG_KEY = 1  # FFMPEGPacket.flags: libavcodec's packet flags
 
 
@@ -141,11 +143,13 @@ def is_keyframe(packet: VideoPacket) -> bool:
 
 
 def _closed_keyframe(packet: VideoPacket) -> bool:
-    """A keyframe that nothing after it refers past (an H.264 IDR; any VP8, VP9 or AV1 keyframe), so that
-    decoding can start again there without losing a frame: an H.264 I-frame flagged as a keyframe in an open GOP
-    is not one."""
+    """A keyframe that nothing after it refers past (an H.264 IDR, an H.265 IDR or BLA; a VP8, VP9 or AV1
+    keyframe), so that decoding can start again there without losing a frame: an H.264 I-frame flagged as a
+    keyframe in an open GOP, an H.265 CRA, are not."""
     if packet.codec == "h264":
         return 5 in _nal_types("h264", bytes(packet.data))
+    if packet.codec == "hevc":  # an IDR or BLA (a CRA's leading pictures refer to the frames before it)
+        return any(16 <= kind <= 20 for kind in _nal_types("hevc", bytes(packet.data)))
     return is_keyframe(packet)
 
 
@@ -163,7 +167,7 @@ class DecodedVideoFrame:
     header: Header
     frame: np.ndarray | None
     problem: str = ""
-    note: str = ""  # what makes the frame's pairing or its pixels less sure (REORDERED_NOTE, CONCEALED_NOTE)
+    note: str = ""  # what makes the frame less sure (CONCEALED_NOTE)
 
     def pixels(self, depth: StreamDepth | None = None, notes: list[str] | None = None) -> np.ndarray:
         if self.frame is None:
@@ -173,8 +177,6 @@ class DecodedVideoFrame:
         return self.frame
 
 
-REORDERED_NOTE = ("the video stream reorders its frames (B-frames): this frame was paired with its message by the "
-                  "stamps, in the order the camera took them")
 LEADING_SKIPPED = "a leading picture of the CRA keyframe the stream begins at, which the decoder skips"
 CONCEALED_NOTE = ("a packet of the video stream since its last keyframe has no frame: this frame may refer to it, "
                   "and the decoder then filled in what it lacked")
@@ -182,27 +184,22 @@ CONCEALED_NOTE = ("a packet of the video stream since its last keyframe has no f
 
 class VideoPacketStream:
     """A bag topic's video packets decoded in order. `add` every packet in recording order (it is written to a
-    stream file in `folder`, or counted as undecodable before the first keyframe), then `frames()` pairs
-    each added packet with its decoded frame or the reason it has none.
-
-    H.264, VP8, VP9 and AV1 are written into IVF files whose timestamps number the packets, and the decoder
-    hands each frame back with its packet's number: the pairing is exact, B-frames too, and a packet the decoder
-    gives no frame for is that packet's row alone (`IvfChunk`). FFmpeg's IVF reader does not take H.265: it is
-    decoded as one Annex B stream and its frames paired with the packets by their stamps."""
+    stream file in `folder`, or counted as undecodable before the first keyframe) and take what `ready()` gives
+    after each; then `frames()` gives the rest: each added packet's decoded frame or the reason it has none, in
+    the order added. The files are `PacketChunk`s: the pairing is exact, B-frames too, and a packet the decoder
+    gives no frame for is that packet's row alone."""
 
     def __init__(self, folder: str | Path, topic: str) -> None:
         self.topic = topic
         self.codec: str | None = None
         self.folder = Path(folder)
-        self.stamps: list[int] = []  # per packet: its stamp (ns)
         self.problems: list[str] = []  # per packet: why it has no frame ("" where it has one)
         self.frames_decoded = 0
         self._started = False
         self._cra_leading = False  # began at an H.265 CRA: its RASL pictures are not output
-        self._chunks: list[IvfChunk] = []
+        self._chunks: list[PacketChunk] = []
         self._decoded = self._decode_chunks()
         self._taken = 0  # the packets whose results have been given
-        self._annex_b: BinaryIO | None = None
         self.notes: list[str] = []  # per packet: CONCEALED_NOTE where a packet before it since a keyframe is lost
         self._lost_since_keyframe = False
 
@@ -212,7 +209,7 @@ class VideoPacketStream:
         problem = ""
         if packet.codec != self.codec:
             problem = f"its codec is {packet.codec}, the topic's first packet's {self.codec}"
-        elif self.codec not in IVF_FOURCC and self.codec not in ANNEX_B:
+        elif self.codec not in IVF_FOURCC and self.codec not in TS_STREAM_TYPES:
             problem = f"the codec {self.codec!r} is not one read here (h264, h265/hevc, vp8, vp9, av1)"
         elif self.codec in ANNEX_B and not bytes(packet.data[:4]).startswith((b"\x00\x00\x01", b"\x00\x00\x00\x01")):
             problem = f"its {self.codec} data is not in Annex B form (start codes), as CompressedVideo requires"
@@ -228,59 +225,46 @@ class VideoPacketStream:
                            "decoded without the keyframe before it")
         elif self._cra_leading:
             if _hevc_skipped_leading(bytes(packet.data)):
-                self._add(packet.header.nanoseconds, LEADING_SKIPPED, lost=False)  # no later picture refers to it
+                self._add(LEADING_SKIPPED, lost=False)  # no later picture refers to it
                 return
             self._cra_leading = False
         if not problem:
             if self._lost_since_keyframe and _closed_keyframe(packet):
                 self._lost_since_keyframe = False
             self._write(packet)
-        self._add(packet.header.nanoseconds, problem)
+        self._add(problem)
 
-    def _add(self, stamp: int, problem: str, lost: bool = True) -> None:
+    def _add(self, problem: str, lost: bool = True) -> None:
         self.notes.append(CONCEALED_NOTE if self._lost_since_keyframe and not problem else "")
         self._lost_since_keyframe |= bool(problem) and lost and self._started
-        self.stamps.append(stamp)
         self.problems.append(problem)
 
     def _write(self, packet: VideoPacket) -> None:
-        if self.codec not in IVF_FOURCC:
-            if self._annex_b is None:
-                self._annex_b = (self.folder / f"stream.{self.codec}").open("wb")
-            self._annex_b.write(packet.data)
-            return
-        keyframe = _closed_keyframe(packet)
-        if not self._chunks or (keyframe and len(self._chunks[-1]) >= CHUNK_PACKETS):
+        if not self._chunks or (len(self._chunks[-1]) >= CHUNK_PACKETS and _closed_keyframe(packet)):
             if self._chunks:
                 self._chunks[-1].close()
-            self._chunks.append(IvfChunk(self.folder / f"stream-{len(self._chunks):05d}.ivf", self.codec,
-                                         len(self.problems)))
-        self._chunks[-1].add(packet.data, keyframe)
+            self._chunks.append(PacketChunk(self.folder / f"stream-{len(self._chunks):05d}", self.codec,
+                                            len(self.problems)))
+        self._chunks[-1].add(packet.data, is_keyframe(packet))
 
     def add_unreadable(self, problem: str) -> None:
-        """A message whose packet cannot be read at all: it has no frame, and a frame after it that needed it
-        shows the damage as the decoder conceals it."""
-        self._add(0, problem)
+        """A message whose packet cannot be read at all: it has no frame, and the frames after it up to the next
+        keyframe say that they may refer to it."""
+        self._add(problem)
 
     def ready(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
-        """As `frames()`, for the packets added so far whose frames can be decoded now: those before the IVF
-        chunk being written (each chunk begins at a keyframe, so nothing in it refers to a later one). Take them
-        all before the next `add`: a long recording is decoded as it is read, a chunk's file removed once its
-        frames are out. H.265 gives its frames at `frames()` only."""
-        if self.codec in IVF_FOURCC:
-            yield from self._frames_by_number(self._chunks[-1].first if self._chunks else len(self.problems))
+        """As `frames()`, for the packets added so far whose frames can be decoded now: those before the chunk
+        being written (each chunk begins at a keyframe that nothing after it refers past). Take them all before
+        the next `add`: a long recording is decoded as it is read, a chunk's file removed once its frames are out."""
+        return self._frames_by_number(self._chunks[-1].first if self._chunks else len(self.problems))
 
     def frames(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
         """Per added packet not yet given by `ready()`, in the order added: (frame, why it has none, what makes
-        it less sure: its pairing by the stamps out of the packets' order, a packet it may refer to lost). The
-        frames are decoded one by one as they are taken (those a reordered packet needs ahead are held)."""
-        if self.codec in IVF_FOURCC or not self._started:
-            if self._chunks:
-                self._chunks[-1].close()
-            return self._frames_by_number(len(self.problems))
-        if self._annex_b is not None:
-            self._annex_b.close()
-        return self._frames_by_stamp()
+        it less sure: a packet before it that it may refer to is lost). The frames are decoded one by one as
+        they are taken (those the decoder gives ahead of a reordered packet are held)."""
+        if self._chunks:
+            self._chunks[-1].close()
+        return self._frames_by_number(len(self.problems))
 
     def _no_decoder(self) -> str:
         return (f"OpenCV's FFmpeg decoded no frame of this {self.codec} stream on {self.topic} up to here: a damaged "
@@ -305,72 +289,88 @@ class VideoPacketStream:
                 problem = self._no_decoder()
             yield frame, problem, note
 
-    def _frames_by_stamp(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
-        decodable = [i for i, problem in enumerate(self.problems) if not problem]
-        by_stamp = sorted(decodable, key=lambda i: (self.stamps[i], i))
-        rank = {packet: position for position, packet in enumerate(by_stamp)}
-        order = {packet: position for position, packet in enumerate(decodable)}
-        capture = cv2.VideoCapture(str(self._annex_b.name), cv2.CAP_FFMPEG) if decodable else None
-        held: dict[int, np.ndarray] = {}
-        decoded = 0
-        ended = False
-        try:
-            for index, problem in enumerate(self.problems):
-                if problem:
-                    yield None, problem, ""
-                    continue
-                wanted = rank[index]
-                while wanted not in held and not ended:
-                    ok, frame = capture.read() if capture is not None and capture.isOpened() else (False, None)
-                    if not ok:
-                        ended = True
-                        break
-                    held[decoded] = frame
-                    decoded += 1
-                if wanted in held:
-                    yield held.pop(wanted), "", REORDERED_NOTE if wanted != order[index] else self.notes[index]
-                elif decoded == 0:
-                    yield None, self._no_decoder(), ""
-                else:
-                    yield None, (f"the {self.codec} stream decoded {decoded} frames from {len(decodable)} packets "
-                                 "(a damaged packet?): the frames cannot be told apart from here on"), ""
-        finally:
-            if capture is not None:
-                capture.release()
+
+def _mpeg_crc32(data: bytes) -> int:
+    """CRC-32/MPEG-2, the checksum of a transport stream's tables (zlib's CRC-32 is the reflected one)."""
+    crc = 0xFFFFFFFF
+    for byte in data:
+        crc ^= byte << 24
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x04C11DB7 if crc & 0x80000000 else crc << 1) & 0xFFFFFFFF
+    return crc
 
 
-class IvfChunk:
-    """Packets of one stream from a keyframe on, in an IVF file: each framed with its position in the chunk as its
-    timestamp (in a 1/1000 s time base, so that OpenCV gives it back as CAP_PROP_POS_MSEC with its frame).
-    Where the decoder stops (a damaged packet), it is started again from the chunk's next keyframe, which these
-    codecs' keyframes allow (nothing after one refers to anything before it)."""
+def _ts_packets(pid: int, payload: bytes, counter: int) -> tuple[bytes, int]:
+    """`payload` (a table or a PES packet, begun in the first) as 188-byte transport stream packets, the last
+    filled out by an adaptation field; and the continuity counter after them."""
+    out = bytearray()
+    for start in range(0, max(len(payload), 1), 184):
+        chunk = payload[start:start + 184]
+        stuffing = 184 - len(chunk)
+        adaptation = b"" if not stuffing else b"\x00" if stuffing == 1 else bytes(
+            [stuffing - 1, 0]) + b"\xff" * (stuffing - 2)
+        out += bytes([0x47, (0x40 if not start else 0) | pid >> 8, pid & 0xFF,
+                      (0x30 if adaptation else 0x10) | counter & 0xF]) + adaptation + chunk
+        counter += 1
+    return bytes(out), counter
+
+
+def _ts_table(table_id: int, body: bytes) -> bytes:
+    """A transport stream table section (PAT, PMT), with its pointer field and checksum."""
+    length = len(body) + 9  # the five bytes after the length, the body, the CRC
+    section = bytes([table_id, 0xB0 | length >> 8, length & 0xFF]) + b"\x00\x01\xc1\x00\x00" + body
+    return b"\x00" + section + struct.pack(">I", _mpeg_crc32(section))
+
+
+class PacketChunk:
+    """Packets of one stream from a keyframe on, in a file that numbers them: an IVF file (H.264, VP8, VP9, AV1:
+    its position as the frame's timestamp in a 1/1000 s time base) or an MPEG transport stream (H.265: each packet
+    a PES whose PTS is its position x 90, a millisecond). OpenCV gives the number back as CAP_PROP_POS_MSEC with
+    the frame it decodes from that packet. Where the decoder stops (a damaged packet), it is started again
+    from the chunk's next keyframe (its own file from there on, numbered from there)."""
 
     STOPPED = ("the decoder stopped at a damaged packet before this one's frame: decoding resumed at the next "
                "keyframe")
-    DROPPED = "the decoder gave no frame for this packet (damaged, or it holds no picture)"
+    DROPPED = "the decoder gave no frame for this packet (damaged, or it refers to a damaged one)"
 
     def __init__(self, path: Path, codec: str, first: int) -> None:
-        self.path = path
+        self.ts_stream_type = TS_STREAM_TYPES.get(codec)
+        self.path = path.with_suffix(".ts" if self.ts_stream_type else ".ivf")
+        self.fourcc = IVF_FOURCC.get(codec, b"")
         self.first = first  # the stream's index of its first packet
-        self.fourcc = IVF_FOURCC[codec]
-        self.offsets: list[int] = []  # of each position's frame header in the file
+        self.offsets: list[int] = []  # of each position's framing in the file
         self.keyframes: list[int] = []
         self._restarts: list[Path] = []  # the files decoding was started again from
-        self._file = path.open("wb")
+        self._counter = 0  # the transport stream's continuity counter
+        self._file = self.path.open("wb")
         self._file.write(self._header())
 
     def _header(self) -> bytes:
-        return b"DKIF" + struct.pack("<HH4sHHIII", 0, 32, self.fourcc, 0, 0, 1000, 1, 0) + bytes(4)
+        if self.ts_stream_type is None:
+            return b"DKIF" + struct.pack("<HH4sHHIII", 0, 32, self.fourcc, 0, 0, 1000, 1, 0) + bytes(4)
+        pat, _ = _ts_packets(0, _ts_table(0x00, struct.pack(">HH", 1, 0xE000 | TS_PMT_PID)), 0)
+        pmt, _ = _ts_packets(TS_PMT_PID, _ts_table(0x02, struct.pack(
+            ">HHBHH", 0xE000 | TS_VIDEO_PID, 0xF000, self.ts_stream_type, 0xE000 | TS_VIDEO_PID, 0xF000)), 0)
+        return pat + pmt
 
     def __len__(self) -> int:
         return len(self.offsets)
 
     def add(self, data: memoryview, keyframe: bool) -> None:
+        position = len(self.offsets)
         if keyframe:
-            self.keyframes.append(len(self.offsets))
+            self.keyframes.append(position)
         self.offsets.append(self._file.tell())
-        self._file.write(struct.pack("<IQ", len(data), len(self.offsets) - 1))
-        self._file.write(data)
+        if self.ts_stream_type is None:
+            self._file.write(struct.pack("<IQ", len(data), position))
+            self._file.write(data)
+            return
+        pts = 90 * position
+        pts_field = bytes([0x21 | (pts >> 29) & 0x0E, (pts >> 22) & 0xFF, 0x01 | (pts >> 14) & 0xFE,
+                           (pts >> 7) & 0xFF, 0x01 | (pts << 1) & 0xFE])
+        framed, self._counter = _ts_packets(TS_VIDEO_PID, b"\x00\x00\x01\xe0\x00\x00\x80\x80\x05" + pts_field
+                                            + bytes(data), self._counter)
+        self._file.write(framed)
 
     def close(self) -> None:
         self._file.close()
@@ -380,13 +380,19 @@ class IvfChunk:
             path.unlink(missing_ok=True)
 
     def _from(self, first: int) -> Path:
-        """The chunk from position `first` (a keyframe) on, renumbered from 0, as a file of its own."""
-        path = self.path.with_name(f"{self.path.stem}-from-{first}.ivf")
+        """The chunk from position `first` (a keyframe) on, as a file of its own whose numbers count from there
+        (an IVF file's renumbered; a transport stream's copied as they are: its decoder gives each less the first
+        one's, which a restarted IVF file's does not open with)."""
+        path = self.path.with_name(f"{self.path.stem}-from-{first}{self.path.suffix}")
         self._restarts.append(path)
         with self.path.open("rb") as source, path.open("wb") as target:
             target.write(self._header())
+            source.seek(self.offsets[first])
+            if self.ts_stream_type is not None:
+                while block := source.read(1 << 20):
+                    target.write(block)
+                return path
             for position in range(first, len(self.offsets)):
-                source.seek(self.offsets[position])
                 size, _ = struct.unpack("<IQ", source.read(12))
                 target.write(struct.pack("<IQ", size, position - first))
                 target.write(source.read(size))
@@ -398,24 +404,29 @@ class IvfChunk:
         are removed as its last frame is given."""
         held: dict[int, np.ndarray] = {}  # frames the decoder gave ahead of the position asked for
         base, restarted = 0, False
+        reached = -1  # the highest number the decoder has given
         capture: cv2.VideoCapture | None = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
         try:
             for position in range(len(self.offsets)):
                 problem = self.DROPPED
                 while position not in held and len(held) <= MAX_REORDER:
-                    if capture is None or position < base:
+                    if position < base:
                         problem = self.STOPPED
+                        break
+                    if capture is None:
                         break
                     ok, frame = capture.read() if capture.isOpened() else (False, None)
                     if ok:
                         number = base + round(capture.get(cv2.CAP_PROP_POS_MSEC))
                         stream.frames_decoded += 1
+                        reached = max(reached, number)
                         if position <= number < len(self.offsets):
                             held.setdefault(number, frame)
                         continue
                     capture.release()
                     capture = None
-                    later = [key for key in self.keyframes if key > position]
+                    # stopped short of a keyframe (else it went to the end, dropping what it gave no frame for)
+                    later = [key for key in self.keyframes if key > max(position, reached)]
                     if later and (stream.frames_decoded or not restarted):
                         base, restarted = later[0], True
                         capture = cv2.VideoCapture(str(self._from(base)), cv2.CAP_FFMPEG)
