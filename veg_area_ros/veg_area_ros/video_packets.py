@@ -380,9 +380,9 @@ class PacketChunk:
             path.unlink(missing_ok=True)
 
     def _from(self, first: int) -> Path:
-        """The chunk from position `first` (a keyframe) on, as a file of its own whose numbers count from there
-        (an IVF file's renumbered; a transport stream's copied as they are: its decoder gives each less the first
-        one's, which a restarted IVF file's does not open with)."""
+        """The chunk from position `first` (a keyframe) on, as a file of its own whose numbers, as the decoder
+        gives them, count from there: an IVF file's renumbered from 0 (copied as they were, OpenCV gave no frame
+        of it), a transport stream's copied as they are (FFmpeg gives each PTS less the first one's)."""
         path = self.path.with_name(f"{self.path.stem}-from-{first}{self.path.suffix}")
         self._restarts.append(path)
         with self.path.open("rb") as source, path.open("wb") as target:
