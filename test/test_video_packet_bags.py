@@ -25,6 +25,7 @@ from veg_area_ros.video_packets import (
     FOXGLOVE_VIDEO,
     VideoPacket,
     VideoPacketStream,
+    _nal_types,
     codec_name,
     decode_video_packet,
     is_keyframe,
@@ -124,7 +125,7 @@ def decoded(name: str, codec: str, first: int = 0, packets: list[tuple[int, byte
 
 
 @pytest.mark.parametrize("name, codec", [("h264_no_b.bin", "h264"), ("h264_b.bin", "h264"),
-                                         ("hevc_open_gop.bin", "hevc")])
+                                         ("h264_open_gop.bin", "h264"), ("hevc_open_gop.bin", "hevc")])
 def test_each_packet_gets_the_frame_it_carries_also_with_b_frames(name, codec):
     """With B-frames the decoder gives the frames in capture order, not the packets': each packet's frame is
     the one it carries (they come back with their packets' numbers), and nothing needs saying."""
@@ -253,6 +254,26 @@ def test_a_recording_begun_between_keyframes_decodes_from_the_next_keyframe():
     assert all(shown is None and "before the stream's first keyframe" in problem
                for shown, problem, _ in results[:keyframe - 2])
     assert [shown for shown, _, _ in results[keyframe - 2:]] == [number for number, _ in packets[keyframe:]]
+
+
+def test_an_h264_stream_begun_between_keyframes_of_open_gops_decodes_from_the_recovery_point():
+    """x264's open GOPs: the keyframes after the first are I-frames with a recovery point, not IDRs (each was
+    taken for an inter-frame, and a recording begun between them decoded nothing). Begun there, the frames from the
+    recovery point on are each on their own packet; its leading B-frames refer to the frames before it and say so."""
+    packets = stored_packets("h264_open_gop.bin")
+    keyframes = [k for k, (_, data) in enumerate(packets) if is_keyframe(VideoPacket(None, "h264",
+                                                                                      memoryview(data)))]
+    assert len(keyframes) == 2 and 5 not in _nal_types("h264", packets[keyframes[1]][1])  # not an IDR
+    recovery = keyframes[1]
+    results = decoded("h264_open_gop.bin", "h264", first=2)
+    for k, (shown, problem, _) in enumerate(results, start=2):
+        if k < recovery:
+            assert shown is None and "before the stream's first keyframe" in problem
+        elif packets[k][0] < packets[recovery][0]:
+            assert shown is None and "leading picture of the open GOP's keyframe" in problem
+        else:
+            assert shown == packets[k][0] and problem == ""
+    assert sum(shown is not None for shown, _, _ in results) == len(packets) - packets[recovery][0]
 
 
 def test_an_h265_stream_begun_at_an_open_gops_keyframe_skips_its_leading_pictures():
@@ -409,7 +430,8 @@ def test_of_one_cameras_transports_the_video_packets_come_last(tmp_path):
     assert [captured(f.image.pixels()) for f in named] == [n for n, _ in packets]
 
 
-@pytest.mark.parametrize("name, codec", [("h264_b.bin", "h264"), ("hevc_open_gop.bin", "hevc")])
+@pytest.mark.parametrize("name, codec", [("h264_b.bin", "h264"), ("h264_open_gop.bin", "h264"),
+                                         ("hevc_open_gop.bin", "hevc")])
 def test_a_segment_of_a_video_bag_decodes_from_the_keyframes_it_needs_and_gives_the_same_frames(tmp_path, name,
                                                                                                   codec):
     """`--jobs` and a cluster measure a long bag in segments: each decoded the whole recording before its own

@@ -38,6 +38,7 @@ CHUNK_PACKETS = 240  # a stream file holds this many packets at least, up to the
 MAX_REORDER = 16  # H.264 and H.265 hold back at most 16 frames to reorder them: one not given by then is dropped
 TS_PMT_PID, TS_VIDEO_PID = 0x1000, 0x100
 AV_PKT_FLAG_KEY = 1  # FFMPEGPacket.flags: libavcodec's packet flags
+H264_RECOVERY_POINT = 6  # the SEI payload type that marks where decoding can begin without an IDR
 
 
 @dataclass(frozen=True)
@@ -92,6 +93,31 @@ def _nal_types(codec: str, data: bytes) -> list[int]:
     return types
 
 
+def _h264_sei_payload_types(data: bytes) -> list[int]:
+    """The payload types of the SEI messages in H.264 Annex B data (each SEI NAL unit read up to the next start
+    code, its emulation prevention bytes removed)."""
+    types, start = [], data.find(b"\x00\x00\x01")
+    while 0 <= start < len(data) - 3:
+        end = data.find(b"\x00\x00\x01", start + 3)
+        if data[start + 3] & 0x1F == 6:
+            body = data[start + 4:len(data) if end < 0 else end].replace(b"\x00\x00\x03", b"\x00\x00")
+            offset = 0
+            while offset < len(body) and body[offset:].rstrip(b"\x00") != b"\x80":  # up to the trailing bits
+                fields = []
+                for _ in range(2):  # the payload's type, then its size: 255 for each 0xFF byte, then the last
+                    value = 0
+                    while offset < len(body) and body[offset] == 0xFF:
+                        value, offset = value + 255, offset + 1
+                    if offset >= len(body):
+                        return types
+                    fields.append(value + body[offset])
+                    offset += 1
+                types.append(fields[0])
+                offset += fields[1]
+        start = end
+    return types
+
+
 def _av1_obu_types(data: bytes) -> Iterator[int]:
     """The OBU types of AV1's low-overhead bitstream (each OBU with its size field)."""
     offset = 0
@@ -125,12 +151,14 @@ def _vp9_is_keyframe(data: bytes) -> bool:
 
 def is_keyframe(packet: VideoPacket) -> bool:
     """Whether the stream can begin to be decoded at this packet: its flag where it has one; else an IDR NAL unit
-    (H.264), an IRAP picture (H.265: BLA, IDR, CRA), a sequence header (AV1), a key frame (VP8, VP9)."""
+    or a recovery point (H.264: an open GOP's I-frame, as x264's open-gop writes it), an IRAP picture (H.265: BLA,
+    IDR, CRA), a sequence header (AV1), a key frame (VP8, VP9)."""
     if packet.keyframe_flag is not None:
         return packet.keyframe_flag
     data = bytes(packet.data)
     if packet.codec == "h264":
-        return 5 in _nal_types("h264", data)
+        types = _nal_types("h264", data)
+        return 5 in types or (6 in types and H264_RECOVERY_POINT in _h264_sei_payload_types(data))
     if packet.codec == "hevc":
         return any(16 <= kind <= 23 for kind in _nal_types("hevc", data))
     if packet.codec == "vp9":
@@ -245,7 +273,7 @@ class VideoPacketStream:
                 self._chunks[-1].close()
             self._chunks.append(PacketChunk(self.folder / f"stream-{len(self._chunks):05d}", self.codec,
                                             len(self.problems)))
-        self._chunks[-1].add(packet.data, is_keyframe(packet))
+        self._chunks[-1].add(packet.data, is_keyframe(packet), _closed_keyframe(packet))
 
     def add_unreadable(self, problem: str) -> None:
         """A message whose packet cannot be read at all: it has no frame, and the frames after it up to the next
@@ -332,6 +360,8 @@ class PacketChunk:
     STOPPED = ("the decoder stopped at a damaged packet before this one's frame: decoding resumed at the next "
                "keyframe")
     DROPPED = "the decoder gave no frame for this packet (damaged, or it refers to a damaged one)"
+    LEADING = ("a leading picture of the open GOP's keyframe decoding began at: it refers to frames before that "
+               "keyframe, which were not decoded")
 
     def __init__(self, path: Path, codec: str, first: int) -> None:
         self.ts_stream_type = TS_STREAM_TYPES.get(codec)
@@ -340,6 +370,7 @@ class PacketChunk:
         self.first = first  # the stream's index of its first packet
         self.offsets: list[int] = []  # of each position's framing in the file
         self.keyframes: list[int] = []
+        self.closed: set[int] = set()  # the keyframes nothing after refers past (`_closed_keyframe`)
         self._restarts: list[Path] = []  # the files decoding was started again from
         self._counter = 0  # the transport stream's continuity counter
         self._file = self.path.open("wb")
@@ -356,10 +387,12 @@ class PacketChunk:
     def __len__(self) -> int:
         return len(self.offsets)
 
-    def add(self, data: memoryview, keyframe: bool) -> None:
+    def add(self, data: memoryview, keyframe: bool, closed: bool = False) -> None:
         position = len(self.offsets)
-        if keyframe:
+        if keyframe or closed:
             self.keyframes.append(position)
+        if closed:
+            self.closed.add(position)
         self.offsets.append(self._file.tell())
         if self.ts_stream_type is None:
             self._file.write(struct.pack("<IQ", len(data), position))
@@ -430,6 +463,9 @@ class PacketChunk:
                     if later and (stream.frames_decoded or not restarted):
                         base, restarted = later[0], True
                         capture = cv2.VideoCapture(str(self._from(base)), cv2.CAP_FFMPEG)
+                if problem == self.DROPPED and base not in self.closed and not any(
+                        base < key <= position for key in self.keyframes):
+                    problem = self.LEADING
                 result = (held.pop(position), "") if position in held else (None, problem)
                 if position == len(self.offsets) - 1:  # its files go before the last frame is given
                     if capture is not None:

@@ -1,5 +1,5 @@
 """Writes the H.264, H.265 and AV1 packet streams beside this file (PyAV's libx264, libx265, libsvtav1; by hand:
-`pip install av numpy` in a scratch venv, then `python make_packets.py`). Each frame is a grey 160x120 image
+`pip install av numpy` in a scratch venv, then `python make_packets.py [name ...]`). Each frame is a grey 160x120 image
 with a bright bar at x = 10 + 8 * (its capture number), so a decoded frame tells which capture it is.
 
 Each file is a run of packets in decode order, each as <uint32 capture number (pts)> <uint32 length> <bytes>
@@ -7,6 +7,7 @@ Each file is a run of packets in decode order, each as <uint32 capture number (p
 """
 
 import struct
+import sys
 from fractions import Fraction
 from pathlib import Path
 
@@ -40,9 +41,18 @@ def encode(codec: str, options: dict[str, str], name: str) -> None:
             file.write(struct.pack("<II", packet.pts, len(data)) + data)
 
 
-encode("libx264", {"bf": "0", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18"}, "h264_no_b.bin")
-encode("libx264", {"bf": "2", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18",
-                   "x264-params": "b-adapt=0"}, "h264_b.bin")
-encode("libx265", {"x265-params": "keyint=6:min-keyint=6:bframes=2:b-adapt=0:open-gop=1:scenecut=0:log-level=error",
-                   "crf": "18"}, "hevc_open_gop.bin")
-encode("libsvtav1", {"g": "6", "preset": "8", "crf": "30"}, "av1.bin")  # no AV1 decoder in OpenCV's wheel
+STREAMS = {
+    "h264_no_b.bin": ("libx264", {"bf": "0", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18"}),
+    "h264_b.bin": ("libx264", {"bf": "2", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18",
+                               "x264-params": "b-adapt=0"}),
+    # an open GOP: the keyframe after the first is an I-frame with a recovery point, not an IDR
+    "h264_open_gop.bin": ("libx264", {"bf": "2", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18",
+                                      "x264-params": "b-adapt=0:open-gop=1"}),
+    "hevc_open_gop.bin": ("libx265", {"x265-params": "keyint=6:min-keyint=6:bframes=2:b-adapt=0:open-gop=1:"
+                                                     "scenecut=0:log-level=error", "crf": "18"}),
+    "av1.bin": ("libsvtav1", {"g": "6", "preset": "8", "crf": "30"}),  # no AV1 decoder in OpenCV's wheel
+}
+
+if __name__ == "__main__":  # python make_packets.py [name ...]: those streams only (else all)
+    for name in sys.argv[1:] or STREAMS:
+        encode(*STREAMS[name], name)
