@@ -218,30 +218,35 @@ def test_a_damaged_packet_that_stops_the_decoder_loses_its_frames_up_to_the_next
     assert results[resumed][0] == packets[resumed][0]
 
 
-def test_a_long_stream_is_decoded_as_it_is_read_in_chunks_begun_at_keyframes_with_the_same_frames(monkeypatch):
-    """The IVF files hold CHUNK_PACKETS packets at least, each begun at a keyframe, and a chunk's frames are given
-    (`ready`) as soon as the next chunk begins, its file then removed: made small here, a long recording's rows
-    come while it is read, with never more than two chunks on disk, and the same frames as one file gives."""
+@pytest.mark.parametrize("name, codec", [("h264_b.bin", "h264"), ("h264_open_gop.bin", "h264"),
+                                         ("hevc_open_gop.bin", "hevc")])
+def test_a_long_stream_is_decoded_as_it_is_read_in_chunks_begun_at_keyframes_with_the_same_frames(monkeypatch, name,
+                                                                                                   codec):
+    """The stream files hold CHUNK_PACKETS packets at least, each begun at a keyframe (an open GOP's given the GOP
+    before it first, for its leading pictures), and a chunk's frames are given (`ready`) as soon as the next chunk
+    begins, its file then removed: made small here, a long recording's rows come while it is read, with never
+    more than two chunks on disk, and the same frames as one file gives."""
     import veg_area_ros.video_packets as video_packets
 
-    packets = stored_packets("h264_b.bin")
+    packets = stored_packets(name)
     four = packets * 4
-    whole = decoded("", "h264", packets=four)
-    monkeypatch.setattr(video_packets, "CHUNK_PACKETS", 4)
+    whole = decoded("", codec, packets=four)
+    keyframes = [k for k, (_, data) in enumerate(four) if is_keyframe(VideoPacket(None, codec, memoryview(data)))]
+    monkeypatch.setattr(video_packets, "CHUNK_PACKETS", 1)  # a chunk at every keyframe
     with tempfile.TemporaryDirectory() as folder:
         stream = VideoPacketStream(folder, "/camera")
         results, ready_at, files = [], [], []
         for k, (number, data) in enumerate(four):
-            stream.add(VideoPacket(Header(*stamp(number), "camera"), "h264", memoryview(data)))
-            files.append(len(list(Path(folder).glob("*.ivf"))))
+            stream.add(VideoPacket(Header(*stamp(number), "camera"), codec, memoryview(data)))
+            files.append(len(list(Path(folder).glob("stream-*"))))
             taken = [(captured(frame), problem, note) for frame, problem, note in stream.ready()]
             ready_at += [k] * len(taken)
             results += taken
         results += [(captured(frame), problem, note) for frame, problem, note in stream.frames()]
-        assert not list(Path(folder).glob("*.ivf"))
+        assert not list(Path(folder).glob("stream-*"))
     assert results == whole and [shown for shown, _, _ in whole] == [number for number, _ in packets] * 4
-    assert max(files) == 2  # keyframes every 6 packets: a chunk each
-    assert ready_at == [6 * (k // 6 + 1) for k in range(len(four) - 6)]  # as the keyframe after its chunk comes
+    assert max(files) == 2
+    assert ready_at == [min(key for key in keyframes if key > k) for k in range(keyframes[-1])]
 
 
 def test_a_recording_begun_between_keyframes_decodes_from_the_next_keyframe():

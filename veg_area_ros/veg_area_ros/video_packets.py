@@ -35,6 +35,7 @@ ANNEX_B = ("h264", "hevc")
 IVF_FOURCC = {"h264": b"H264", "vp8": b"VP80", "vp9": b"VP90", "av1": b"AV01"}
 TS_STREAM_TYPES = {"hevc": 0x24}
 CHUNK_PACKETS = 240  # a stream file holds this many packets at least, up to the next keyframe
+GOP_KEPT = 1000  # an open GOP's keyframe begins a chunk where the GOP before it, given first, is no longer
 MAX_REORDER = 16  # H.264 and H.265 hold back at most 16 frames to reorder them: one not given by then is dropped
 TS_PMT_PID, TS_VIDEO_PID = 0x1000, 0x100
 AV_PKT_FLAG_KEY = 1  # FFMPEGPacket.flags: libavcodec's packet flags
@@ -226,6 +227,9 @@ class VideoPacketStream:
         self._started = False
         self._cra_leading = False  # began at an H.265 CRA: its RASL pictures are not output
         self._chunks: list[PacketChunk] = []
+        # the packets from the last keyframe on (None past GOP_KEPT): a chunk begun at an open GOP's
+        # keyframe is given them first, for its leading pictures to refer to
+        self._gop: list[tuple[bytes, bool, bool]] | None = None
         self._decoded = self._decode_chunks()
         self._taken = 0  # the packets whose results have been given
         self.notes: list[str] = []  # per packet: CONCEALED_NOTE where a packet before it since a keyframe is lost
@@ -268,12 +272,20 @@ class VideoPacketStream:
         self.problems.append(problem)
 
     def _write(self, packet: VideoPacket) -> None:
-        if not self._chunks or (len(self._chunks[-1]) >= CHUNK_PACKETS and _closed_keyframe(packet)):
+        keyframe, closed = is_keyframe(packet), _closed_keyframe(packet)
+        if not self._chunks or (len(self._chunks[-1]) >= CHUNK_PACKETS and (
+                closed or (keyframe and self._gop is not None))):
             if self._chunks:
                 self._chunks[-1].close()
             self._chunks.append(PacketChunk(self.folder / f"stream-{len(self._chunks):05d}", self.codec,
-                                            len(self.problems)))
-        self._chunks[-1].add(packet.data, is_keyframe(packet), _closed_keyframe(packet))
+                                            len(self.problems), [] if closed or not self._chunks else self._gop))
+        if keyframe or closed:
+            self._gop = []
+        if self._gop is not None and len(self._gop) < GOP_KEPT:
+            self._gop.append((bytes(packet.data), keyframe, closed))
+        else:
+            self._gop = None
+        self._chunks[-1].add(packet.data, keyframe, closed)
 
     def add_unreadable(self, problem: str) -> None:
         """A message whose packet cannot be read at all: it has no frame, and the frames after it up to the next
@@ -363,7 +375,7 @@ class PacketChunk:
     LEADING = ("a leading picture of the open GOP's keyframe decoding began at: it refers to frames before that "
                "keyframe, which were not decoded")
 
-    def __init__(self, path: Path, codec: str, first: int) -> None:
+    def __init__(self, path: Path, codec: str, first: int, prefix: list[tuple[bytes, bool, bool]] = ()) -> None:
         self.ts_stream_type = TS_STREAM_TYPES.get(codec)
         self.path = path.with_suffix(".ts" if self.ts_stream_type else ".ivf")
         self.fourcc = IVF_FOURCC.get(codec, b"")
@@ -375,6 +387,9 @@ class PacketChunk:
         self._counter = 0  # the transport stream's continuity counter
         self._file = self.path.open("wb")
         self._file.write(self._header())
+        for data, keyframe, closed in prefix:
+            self.add(data, keyframe, closed)
+        self.skip = len(prefix)  # the previous GOP's packets, decoded only for the chunk's first frames
 
     def _header(self) -> bytes:
         if self.ts_stream_type is None:
@@ -385,7 +400,7 @@ class PacketChunk:
         return pat + pmt
 
     def __len__(self) -> int:
-        return len(self.offsets)
+        return len(self.offsets) - self.skip
 
     def add(self, data: memoryview, keyframe: bool, closed: bool = False) -> None:
         position = len(self.offsets)
@@ -440,7 +455,7 @@ class PacketChunk:
         reached = -1  # the highest number the decoder has given
         capture: cv2.VideoCapture | None = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
         try:
-            for position in range(len(self.offsets)):
+            for position in range(self.skip, len(self.offsets)):
                 problem = self.DROPPED
                 while position not in held and len(held) <= MAX_REORDER:
                     if position < base:
