@@ -57,7 +57,7 @@ def stored_packets(name: str) -> list[tuple[int, bytes]]:
 def captured(frame: np.ndarray) -> int:
     """Which capture a decoded bar frame is: its bar covers x = 10 + 8 * number to 8 pixels on."""
     bright = np.flatnonzero(frame[60, :, 1] > 145)
-    return round(float(bright.mean() - 13.5) / 8)
+    return round(float(bright.mean() - 13.5) / 8) if bright.size else -1  # -1: no bar (a concealed frame)
 
 
 def stamp(number: int) -> tuple[int, int]:
@@ -199,6 +199,23 @@ def test_a_packet_without_a_picture_costs_its_own_row_alone(name):
             number for k, (number, _) in enumerate(packets) if k != lost]
 
 
+def test_after_a_lost_packet_the_frames_say_so_up_to_a_closed_keyframe_or_the_second_open_one():
+    """x264's open GOPs: after a lost packet the next keyframe, an open GOP's, does not end the doubt (its leading
+    pictures may refer to the GOP with the loss); the open keyframe after it does, and so does an IDR."""
+    packets = stored_packets("h264_open_gop.bin")
+    keyframes = [k for k, (_, data) in enumerate(packets) if is_keyframe(VideoPacket(None, "h264", memoryview(data)))]
+    assert len(keyframes) == 3 and all(5 not in _nal_types("h264", packets[k][1]) for k in keyframes[1:])
+    lost = list(packets)
+    lost[1] = (lost[1][0], b"\x00\x00\x00\x01\x09\xf0")
+    notes = [note for _, _, note in decoded("", "h264", packets=lost)]
+    assert [note == CONCEALED_NOTE for note in notes] == [1 < k < keyframes[2] for k in range(len(packets))]
+    twice = packets + [(number + len(packets), data) for number, data in packets]
+    twice[keyframes[2] + 1] = (twice[keyframes[2] + 1][0], b"\x00\x00\x00\x01\x09\xf0")
+    notes = [note for _, _, note in decoded("", "h264", packets=twice)]
+    assert [note == CONCEALED_NOTE for note in notes] == [keyframes[2] + 1 < k < len(packets)
+                                                          for k in range(len(twice))]
+
+
 @pytest.mark.parametrize("name", ["h264_no_b.bin", "h264_b.bin"])
 def test_a_damaged_packet_that_stops_the_decoder_loses_its_frames_up_to_the_next_keyframe_only(name):
     """A packet whose slice data is zeros stops OpenCV's decoder (before, it cost an H.264 stream every frame):
@@ -268,7 +285,7 @@ def test_an_h264_stream_begun_between_keyframes_of_open_gops_decodes_from_the_re
     packets = stored_packets("h264_open_gop.bin")
     keyframes = [k for k, (_, data) in enumerate(packets) if is_keyframe(VideoPacket(None, "h264",
                                                                                       memoryview(data)))]
-    assert len(keyframes) == 2 and 5 not in _nal_types("h264", packets[keyframes[1]][1])  # not an IDR
+    assert len(keyframes) == 3 and 5 not in _nal_types("h264", packets[keyframes[1]][1])  # not an IDR
     recovery = keyframes[1]
     results = decoded("h264_open_gop.bin", "h264", first=2)
     for k, (shown, problem, _) in enumerate(results, start=2):

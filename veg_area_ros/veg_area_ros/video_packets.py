@@ -207,8 +207,8 @@ class DecodedVideoFrame:
 
 
 LEADING_SKIPPED = "a leading picture of the CRA keyframe the stream begins at, which the decoder skips"
-CONCEALED_NOTE = ("a packet of the video stream since its last keyframe has no frame: this frame may refer to it, "
-                  "and the decoder then filled in what it lacked")
+CONCEALED_NOTE = ("a packet of the video stream that this frame may refer to has no frame: where it does, the "
+                  "decoder filled in what it lacked")
 
 
 class VideoPacketStream:
@@ -232,8 +232,10 @@ class VideoPacketStream:
         self._gop: list[tuple[bytes, bool, bool]] | None = None
         self._decoded = self._decode_chunks()
         self._taken = 0  # the packets whose results have been given
-        self.notes: list[str] = []  # per packet: CONCEALED_NOTE where a packet before it since a keyframe is lost
-        self._lost_since_keyframe = False
+        self.notes: list[str] = []  # per packet: CONCEALED_NOTE where it may refer to a lost packet
+        # keyframes still to come before the frames can no longer refer to a lost packet: a closed one clears it,
+        # an open GOP's the second (the first one's leading pictures may refer to the lost packet's GOP)
+        self._keyframes_to_clear = 0
 
     def add(self, packet: VideoPacket) -> None:
         if self.codec is None:
@@ -261,14 +263,17 @@ class VideoPacketStream:
                 return
             self._cra_leading = False
         if not problem:
-            if self._lost_since_keyframe and _closed_keyframe(packet):
-                self._lost_since_keyframe = False
+            if _closed_keyframe(packet):
+                self._keyframes_to_clear = 0
+            elif is_keyframe(packet):
+                self._keyframes_to_clear = max(0, self._keyframes_to_clear - 1)
             self._write(packet)
         self._add(problem)
 
     def _add(self, problem: str, lost: bool = True) -> None:
-        self.notes.append(CONCEALED_NOTE if self._lost_since_keyframe and not problem else "")
-        self._lost_since_keyframe |= bool(problem) and lost and self._started
+        self.notes.append(CONCEALED_NOTE if self._keyframes_to_clear and not problem else "")
+        if problem and lost and self._started:
+            self._keyframes_to_clear = 2
         self.problems.append(problem)
 
     def _write(self, packet: VideoPacket) -> None:
@@ -294,7 +299,7 @@ class VideoPacketStream:
 
     def ready(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
         """As `frames()`, for the packets added so far whose frames can be decoded now: those before the chunk
-        being written (each chunk begins at a keyframe that nothing after it refers past). Take them all before
+        being written (each chunk begins at a keyframe, an open GOP's given the GOP before it). Take them all before
         the next `add`: a long recording is decoded as it is read, a chunk's file removed once its frames are out."""
         return self._frames_by_number(self._chunks[-1].first if self._chunks else len(self.problems))
 

@@ -24,13 +24,13 @@ def bar_frame(number: int) -> np.ndarray:
     return image
 
 
-def encode(codec: str, options: dict[str, str], name: str) -> None:
+def encode(codec: str, options: dict[str, str], name: str, frames: int = FRAMES) -> None:
     context = av.CodecContext.create(codec, "w")
     context.width, context.height, context.pix_fmt = 160, 120, "yuv420p"
     context.time_base, context.framerate = Fraction(1, 10), 10
     context.options = options
     packets = []
-    for number in range(FRAMES):
+    for number in range(frames):
         frame = av.VideoFrame.from_ndarray(bar_frame(number), format="rgb24").reformat(format="yuv420p")
         frame.pts = number
         packets += context.encode(frame)
@@ -45,9 +45,9 @@ STREAMS = {
     "h264_no_b.bin": ("libx264", {"bf": "0", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18"}),
     "h264_b.bin": ("libx264", {"bf": "2", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18",
                                "x264-params": "b-adapt=0"}),
-    # an open GOP: the keyframe after the first is an I-frame with a recovery point, not an IDR
+    # open GOPs: the keyframes after the first are I-frames with a recovery point, not IDRs (18 frames: two)
     "h264_open_gop.bin": ("libx264", {"bf": "2", "g": "6", "keyint_min": "6", "sc_threshold": "0", "crf": "18",
-                                      "x264-params": "b-adapt=0:open-gop=1"}),
+                                      "x264-params": "b-adapt=0:open-gop=1"}, 18),
     "hevc_open_gop.bin": ("libx265", {"x265-params": "keyint=6:min-keyint=6:bframes=2:b-adapt=0:open-gop=1:"
                                                      "scenecut=0:log-level=error", "crf": "18"}),
     "av1.bin": ("libsvtav1", {"g": "6", "preset": "8", "crf": "30"}),  # no AV1 decoder in OpenCV's wheel
@@ -55,4 +55,5 @@ STREAMS = {
 
 if __name__ == "__main__":  # python make_packets.py [name ...]: those streams only (else all)
     for name in sys.argv[1:] or STREAMS:
-        encode(*STREAMS[name], name)
+        codec, options, *frames = STREAMS[name]
+        encode(codec, options, name, *frames)
