@@ -161,19 +161,30 @@ def test_an_h265_keyframe_the_decoder_stops_at_costs_the_frames_up_to_the_next_k
     assert kept[-len(packets):] == list(range(len(packets), len(twice)))
 
 
-def test_an_h265_packet_the_decoder_drops_costs_its_own_rows_not_the_frames_after():
+@pytest.mark.parametrize("copies", [1, 4])
+def test_an_h265_packet_the_decoder_drops_costs_its_own_rows_not_the_frames_after(copies):
     """A damaged H.265 packet (its slice data zeros): the decoder gives no frame for it, or for those that refer to
     it, and goes on; those rows say so and every other packet keeps its own frame (paired by the stamps' order,
-    every later frame moved onto the message before it, and only the last row said that something was off)."""
-    packets = stored_packets("hevc_open_gop.bin")
+    every later frame moved onto the message before it, and only the last row said that something was off). Four
+    copies of the stream: a missing frame is given up once the decoder has given 16 after it, not at the end."""
+    packets = [(number + len(stored_packets("hevc_open_gop.bin")) * copy, data) for copy in range(copies)
+               for number, data in stored_packets("hevc_open_gop.bin")]
     damaged = 5
     packets[damaged] = (packets[damaged][0], packets[damaged][1][:6] + bytes(len(packets[damaged][1]) - 6))
-    results = decoded("", "hevc", packets=packets)
+    with tempfile.TemporaryDirectory() as folder:
+        stream = VideoPacketStream(folder, "/camera")
+        for number, data in packets:
+            stream.add(VideoPacket(Header(*stamp(number), "camera"), "hevc", memoryview(data)))
+        results, decoded_by = [], []  # the frames the decoder had given when each row came
+        for frame, problem, note in stream.frames():
+            results.append((None if frame is None else captured(frame), problem, note))
+            decoded_by.append(stream.frames_decoded)
     lost = [k for k, (shown, _, _) in enumerate(results) if shown is None]
     assert damaged in lost and len(lost) < 4
     assert all("gave no frame for this packet" in results[k][1] for k in lost)
+    assert decoded_by[damaged] <= damaged + 16 + 3  # not held until the end: at most 16 frames after it
     kept = [k for k in range(len(packets)) if k not in lost]
-    assert [results[k][0] for k in kept] == [packets[k][0] for k in kept]
+    assert [results[k][0] for k in kept] == [packets[k][0] % 12 for k in kept]
 
 
 @pytest.mark.parametrize("name", ["h264_no_b.bin", "h264_b.bin"])
