@@ -162,6 +162,9 @@ def measure_rate(rate_hz: float, seconds: float, rounds: int, calibration: Path,
                 process.wait(15)
             except subprocess.TimeoutExpired:
                 process.kill()
+    if not all(without) or not all(again):
+        raise SystemExit("the area node gave no result in a window without pages (is the installed package this "
+                         "checkout's? make install)")
     ratios = [w / n for w, n in zip(with_pages, without, strict=True)]
     same = [n / a for n, a in zip(without, again, strict=True)]
     return {"camera": "synthetic" if video is None else "video", "camera_hz": rate_hz,
