@@ -15,6 +15,7 @@ import pytest
 import yaml
 from helpers import TEST_DATA, run_cli
 from rosbags.rosbag2 import Writer
+from rosbags.rosbag2.enums import StoragePlugin
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from veg_area_ros.bags import iter_bag_frames
@@ -80,9 +81,10 @@ def ffmpeg(number: int, data: bytes, encoding: str, key: bool, frame_id: str = "
                                       flags=int(key), is_bigendian=False, data=np.frombuffer(data, np.uint8))
 
 
-def write_video_bag(path: Path, topic: str, msgtype: str, messages: list, extra: list = ()) -> None:
+def write_video_bag(path: Path, topic: str, msgtype: str, messages: list, extra: list = (),
+                    storage: StoragePlugin = StoragePlugin.SQLITE3) -> None:
     """A bag as `ros2 bag record` writes it: the packets received in decode order, 1 ms apart."""
-    with Writer(path, version=Writer.VERSION_LATEST) as writer:
+    with Writer(path, version=Writer.VERSION_LATEST, storage_plugin=storage) as writer:
         video = writer.add_connection(topic, msgtype, typestore=STORE)
         others = [(writer.add_connection(t, m, typestore=STORE), m, ms) for t, m, ms in extra]
         for k, message in enumerate(messages):
@@ -463,10 +465,11 @@ def test_of_one_cameras_transports_the_video_packets_come_last(tmp_path):
     assert [captured(f.image.pixels()) for f in named] == [n for n, _ in packets]
 
 
-@pytest.mark.parametrize("name, codec", [("h264_b.bin", "h264"), ("h264_open_gop.bin", "h264"),
-                                         ("hevc_open_gop.bin", "hevc")])
+@pytest.mark.parametrize("name, codec, storage", [("h264_b.bin", "h264", StoragePlugin.SQLITE3),
+                                                  ("h264_open_gop.bin", "h264", StoragePlugin.MCAP),
+                                                  ("hevc_open_gop.bin", "hevc", StoragePlugin.MCAP)])
 def test_a_segment_of_a_video_bag_decodes_from_the_keyframes_it_needs_and_gives_the_same_frames(tmp_path, name,
-                                                                                                  codec):
+                                                                                                  codec, storage):
     """`--jobs` and a cluster measure a long bag in segments: each decoded the whole recording before its own
     frames (quadratic in the bag's length). From each possible first frame, the frames from there on are the
     whole decode's, and only the two keyframes' packets before it are decoded (an open GOP's leading pictures
@@ -474,7 +477,8 @@ def test_a_segment_of_a_video_bag_decodes_from_the_keyframes_it_needs_and_gives_
     packets = stored_packets(name)
     twice = packets + [(number + len(packets), data) for number, data in packets]
     bag = tmp_path / "twice"
-    write_video_bag(bag, "/camera/image_raw/foxglove", FOXGLOVE_VIDEO, [foxglove(n, d, codec) for n, d in twice])
+    write_video_bag(bag, "/camera/image_raw/foxglove", FOXGLOVE_VIDEO, [foxglove(n, d, codec) for n, d in twice],
+                    storage=storage)
     whole = [f.image.pixels() for f in iter_bag_frames(bag)]
     keyframes = [k for k, (_, data) in enumerate(twice) if is_keyframe(VideoPacket(None, codec, memoryview(data)))]
     for start in range(len(twice)):
