@@ -104,3 +104,12 @@ def test_ros_transport_delivers_in_every_case():
 def test_the_guidance_bench_runs():
     out = run_bench("guidance_speed.py", "--repeats", "1")
     assert "640x480: a frame looked at" in out and "3872x2592: a frame looked at" in out
+
+
+def test_the_video_bag_bench_reads_every_frame_in_both_storages():
+    out = run_bench("video_bag_speed.py", "--frames", "40", "--runs", "1")
+    rows = [line.split() for line in out.splitlines() if line.split()[:1] in (["mcap"], ["sqlite3"])]
+    assert [row[0] for row in rows] == ["mcap", "sqlite3"], out
+    for row in rows:
+        file_s, bag_s, ratio, held_mb = (float(x) for x in row[1:5])
+        assert file_s > 0 and bag_s > 0 and ratio > 0 and held_mb > 0, row
