@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import struct
 import sys
 import tempfile
 import time
@@ -31,7 +30,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E
 
 from veg_area_ros.bags import iter_bag_frames  # noqa: E402
 from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene  # noqa: E402
-from veg_area_ros.video_packets import FOXGLOVE_VIDEO, VideoPacket, is_keyframe  # noqa: E402
+from veg_area_ros.video_packets import FOXGLOVE_VIDEO, VideoPacket, is_keyframe, ivf_packets  # noqa: E402
 
 STORE = get_typestore(Stores.ROS2_KILTED)
 STORE.register(get_types_from_msg("builtin_interfaces/Time timestamp\nstring frame_id\nuint8[] data\nstring format\n",
@@ -47,15 +46,6 @@ def write_video(path: Path, frames: int) -> None:
     for _ in range(frames):
         writer.write(np.clip(clean + rng.normal(0.0, 3.0, clean.shape), 0, 255).astype(np.uint8))
     writer.release()
-
-
-def ivf_packets(path: Path) -> list[bytes]:
-    data, packets, offset = path.read_bytes(), [], 32
-    while offset < len(data):
-        (length,) = struct.unpack_from("<I", data, offset)
-        packets.append(data[offset + 12:offset + 12 + length])
-        offset += 12 + length
-    return packets
 
 
 def write_bag(path: Path, packets: list[bytes], storage: StoragePlugin) -> None:
@@ -98,7 +88,7 @@ def main() -> int:
         root = Path(folder)
         video = root / "cube.ivf"
         write_video(video, args.frames)
-        packets = ivf_packets(video)
+        packets = ivf_packets(video.read_bytes())
         topic_bytes = sum(len(p) for p in packets)
         scratch = root / "tmp"
         scratch.mkdir()

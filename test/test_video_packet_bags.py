@@ -30,6 +30,7 @@ from veg_area_ros.video_packets import (
     codec_name,
     decode_video_packet,
     is_keyframe,
+    ivf_packets,
 )
 
 PACKETS = TEST_DATA / "video-packets"
@@ -372,15 +373,6 @@ def test_an_ffmpeg_image_transport_bag_is_read_in_capture_order_with_its_camera_
     assert not any("reorders its frames (B-frames)" in note for f in frames for note in f.notes)
 
 
-def ivf_packets(path: Path) -> list[bytes]:
-    data, packets, offset = path.read_bytes(), [], 32
-    while offset < len(data):
-        (length,) = struct.unpack_from("<I", data, offset)
-        packets.append(data[offset + 12:offset + 12 + length])
-        offset += 12 + length
-    return packets
-
-
 def test_a_foxglove_vp9_bag_is_measured_as_the_same_video_file(tmp_path):
     """A camera recorded through Foxglove's CompressedVideo transport (VP9, encoded here by OpenCV's FFmpeg):
     `veg-area measure` finds the topic, measures every frame with the camera_info
@@ -395,7 +387,7 @@ def test_a_foxglove_vp9_bag_is_measured_as_the_same_video_file(tmp_path):
     for frame in frames:
         writer.write(frame)
     writer.release()
-    packets = ivf_packets(video)
+    packets = ivf_packets(video.read_bytes())
     assert len(packets) == len(frames)
     fields = camera_info_fields(ENDOSCOPE)
     info = STORE.types["sensor_msgs/msg/CameraInfo"](

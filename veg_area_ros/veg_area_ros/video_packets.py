@@ -335,6 +335,17 @@ class VideoPacketStream:
             yield frame, problem, note
 
 
+def ivf_packets(data: bytes) -> list[bytes]:
+    """The frames of an IVF file (its 32-byte header, then each frame's 12-byte header and bytes), as a recorder
+    of a VP8/VP9/AV1 camera would send them one per message."""
+    packets, offset = [], 32
+    while offset + 12 <= len(data):
+        (length,) = struct.unpack_from("<I", data, offset)
+        packets.append(data[offset + 12:offset + 12 + length])
+        offset += 12 + length
+    return packets
+
+
 def _mpeg_crc32(data: bytes) -> int:
     """CRC-32/MPEG-2, the checksum of a transport stream's tables (zlib's CRC-32 is the reflected one)."""
     crc = 0xFFFFFFFF
