@@ -114,17 +114,21 @@ def test_the_packets_fields_read_as_rosbags_serializes_them():
     assert packet.codec == "h264" and bytes(packet.data) == data and packet.keyframe_flag is True
 
 
+def camera_packet(number: int, data: bytes, codec: str, stamped: bool = True) -> VideoPacket:
+    """Capture `number`'s packet as the camera stamps it (or stamp 0, a driver that stamps nothing)."""
+    return VideoPacket(Header(*stamp(number if stamped else 0), "camera"), codec, memoryview(data))
+
+
 def decoded(name: str, codec: str, first: int = 0, packets: list[tuple[int, bytes]] | None = None,
-            stamped: bool = True) -> list[tuple[int | None, str, bool]]:
+            stamped: bool = True) -> list[tuple[int | None, str, str]]:
     """The stream's packets from the `first`-th on, each stamped with its capture time (or all alike), as
-    (capture number the decoded frame shows, why it has none, whether it was reordered), per packet in decode
-    order."""
+    (capture number the decoded frame shows, why it has none, its note), per packet in decode order."""
     with tempfile.TemporaryDirectory() as folder:
         stream = VideoPacketStream(folder, "/camera/image_raw/foxglove")
         for number, data in (stored_packets(name) if packets is None else packets)[first:]:
-            stream.add(VideoPacket(Header(*stamp(number if stamped else 0), "camera"), codec, memoryview(data)))
-        return [(None if frame is None else captured(frame), problem, reordered)
-                for frame, problem, reordered in stream.frames()]
+            stream.add(camera_packet(number, data, codec, stamped))
+        return [(None if frame is None else captured(frame), problem, note)
+                for frame, problem, note in stream.frames()]
 
 
 @pytest.mark.parametrize("name, codec", [("h264_no_b.bin", "h264"), ("h264_b.bin", "h264"),
@@ -177,7 +181,7 @@ def test_an_h265_packet_the_decoder_drops_costs_its_own_rows_not_the_frames_afte
     with tempfile.TemporaryDirectory() as folder:
         stream = VideoPacketStream(folder, "/camera")
         for number, data in packets:
-            stream.add(VideoPacket(Header(*stamp(number), "camera"), "hevc", memoryview(data)))
+            stream.add(camera_packet(number, data, "hevc"))
         results, decoded_by = [], []  # the frames the decoder had given when each row came
         for frame, problem, note in stream.frames():
             results.append((None if frame is None else captured(frame), problem, note))
@@ -268,7 +272,7 @@ def test_a_long_stream_is_decoded_as_it_is_read_in_chunks_begun_at_keyframes_wit
         stream = VideoPacketStream(folder, "/camera")
         results, ready_at, files = [], [], []
         for k, (number, data) in enumerate(four):
-            stream.add(VideoPacket(Header(*stamp(number), "camera"), codec, memoryview(data)))
+            stream.add(camera_packet(number, data, codec))
             files.append(len(list(Path(folder).glob("stream-*"))))
             taken = [(captured(frame), problem, note) for frame, problem, note in stream.ready()]
             ready_at += [k] * len(taken)

@@ -77,31 +77,35 @@ def decode_video_packet(msgtype: str, buffer) -> VideoPacket:
         header = reader.header()
         reader.unpack("ii")  # width, height: the decoder reads them from the stream
         encoding = reader.string()
-        reader.unpack("Q")  # pts: the frames are paired with their messages by the stamps
+        reader.unpack("Q")  # pts: the stream files number the packets themselves (`PacketChunk`)
         flags, _ = reader.unpack("BB")  # flags, is_bigendian
         return VideoPacket(header, codec_name(encoding), reader.octets(), bool(flags & AV_PKT_FLAG_KEY))
     raise ImageMessageError(f"{msgtype} is not a video packet read here")
 
 
-def _nal_types(codec: str, data: bytes) -> list[int]:
-    """The NAL unit types of Annex B data, each after its 00 00 01 start code (H.264: the low 5 bits of the
-    unit's first byte; H.265: 6 bits after its first)."""
-    types, start = [], data.find(b"\x00\x00\x01")
+def _nal_units(data: bytes) -> Iterator[tuple[int, int]]:
+    """Where each NAL unit of Annex B data lies: (its first byte, after its 00 00 01 start code; the next start
+    code or the end)."""
+    start = data.find(b"\x00\x00\x01")
     while 0 <= start < len(data) - 3:
-        byte = data[start + 3]
-        types.append(byte & 0x1F if codec == "h264" else (byte >> 1) & 0x3F)
-        start = data.find(b"\x00\x00\x01", start + 3)
-    return types
+        end = data.find(b"\x00\x00\x01", start + 3)
+        yield start + 3, len(data) if end < 0 else end
+        start = end
+
+
+def _nal_types(codec: str, data: bytes) -> list[int]:
+    """The NAL unit types of Annex B data (H.264: the low 5 bits of the unit's first byte; H.265: 6 bits after
+    its first)."""
+    return [data[first] & 0x1F if codec == "h264" else (data[first] >> 1) & 0x3F for first, _ in _nal_units(data)]
 
 
 def _h264_sei_payload_types(data: bytes) -> list[int]:
-    """The payload types of the SEI messages in H.264 Annex B data (each SEI NAL unit read up to the next start
-    code, its emulation prevention bytes removed)."""
-    types, start = [], data.find(b"\x00\x00\x01")
-    while 0 <= start < len(data) - 3:
-        end = data.find(b"\x00\x00\x01", start + 3)
-        if data[start + 3] & 0x1F == 6:
-            body = data[start + 4:len(data) if end < 0 else end].replace(b"\x00\x00\x03", b"\x00\x00")
+    """The payload types of the SEI messages in H.264 Annex B data (each SEI NAL unit's emulation prevention
+    bytes removed)."""
+    types = []
+    for first, end in _nal_units(data):
+        if data[first] & 0x1F == 6:
+            body = data[first + 1:end].replace(b"\x00\x00\x03", b"\x00\x00")
             offset = 0
             while offset < len(body) and body[offset:].rstrip(b"\x00") != b"\x80":  # up to the trailing bits
                 fields = []
@@ -115,7 +119,6 @@ def _h264_sei_payload_types(data: bytes) -> list[int]:
                     offset += 1
                 types.append(fields[0])
                 offset += fields[1]
-        start = end
     return types
 
 
@@ -263,11 +266,12 @@ class VideoPacketStream:
                 return
             self._cra_leading = False
         if not problem:
-            if _closed_keyframe(packet):
+            keyframe, closed = is_keyframe(packet), _closed_keyframe(packet)
+            if closed:
                 self._keyframes_to_clear = 0
-            elif is_keyframe(packet):
+            elif keyframe:
                 self._keyframes_to_clear = max(0, self._keyframes_to_clear - 1)
-            self._write(packet)
+            self._write(packet, keyframe, closed)
         self._add(problem)
 
     def _add(self, problem: str, lost: bool = True) -> None:
@@ -276,8 +280,7 @@ class VideoPacketStream:
             self._keyframes_to_clear = 2
         self.problems.append(problem)
 
-    def _write(self, packet: VideoPacket) -> None:
-        keyframe, closed = is_keyframe(packet), _closed_keyframe(packet)
+    def _write(self, packet: VideoPacket, keyframe: bool, closed: bool) -> None:
         if not self._chunks or (len(self._chunks[-1]) >= CHUNK_PACKETS and (
                 closed or (keyframe and self._gop is not None))):
             if self._chunks:
