@@ -108,8 +108,8 @@ def test_timed_photos_of_a_board_are_views_not_a_videos_held_pose(tmp_path):
         assert done.returncode == 0, done.stderr
         assert "1 view(s) repeat a view already counted" in done.stderr, done.stderr
         fits[folder.name] = yaml.safe_load((tmp_path / f"{folder.name}.yaml").read_text())
-    for key in ("camera_matrix", "distortion_coefficients"):
-        assert fits["timed"][key]["data"] == pytest.approx(fits["plain"][key]["data"], rel=1e-7, abs=1e-9)
+    for key in ("camera_matrix", "distortion_coefficients"):  # bit for bit: a calibration is repeatable
+        assert fits["timed"][key]["data"] == fits["plain"][key]["data"]
 
 
 @settings(max_examples=300, deadline=None, derandomize=True)

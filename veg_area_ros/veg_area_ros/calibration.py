@@ -12,8 +12,10 @@ warnings about weak geometry.
 from __future__ import annotations
 
 import math
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import cv2
@@ -782,6 +784,22 @@ def calibrate(
         object_points=[views[v].detection.object_points.astype(np.float64) for v in active])
 
 
+_OPENCV_THREADS_LOCK = threading.Lock()
+
+
+@contextmanager
+def _opencv_single_threaded() -> Iterator[None]:
+    """OpenCV on one thread while inside: its calibrations sum over threads in an order that varies from run to
+    run, which moves the adjustment's converged result in the 8th digit (the same views, another file)."""
+    with _OPENCV_THREADS_LOCK:
+        threads = cv2.getNumThreads()
+        cv2.setNumThreads(1)
+        try:
+            yield
+        finally:
+            cv2.setNumThreads(threads)
+
+
 def _initial_camera(object_points: list[np.ndarray], image_points: list[np.ndarray], image_size: tuple[int, int],
                     model: str) -> tuple[float, np.ndarray, np.ndarray]:
     """OpenCV's calibration of the model from these views, the bundle adjustment's start: (RMS px, K, dist).
@@ -792,7 +810,8 @@ def _initial_camera(object_points: list[np.ndarray], image_points: list[np.ndarr
     objects = [p.astype(np.float32) for p in object_points]
     images = [p.astype(np.float32) for p in image_points]
     try:
-        rms, K, dist, _, _ = cv2.calibrateCamera(objects, images, image_size, None, None)
+        with _opencv_single_threaded():
+            rms, K, dist, _, _ = cv2.calibrateCamera(objects, images, image_size, None, None)
     except cv2.error as exc:
         raise CalibrationError(f"OpenCV could not initialise the calibration: {exc.err}") from exc
     if not np.isfinite(rms):
@@ -803,10 +822,11 @@ def _initial_camera(object_points: list[np.ndarray], image_points: list[np.ndarr
         return float(rms), K, np.concatenate([np.asarray(dist, float).ravel()[:5], np.zeros(3)])
     try:
         criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-10)
-        fisheye_rms, fisheye_k, fisheye_d, _, _ = cv2.fisheye.calibrate(
-            [p.reshape(-1, 1, 3).astype(np.float64) for p in object_points],
-            [p.reshape(-1, 1, 2).astype(np.float64) for p in image_points], image_size, None, None,
-            flags=cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW, criteria=criteria)
+        with _opencv_single_threaded():
+            fisheye_rms, fisheye_k, fisheye_d, _, _ = cv2.fisheye.calibrate(
+                [p.reshape(-1, 1, 3).astype(np.float64) for p in object_points],
+                [p.reshape(-1, 1, 2).astype(np.float64) for p in image_points], image_size, None, None,
+                flags=cv2.CALIB_RECOMPUTE_EXTRINSIC | cv2.CALIB_FIX_SKEW, criteria=criteria)
         if np.isfinite(fisheye_rms) and np.all(np.isfinite(fisheye_d)):
             return float(fisheye_rms), fisheye_k, np.asarray(fisheye_d, float).ravel()
     except cv2.error:
