@@ -21,6 +21,7 @@ import numpy as np
 from .targets import MAX_TARGET_SPAN_M, MIN_TARGET_SPAN_M
 
 KINDS = ("chessboard", "charuco", "circles")
+SECTOR_DETECTOR_SEED = 0x5EED  # findChessboardCornersSB's random numbers, the same for every frame
 
 
 class BoardSpecError(ValueError):
@@ -191,6 +192,9 @@ class BoardSpec:
             # the sector-based detector copes better with strong distortion and a board cut by the frame's edge;
             # its accuracy mode costs 4x the time and was no closer to the truth than the saddle refinement
             # below (renders of a distorted lens and under moderate blur; real frames' residuals)
+            # it draws on the calling thread's random numbers, whose state depends on what that thread did
+            # before: seeded here, a frame gives one answer in any thread (else a run's views varied with load)
+            cv2.setRNGSeed(SECTOR_DETECTOR_SEED)
             found, corners = cv2.findChessboardCornersSB(grey, size)
             if not found:
                 return None
