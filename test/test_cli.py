@@ -46,6 +46,22 @@ def test_calibrate_writes_yaml_json_and_report(board_folder, tmp_path):
         assert (tmp_path / "report" / name).stat().st_size > 1000
 
 
+def shaded_share(png) -> float:
+    """The share of a figure's pixels in the coverage picture's shade for empty cells (light red)."""
+    blue, green, red = (cv2.imread(str(png)).astype(int)[..., k] for k in range(3))
+    return float(np.mean((red > 230) & (red - green > 20) & (red - blue > 30) & (green > 150)))
+
+
+def test_the_coverage_picture_shades_the_cells_no_view_reached(tmp_path):
+    result = run_cli("calibrate", str(OPENCV_LEFT), "--board", "chessboard:9x6:1", "-o", str(tmp_path / "left.yaml"),
+                     "--report", str(tmp_path / "report"), "-q")
+    assert result.returncode == 0, result.stderr
+    empty = 1.0 - json.loads((tmp_path / "report" / "calibration.json").read_text())["coverage"]
+    assert 0.2 < empty < 0.4  # OpenCV's photos leave the image's corners and left edge empty
+    share = shaded_share(tmp_path / "report" / "coverage.png")
+    assert 0.6 * empty < share < empty  # the axes hold most of the figure; the board points cover no shade
+
+
 def test_real_images_through_the_cli(tmp_path):
     out = tmp_path / "left.yaml"
     result = run_cli("calibrate", str(OPENCV_LEFT), "--board", "chessboard:9x6:1", "-o", str(out), "--json",

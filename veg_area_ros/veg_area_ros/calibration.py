@@ -211,6 +211,9 @@ def _view_roll_deg(camera: BrownCamera, detection: Detection, rvec: np.ndarray, 
     return float(np.degrees(np.arctan2(dv, du)))
 
 
+COVERAGE_CELLS = (8, 6)  # columns, rows of the grid whose share holding board points is the coverage
+
+
 def coverage_grid(image_points: Sequence[np.ndarray], width: int, height: int, nx: int, ny: int) -> np.ndarray:
     """Which cells of an nx x ny grid over the image hold at least one of the points."""
     grid = np.zeros((ny, nx), bool)
@@ -749,7 +752,7 @@ def calibrate(
                         "folds beyond (its polynomial bends back past the board's reach): frames are measured only "
                         "inside that circle and a ROI reaching past it says so; cover the corners with the board, "
                         "or use a model made for wide lenses (--model equidistant or rational_polynomial)")
-    coverage = float(coverage_grid(used_points, width, height, 8, 6).mean())
+    coverage = float(coverage_grid(used_points, width, height, *COVERAGE_CELLS).mean())
     honest = dict(zip(names, map(float, std_values), strict=True))
     projection = projection_std(camera, view_cov if np.all(view_std >= covariance_std) else cov_i,
                                 np.vstack(used_points))

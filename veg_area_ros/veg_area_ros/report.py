@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .calibration import CalibrationResult, radial_residuals
+from .calibration import COVERAGE_CELLS, CalibrationResult, coverage_grid, radial_residuals
 from .files import save_figure
 
 
@@ -71,15 +71,21 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
     plt.close(fig)
 
     fig, ax = plt.subplots(figsize=(8, 6.5))
+    columns, rows = COVERAGE_CELLS
+    held = coverage_grid(result.image_points, width, height, columns, rows)
+    empty = np.ma.masked_where(held, np.ones(held.shape))  # the cells no view reached, shaded
+    ax.imshow(empty, extent=(0, width, height, 0), cmap="Reds", vmin=0, vmax=4, alpha=0.6, interpolation="nearest")
     for pts in result.image_points:
         ax.plot(pts[:, 0], pts[:, 1], ".", markersize=3)
-    for k in (1, 2):
-        ax.axvline(k * width / 3, color="grey", lw=0.5)
-        ax.axhline(k * height / 3, color="grey", lw=0.5)
+    for k in range(1, columns):
+        ax.axvline(k * width / columns, color="grey", lw=0.5)
+    for k in range(1, rows):
+        ax.axhline(k * height / rows, color="grey", lw=0.5)
     ax.set_xlim(0, width)
     ax.set_ylim(height, 0)
     ax.set_aspect("equal")
-    ax.set_title(f"Board points of all views (coverage {100 * result.coverage:.0f} % of an 8x6 grid)")
+    ax.set_title(f"Board points of all views: {held.sum()} of {held.size} cells reached "
+                 f"(coverage {100 * result.coverage:.0f} %; empty cells shaded)")
     written.append(folder / "coverage.png")
     save_figure(fig, written[-1], dpi=110, bbox_inches="tight")
     plt.close(fig)

@@ -30,7 +30,7 @@ from ..calib_io import (
     read_calibration,
     write_calibration,
 )
-from ..calibration import CalibrationError, View, calibrate, coverage_grid
+from ..calibration import COVERAGE_CELLS, CalibrationError, View, calibrate, coverage_grid
 from ..camera_model import MODELS, BrownCamera
 from ..feedback import FitView, fit_reach, render_feedback
 from ..guidance import CalibrationGuide
@@ -222,7 +222,7 @@ class CalibrationNode(Node):
         if self.image_size is None or not self.views:
             return 0.0
         return float(coverage_grid([v.detection.image_points.reshape(-1, 2) for v in self.views],
-                                   *self.image_size, 8, 6).mean())
+                                   *self.image_size, *COVERAGE_CELLS).mean())
 
     def _report(self, text: str, **extra) -> None:
         self.get_logger().info(text)
