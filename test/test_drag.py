@@ -215,3 +215,12 @@ def test_a_spreadsheet_table_in_a_decimal_comma_locale_is_read_and_empty_cells_a
     assert empty.returncode == 1 and "line 3: no force_n (an empty cell)" in empty.stderr, empty.stderr
     wrong = run_cli("vogel", str(tmp_path / "semicolon.csv"), "--plot", str(tmp_path / "none"))
     assert wrong.returncode == 2 and "ending in .png" in wrong.stderr and not (tmp_path / "none").exists()
+
+
+def test_the_vogel_plots_log_axes_are_labelled_with_plain_numbers_at_least_twice():
+    from veg_area_ros.drag import _tick_digits
+
+    assert _tick_digits(0.09, 0.65) == (1.0, 2.0, 5.0)  # 0.1, 0.2, 0.5: no 3x10^-1 running into 4x10^-1
+    assert _tick_digits(0.0035, 0.013) == (1.0, 2.0, 5.0)  # 0.005, 0.01
+    assert _tick_digits(0.25, 0.45) == tuple(float(d) for d in range(1, 10))  # 0.3, 0.4: no 1, 2 or 5 between
+    assert _tick_digits(0.31, 0.33) is None  # narrower than a digit's step: matplotlib's own ticks stay

@@ -1,6 +1,7 @@
 """Draw the docs' pictures of what the command line writes, with the command line itself: a calibration's
-residuals and coverage (OpenCV's real webcam photos in test/data/), and a bush's mask overlay and Af time
-series (a rendered bush in front of the endoscope, 3 DN of fresh noise per frame, its true area known).
+residuals and coverage (OpenCV's real webcam photos in test/data/), a bush's mask overlay and Af time series (a
+rendered bush in front of the endoscope, 3 DN of fresh noise per frame, its true area known), and the Vogel
+plot of six flume runs (a table made from a known exponent, 3 % noise on the force).
 
     PYTHONPATH=veg_area_ros .venv/bin/python tools/doc_figures.py docs/images"""
 
@@ -72,6 +73,27 @@ def bush_figures(out: Path, work: Path) -> None:
           f"Af's std (median) {np.median(stds):.3g} m²")
 
 
+VOGEL_EXPONENT = -0.7  # Cd·Af ∝ U^ψ of the made-up runs
+FORCE_NOISE = 0.03
+
+
+def vogel_figure(out: Path, work: Path) -> None:
+    rng = np.random.default_rng(11)
+    velocity = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+    cd_area = 0.012 * (velocity / 0.1) ** VOGEL_EXPONENT
+    force = 0.5 * 998.2 * velocity**2 * cd_area * (1 + rng.normal(0, FORCE_NOISE, velocity.size))
+    area = 0.0048 * (velocity / 0.1) ** -0.35  # the bush reconfigures: its Af falls with the flow
+    table = work / "runs.csv"
+    with open(table, "w", newline="") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(["velocity_m_s", "force_n", "area_m2", "velocity_std_m_s", "force_std_n", "area_std_m2"])
+        for u, f, a in zip(velocity, force, area, strict=True):
+            writer.writerow([f"{u:.3f}", f"{f:.5f}", f"{a:.6f}", "0.005", f"{FORCE_NOISE * f:.5f}", "0.00002"])
+    if veg_area(["vogel", str(table), "--plot", str(out / "vogel.png")]):
+        raise SystemExit("the Vogel fit failed")
+    print(f"the runs were made with psi {VOGEL_EXPONENT}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out", type=Path, help="folder for the PNGs (docs/images)")
@@ -80,6 +102,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="veg_area_doc_figures_") as folder:
         calibration_figures(args.out, Path(folder))
         bush_figures(args.out, Path(folder))
+        vogel_figure(args.out, Path(folder))
     return 0
 
 

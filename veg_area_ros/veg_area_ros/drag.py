@@ -301,11 +301,23 @@ def format_run_table(table: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _tick_digits(low: float, high: float) -> tuple[float, ...] | None:
+    """The leading digits of a log axis's labelled ticks: 1, 2 and 5 where at least two fall in [low, high], else
+    every digit; None where even those are fewer than two (a span narrower than one digit's step)."""
+    for digits in ((1.0, 2.0, 5.0), tuple(float(d) for d in range(1, 10))):
+        decades = 10.0 ** np.arange(np.floor(np.log10(low)), np.ceil(np.log10(high)) + 1)
+        ticks = np.outer(decades, digits).ravel()
+        if np.count_nonzero((ticks >= low) & (ticks <= high)) >= 2:
+            return digits
+    return None
+
+
 def plot_vogel(velocity, cd_area, fit: VogelFit, path: str | Path, cd_area_std=None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
     figure, axes = plt.subplots(figsize=(5, 4))
     axes.set_xscale("log")
@@ -315,6 +327,15 @@ def plot_vogel(velocity, cd_area, fit: VogelFit, path: str | Path, cd_area_std=N
     low, high = fit.interval
     axes.loglog(u, fit.coefficient * u**fit.exponent, "-",
                 label=f"ψ = {fit.exponent:.3f} [{low:.3f}, {high:.3f}] ({fit.confidence:.0%})")
+    # plain numbers at 1, 2, 5 (every digit where the span holds fewer than two of those): log labels as
+    # 3x10^-1 ran into each other
+    for axis, limits in ((axes.xaxis, axes.get_xlim()), (axes.yaxis, axes.get_ylim())):
+        digits = _tick_digits(*limits)
+        if digits is None:
+            continue
+        axis.set_major_locator(LogLocator(base=10, subs=digits))
+        axis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+        axis.set_minor_formatter(NullFormatter())
     axes.set_xlabel("U (m/s)")
     axes.set_ylabel("Cd·Af (m²)")
     axes.legend()
