@@ -81,6 +81,10 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
         ax.axvline(k * width / columns, color="grey", lw=0.5)
     for k in range(1, rows):
         ax.axhline(k * height / rows, color="grey", lw=0.5)
+    for k in (1, 2):  # the thirds whose corner cells the calibration's warning checks for points
+        ax.axvline(k * width / 3, color="black", lw=1.0, ls="--", label="thirds (corners warned)" if k == 1 else None)
+        ax.axhline(k * height / 3, color="black", lw=1.0, ls="--")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.06), fontsize=8, frameon=False)
     ax.set_xlim(0, width)
     ax.set_ylim(height, 0)
     ax.set_aspect("equal")
