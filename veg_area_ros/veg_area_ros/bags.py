@@ -27,6 +27,7 @@ from types import MappingProxyType
 
 import yaml
 from rosbags.interfaces import (
+    Connection,
     ConnectionExtRosbag1,
     Qos,
     QosDurability,
@@ -39,6 +40,7 @@ from rosbags.rosbag2 import Reader, Writer
 from rosbags.rosbag2.enums import CompressionMode, StoragePlugin
 from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
 
 from .cdr import (
     FOXGLOVE_COMPRESSED_IMAGE,
@@ -117,7 +119,7 @@ def _our_types() -> tuple:
     return tuple(types.items())
 
 
-def typestore(reader: Reader | None = None):
+def typestore(reader: Reader | None = None) -> Typestore:
     """The Kilted message types with veg_area_msgs's registered (a bag of ProjectedArea is written with its
     definition and read back), and, given a reader, any other type the bag defines itself (MCAP schemas)."""
     store = get_typestore(Stores.ROS2_KILTED)
@@ -175,7 +177,7 @@ class _CheckedMcapWriter(McapWriter):
         super().__init__(path, CompressionMode.STORAGE)  # zstd chunks, as rosbag2's MCAP storage compresses them
         self.publish_time_ns: int | None = None  # the next message's publish time
 
-    def write(self, connection, timestamp: int, data: bytes | memoryview) -> None:
+    def write(self, connection: Connection, timestamp: int, data: bytes | memoryview) -> None:
         publish = timestamp if self.publish_time_ns is None else self.publish_time_ns
         self.publish_time_ns = None
         chunk = self.chunk

@@ -9,11 +9,17 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .camera_model import MODEL_DIST_NAMES, MODELS, BrownCamera, check_plausible
 from .files import MAX_IMAGE_SIDE, too_many_pixels
+
+if TYPE_CHECKING:  # read by attribute alike: a ROS message or the CDR reader's fields
+    from sensor_msgs.msg import CameraInfo
+
+    from .cdr import CameraInfoFields
 
 FISHEYE_MODELS = ("equidistant", "fisheye", "kannala_brandt")  # other tools' names for OpenCV's fisheye
 PINHOLE_SIZES = (0, 4, 5, 8, 12, 14)  # OpenCV's lengths; beyond the model's own coefficients they must be zero
@@ -65,7 +71,7 @@ def camera_from_info(width: int, height: int, distortion_model: str, d: Sequence
     return check_plausible(BrownCamera.from_opencv(matrix, coefficients, (int(width), int(height)), distortion_model))
 
 
-def info_to_camera(msg) -> BrownCamera:
+def info_to_camera(msg: CameraInfo | CameraInfoFields) -> BrownCamera:
     """The calibrated camera of the images a sensor_msgs/CameraInfo or CameraInfoFields describes: its
     calibration, binned and cropped to its region of interest where it says so (`binned`)."""
     if hasattr(msg, "binning_x"):  # a ROS message

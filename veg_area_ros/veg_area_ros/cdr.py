@@ -11,13 +11,19 @@ from __future__ import annotations
 
 import functools
 import struct
+from array import array
+from collections.abc import Iterable
 from dataclasses import dataclass
+from types import ModuleType
 
 import cv2
 import numpy as np
 
 from .bit_depth import StreamDepth, to_8_bit
 from .files import MAX_IMAGE_PIXELS
+
+# a serialized message or an image's bytes, as they arrive: bytes, a view, rclpy's array, rosbags' numpy array
+Buffer = bytes | bytearray | memoryview | array | np.ndarray
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR_LE, no options
 # channels of each 8-bit encoding of sensor_msgs/image_encodings (8UC1/8UC3 read as cv_bridge reads them)
@@ -60,30 +66,30 @@ STAMP = struct.Struct("<iI")  # header.stamp (sec, nanosec): the first field of 
 STAMP_END = len(ENCAPSULATION) + STAMP.size
 
 
-def _require_stamp(buffer) -> None:
+def _require_stamp(buffer: Buffer) -> None:
     if len(buffer) < STAMP_END:
         raise ImageMessageError("CDR data too short for a header stamp")
 
 
-def restamp(buffer, sec: int, nanosec: int) -> bytes:
+def restamp(buffer: Buffer, sec: int, nanosec: int) -> bytes:
     """A serialized stamped message (Image, CameraInfo, ...) with another header stamp, nothing else changed."""
     _require_stamp(buffer)
     return bytes(buffer[:len(ENCAPSULATION)]) + STAMP.pack(sec, nanosec) + bytes(buffer[STAMP_END:])
 
 
-def stamp_ns(buffer) -> int:
+def stamp_ns(buffer: Buffer) -> int:
     """The header stamp of a serialized stamped message, in nanoseconds."""
     _require_stamp(buffer)
     sec, nanosec = STAMP.unpack_from(buffer, len(ENCAPSULATION))
     return sec * 1_000_000_000 + nanosec
 
 
-def unstamped(buffer) -> bytes:
+def unstamped(buffer: Buffer) -> bytes:
     """A serialized stamped message without its stamp: equal for the same content sent at other times."""
     return bytes(buffer[STAMP_END:])
 
 
-def frame_pixels(data, height: int, width: int, encoding: str, step: int, is_bigendian: bool = False,
+def frame_pixels(data: Buffer, height: int, width: int, encoding: str, step: int, is_bigendian: bool = False,
                  depth: StreamDepth | None = None, notes: list[str] | None = None) -> np.ndarray:
     """A BGR (H, W, 3) or grey (H, W) uint8 frame from an Image's fields: a view of `data` when the rows are
     packed bgr8/mono8 (no copy), a converted copy for the other encodings (RGB, with alpha, a camera's raw
@@ -150,7 +156,7 @@ class _Writer:
         self.pack("iI", sec, nanosec)
         self.string(frame_id)
 
-    def doubles(self, values, count: int | None = None) -> None:
+    def doubles(self, values: Iterable[float], count: int | None = None) -> None:
         values = [float(v) for v in values]
         if count is None:
             self.pack("I", len(values))
@@ -159,7 +165,7 @@ class _Writer:
         if values:
             self.pack(f"{len(values)}d", *values)
 
-    def blob(self, data) -> None:
+    def blob(self, data: Buffer) -> None:
         self.pack("I", len(data))
         self.parts.append(data)
         self.size += len(data)
@@ -171,7 +177,7 @@ class _Writer:
 class CdrReader:
     """Reads a serialized message's fields in order, each aligned as ROS 2's CDR aligns it."""
 
-    def __init__(self, buffer) -> None:
+    def __init__(self, buffer: Buffer) -> None:
         self.view = memoryview(buffer).cast("B")
         if len(self.view) < 4 or bytes(self.view[:2]) != b"\x00\x01":
             raise ImageMessageError("not little-endian CDR (the encapsulation header is not 00 01)")
@@ -253,7 +259,7 @@ class ImageFields:
                             depth, notes)
 
 
-def decode_image(buffer) -> ImageFields:
+def decode_image(buffer: Buffer) -> ImageFields:
     """Serialized sensor_msgs/Image -> its fields, the pixel data a view (no copy) of `buffer`."""
     reader = CdrReader(buffer)
     header = reader.header()
@@ -300,7 +306,7 @@ class CompressedImageFields:
 
 
 @functools.cache
-def zstd_module():
+def zstd_module() -> ModuleType:
     """Python's zstd (compression.zstd from 3.14, its backport before), found once: a failed import is tried
     again at every call, and a zstd stream decodes every frame."""
     try:
@@ -345,7 +351,7 @@ FOXGLOVE_COMPRESSED_IMAGE = "foxglove_msgs/msg/CompressedImage"
 FOXGLOVE_ENCODINGS = {"uyvy": "yuv422", "yuyv": "yuv422_yuy2"}  # Foxglove's names for two of ROS's encodings
 
 
-def decode_foxglove_raw_image(buffer) -> ImageFields:
+def decode_foxglove_raw_image(buffer: Buffer) -> ImageFields:
     """Serialized foxglove_msgs/RawImage -> the fields of the Image it is: its timestamp and frame_id lie as a
     std_msgs/Header does; then width before height, the encoding, step (16-bit data little-endian), the data."""
     reader = CdrReader(buffer)
@@ -356,7 +362,7 @@ def decode_foxglove_raw_image(buffer) -> ImageFields:
     return ImageFields(header, height, width, FOXGLOVE_ENCODINGS.get(encoding, encoding), 0, step, reader.octets())
 
 
-def decode_foxglove_compressed_image(buffer) -> CompressedImageFields:
+def decode_foxglove_compressed_image(buffer: Buffer) -> CompressedImageFields:
     """Serialized foxglove_msgs/CompressedImage (timestamp, frame_id, data, format: jpeg, png, webp) -> the
     fields of the CompressedImage it is."""
     reader = CdrReader(buffer)
@@ -365,7 +371,7 @@ def decode_foxglove_compressed_image(buffer) -> CompressedImageFields:
     return CompressedImageFields(header, reader.string(), data)
 
 
-def decode_compressed_image(buffer) -> CompressedImageFields:
+def decode_compressed_image(buffer: Buffer) -> CompressedImageFields:
     """Serialized sensor_msgs/CompressedImage -> its fields, the data a view (no copy) of `buffer`."""
     reader = CdrReader(buffer)
     header = reader.header()
@@ -415,12 +421,12 @@ def _camera_info_writer(info: CameraInfoFields) -> _Writer:
     return writer
 
 
-def decode_string(buffer) -> str:
+def decode_string(buffer: Buffer) -> str:
     """A std_msgs/String message's text."""
     return CdrReader(buffer).string()
 
 
-def decode_camera_info(buffer) -> CameraInfoFields:
+def decode_camera_info(buffer: Buffer) -> CameraInfoFields:
     reader = CdrReader(buffer)
     header = reader.header()
     height, width = reader.unpack("II")

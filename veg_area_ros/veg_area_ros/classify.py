@@ -18,10 +18,12 @@ from __future__ import annotations
 import bisect
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .files import MAX_IMAGE_SIDE
 
@@ -44,7 +46,7 @@ class ClassifyError(ValueError):
     """Settings or a region that cannot classify a frame."""
 
 
-def to_light(values, tone_curve: str) -> np.ndarray:
+def to_light(values: ArrayLike, tone_curve: str) -> np.ndarray:
     """Band values (0..255, float allowed) as light on the same 0..255 scale, through the tone curve."""
     values = np.asarray(values, float)
     if tone_curve == "linear":
@@ -342,7 +344,7 @@ def pure_level(counts: np.ndarray) -> tuple[float, float, float] | None:
     return level, spread, math.hypot(spread / math.sqrt(n), MIN_SPREAD_DN / 2)
 
 
-def check_levels(levels) -> tuple[float, float] | None:
+def check_levels(levels: Sequence[float] | None) -> tuple[float, float] | None:
     """User-given (object level, background level) as two floats, or None to estimate them per frame; a
     ClassifyError if they cannot tell an edge pixel's share."""
     if levels is None or (isinstance(levels, list | tuple) and len(levels) == 0):
@@ -379,7 +381,7 @@ def otsu_level(counts: np.ndarray, tone_curve: str = "linear") -> float:
     return float(np.argmax(between)) if between.max() >= 0 else 0.0
 
 
-def check_polygon(polygon) -> np.ndarray:
+def check_polygon(polygon: ArrayLike) -> np.ndarray:
     """A region-of-interest polygon as (N, 2) floats; ClassifyError unless it has 3+ corners enclosing area."""
     polygon = np.asarray(polygon, float).reshape(-1, 2)
     if len(polygon) < 3:
@@ -441,7 +443,7 @@ def _clip(polygon: np.ndarray, axis: int, limit: float, keep_below: bool) -> np.
     return np.array(kept).reshape(-1, 2)
 
 
-def roi_area_inside(polygon, width: int, height: int) -> float:
+def roi_area_inside(polygon: ArrayLike, width: int, height: int) -> float:
     """Area (px²) of the part of the polygon inside a width x height image; exact for convex polygons and a
     bound from above for others (enough to refuse a ROI that misses the image)."""
     clipped = check_polygon(polygon)
@@ -456,7 +458,7 @@ def polygon_area(corners: np.ndarray) -> float:
     return float(abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))) / 2)
 
 
-def check_roi_in_image(polygon, width: int, height: int) -> np.ndarray:
+def check_roi_in_image(polygon: ArrayLike, width: int, height: int) -> np.ndarray:
     """The polygon, or ClassifyError when it encloses less than a pixel of the width x height image."""
     if roi_area_inside(polygon, width, height) < 1.0:
         corners = np.asarray(polygon, float).reshape(-1, 2)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import ipaddress
 import itertools
 import math
+import os
 import secrets
 import threading
 import time
@@ -259,7 +260,7 @@ def checked_parameters(request: dict) -> dict:
     return checked
 
 
-def checked_roi(value) -> list[float]:
+def checked_roi(value: object) -> list[float]:
     """[0.0] (inside the targets) or a polygon of at least three finite points, as floats."""
     try:
         if not isinstance(value, list | tuple):
@@ -332,10 +333,8 @@ def host_allowed(host_header: str, access: Access) -> bool:
     return is_loopback(name.strip("[]"))
 
 
-def folder_size(path) -> int:
+def folder_size(path: str | os.PathLike) -> int:
     """Bytes in a folder's files (a bag being written)."""
-    import os
-
     total = 0
     for root, _, files in os.walk(path):
         for name in files:

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import stats
 
 from .files import save_figure, special_file
@@ -34,7 +35,7 @@ def check_axis(axis: str) -> str:
     return axis
 
 
-def component(vector, axis: str) -> float:
+def component(vector: object, axis: str) -> float:
     """The signed component ("+x" .. "-z") of anything with x, y, z attributes (geometry_msgs/Vector3)."""
     check_axis(axis)
     return (1.0 if axis[0] == "+" else -1.0) * getattr(vector, axis[1])
@@ -170,7 +171,7 @@ class VogelFit:
     runs: int
 
 
-def vogel_fit(velocity, cd_area, confidence: float = 0.95) -> VogelFit:
+def vogel_fit(velocity: ArrayLike, cd_area: ArrayLike, confidence: float = 0.95) -> VogelFit:
     """Least squares of log(Cd Af) = log(k) + psi log(U) over runs; Student-t interval on psi."""
     u, y = np.asarray(velocity, float), np.asarray(cd_area, float)
     if u.shape != y.shape or len(u) < 3:
@@ -312,7 +313,8 @@ def _tick_digits(low: float, high: float) -> tuple[float, ...] | None:
     return None
 
 
-def plot_vogel(velocity, cd_area, fit: VogelFit, path: str | Path, cd_area_std=None) -> None:
+def plot_vogel(velocity: ArrayLike, cd_area: ArrayLike, fit: VogelFit, path: str | Path,
+               cd_area_std: ArrayLike | None = None) -> None:
     import matplotlib
 
     matplotlib.use("Agg")

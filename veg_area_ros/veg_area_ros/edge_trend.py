@@ -27,10 +27,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 from scipy.optimize import brentq
+
+if TYPE_CHECKING:
+    from .area_result import AreaResult
 
 MIN_VIEWS = 6  # a slope and its scatter need a few more views than its two parameters
 DECISIVE_SIGMA = 3.0  # the slope this many standard errors from zero
@@ -310,7 +314,7 @@ def edge_correction(trend: EdgeTrend, white_dn: float, object_kind: str, mask: n
                           offset, white_dn, boundary, outside, trend.range_dn, trend.learned or trend.local)
 
 
-def apply_correction(result, correction: EdgeCorrection) -> None:
+def apply_correction(result: AreaResult, correction: EdgeCorrection) -> None:
     """The correction applied to an AreaResult: Af and its sweep moved, the std's term added (checks.py says a
     white level outside the views')."""
     result.area_m2 += correction.area_m2

@@ -13,6 +13,10 @@ import stat
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path, PurePath
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 from typing import TypeVar
 
 # the largest sensors sold (200 MP phones, 150 MP medium format); measuring costs about 150 MB + 21 bytes a pixel
@@ -165,7 +169,7 @@ def write_atomic(path: str | os.PathLike, content: str | bytes) -> None:
         os.fsync(handle.fileno())
 
 
-def save_figure(figure, path: str | os.PathLike, **options) -> None:
+def save_figure(figure: Figure, path: str | os.PathLike, **options: object) -> None:
     """A matplotlib figure saved as PNG atomically (a temporary file in the same folder, then renamed): a run
     stopped while it is drawn leaves the last whole plot or none, never a truncated file."""
     path = Path(path)

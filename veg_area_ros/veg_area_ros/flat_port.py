@@ -360,7 +360,7 @@ def port_to_dict(camera: FlatPortCamera, std: dict[str, float] | None = None,
     return block
 
 
-def port_from_dict(block, image_size: tuple[int, int]) -> FlatPortCamera:
+def port_from_dict(block: object, image_size: tuple[int, int]) -> FlatPortCamera:
     """The FlatPortCamera of a `port_to_dict` block; PortError with the reason for anything else."""
     if not isinstance(block, dict) or not isinstance(block.get("lens"), dict):
         raise PortError(f"'{PORT_KEY}' must be a mapping with the port's numbers and its 'lens'")
@@ -390,7 +390,7 @@ class PortUncertainty:
         return bool(self.port_std) or self.lens_covariance is not None
 
 
-def port_uncertainty_from_dict(block, lens: BrownCamera) -> PortUncertainty:
+def port_uncertainty_from_dict(block: dict, lens: BrownCamera) -> PortUncertainty:
     """The `PortUncertainty` of a `port_to_dict` block for its `lens`; PortError where it is not readable."""
     std = block.get("std") or {}
     if not isinstance(std, dict) or any(name not in PORT_PARAMETERS for name in std):

@@ -13,6 +13,7 @@ No ROS here.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import cv2
@@ -47,8 +48,8 @@ class LightSettings:
     given_levels: tuple[float, float] | None
 
     @classmethod
-    def checked(cls, classifier: Classifier, area_mode: str, levels, background: np.ndarray | None,
-                even_light: bool, image_size: tuple[int, int] | None) -> LightSettings:
+    def checked(cls, classifier: Classifier, area_mode: str, levels: Sequence[float] | None,
+                background: np.ndarray | None, even_light: bool, image_size: tuple[int, int] | None) -> LightSettings:
         """The settings, each refused with its reason where it does not apply (ClassifyError)."""
         given = check_levels(levels)
         if given is not None:  # reversed levels turned Af inside out (+906 %)

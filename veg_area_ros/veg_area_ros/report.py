@@ -8,11 +8,16 @@ from __future__ import annotations
 import json
 import textwrap
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .calibration import COVERAGE_CELLS, CalibrationResult, coverage_grid, radial_residuals
 from .files import save_figure
+
+if TYPE_CHECKING:
+    from .guidance import CalibrationGuide
+    from .tone_evidence import ToneChoice
 
 
 def _pyplot():
@@ -25,7 +30,8 @@ def _pyplot():
 
 
 
-def write_calibration_report(result: CalibrationResult, folder: str | Path, guide=None, tone=None) -> list[Path]:
+def write_calibration_report(result: CalibrationResult, folder: str | Path, guide: CalibrationGuide | None = None,
+                             tone: ToneChoice | None = None) -> list[Path]:
     """Write residuals.png, per_view.png, coverage.png, radial.png, uncertainty.png and calibration.json into
     `folder`; with `guide` (guidance.CalibrationGuide over the views) also variety.png, the bars; with `tone`
     (tone_evidence.ToneChoice) that measured views, tone_curve.png."""
@@ -146,7 +152,7 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
     return written
 
 
-def plot_variety(guide, path: str | Path, distinct: int | None = None) -> Path:
+def plot_variety(guide: CalibrationGuide, path: str | Path, distinct: int | None = None) -> Path:
     """The variety bars of the views (as the calibration node's feedback shows them) and what is still needed."""
     from .feedback import bar_rows
 
@@ -170,7 +176,7 @@ def plot_variety(guide, path: str | Path, distinct: int | None = None) -> Path:
     return path
 
 
-def plot_tone_evidence(tone, path: str | Path) -> Path:
+def plot_tone_evidence(tone: ToneChoice, path: str | Path) -> Path:
     """Each measured view's error in the board's black area against its size, under each tone curve, with the
     fitted drift (error = a + slope / px per square): the camera's curve is the flat one."""
     plt = _pyplot()
@@ -204,7 +210,7 @@ def plot_tone_evidence(tone, path: str | Path) -> Path:
     return path
 
 
-def plot_edge_trend(tone, path: str | Path) -> Path:
+def plot_edge_trend(tone: ToneChoice, path: str | Path) -> Path:
     """Each measured view's edge offset (its black area's error over the board's edge length, px) against its
     white level, under the curve taken, with the trend the calibration records (or the line it did not take).
     Where the print's gain was fitted beside the trend, the views are drawn with it taken out."""

@@ -6,6 +6,7 @@ measurer they build for a camera. No ROS here.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -24,7 +25,7 @@ NO_ROI = (0.0,)  # how a ROS parameter (typed, never empty on the command line) 
 NO_LEVELS = (0.0,)
 
 
-def roi_polygon(values) -> list[float] | None:
+def roi_polygon(values: Sequence[float] | None) -> list[float] | None:
     """The ROI rule: a flat x1,y1,x2,y2,... list of at least three finite corner pairs enclosing area, or
     None (empty, or [0.0]) for the default region inside the targets. ClassifyError says why not."""
     values = [float(v) for v in (values or ())]
@@ -36,7 +37,7 @@ def roi_polygon(values) -> list[float] | None:
     return values
 
 
-def given_levels(values) -> tuple[float, float] | None:
+def given_levels(values: Sequence[float] | None) -> tuple[float, float] | None:
     """[object, background] grey levels, or None (empty, or [0.0]) to estimate them in each frame."""
     values = list(values or ())
     if not values or tuple(values) == NO_LEVELS:

@@ -205,7 +205,8 @@ class DeviceSource:
 
 
 def open_source(source: str, loop: bool = False, width: int = 0, height: int = 0,
-                synthetic_scene: str = "board_then_cube", synthetic_medium: str = "water"):
+                synthetic_scene: str = "board_then_cube", synthetic_medium: str = "water"
+                ) -> SyntheticSource | DeviceSource | FileSource:
     """`synthetic`, a device (index or /dev/video*), a video file, an image folder, a rosbag2 bag or a glob."""
     if source == "synthetic":
         return SyntheticSource(synthetic_scene, synthetic_medium)

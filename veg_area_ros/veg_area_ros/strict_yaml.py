@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -42,7 +43,7 @@ class _StrictLoader(yaml.SafeLoader):
 _StrictLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _StrictLoader.construct_mapping)
 
 
-def load_text(text: str):
+def load_text(text: str) -> Any:
     """Parse YAML text: duplicate keys and aliases are StrictYamlError, malformed YAML yaml.YAMLError."""
     if len(text) > MAX_BYTES:
         raise StrictYamlError(f"{len(text)} bytes: larger than any such file ({MAX_BYTES} at most)")
@@ -95,7 +96,7 @@ _PortableDumper.add_representer(list, _represent_list)
 _PortableDumper.add_representer(tuple, _represent_list)
 
 
-def dump_portable(content) -> str:
+def dump_portable(content: object) -> str:
     """YAML text of plain data (dicts, lists, strings, numbers) that PyYAML, OpenCV's FileStorage and yaml-cpp
     all read as it was written; keys in their order; no line folded (FileStorage cannot read a folded string)."""
     return yaml.dump(content, Dumper=_PortableDumper, sort_keys=False, default_flow_style=None, width=10**9,

@@ -83,7 +83,7 @@ class TargetsSpec:
             raise TargetsError(f"{path}: {exc}") from exc
 
     @classmethod
-    def from_dict(cls, content) -> TargetsSpec:
+    def from_dict(cls, content: object) -> TargetsSpec:
         if not isinstance(content, dict):
             raise TargetsError("expected a mapping with 'markers' and/or 'points'")
         spec = cls(dictionary=str(content.get("dictionary", "")).upper())

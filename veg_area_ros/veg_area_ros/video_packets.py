@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 
 from .bit_depth import StreamDepth
-from .cdr import CdrReader, Header, ImageMessageError
+from .cdr import Buffer, CdrReader, Header, ImageMessageError
 
 FOXGLOVE_VIDEO = "foxglove_msgs/msg/CompressedVideo"
 FFMPEG_PACKET = "ffmpeg_image_transport_msgs/msg/FFMPEGPacket"
@@ -65,7 +65,7 @@ def codec_name(text: str) -> str:
     return first
 
 
-def decode_video_packet(msgtype: str, buffer) -> VideoPacket:
+def decode_video_packet(msgtype: str, buffer: Buffer) -> VideoPacket:
     """Serialized CompressedVideo or FFMPEGPacket -> a VideoPacket, its data a view (no copy) of `buffer`."""
     reader = CdrReader(buffer)
     if msgtype == FOXGLOVE_VIDEO:

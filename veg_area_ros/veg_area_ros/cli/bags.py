@@ -9,7 +9,7 @@ import sys
 from .common import EXIT_USAGE, CliError, check_writable, positive_float
 
 
-def add_parsers(sub) -> None:
+def add_parsers(sub: argparse._SubParsersAction) -> None:
     rec = sub.add_parser("record", help="record topics into a rosbag2 bag (MCAP, or sqlite3) as they come, "
                          "serialized (ROS 2 node; Ctrl-C closes the bag)")
     rec.add_argument("topics", nargs="*", default=None,

@@ -26,6 +26,7 @@ from .common import (
 
 if TYPE_CHECKING:
     from ..board import BoardSpec
+    from ..calibration import CalibrationResult
     from ..camera_model import BrownCamera
     from ..tone_evidence import ToneChoice
 
@@ -39,7 +40,7 @@ FRAME_LINES = 30  # frames with a line each; then one line every PROGRESS_EVERY_
 PROGRESS_EVERY_S = 2.0
 
 
-def add_parser(sub) -> None:
+def add_parser(sub: argparse._SubParsersAction) -> None:
     cal = sub.add_parser("calibrate", help="self-calibrating bundle adjustment from board images or videos")
     cal.add_argument("inputs", nargs="*", help="images, folders of images, videos (underwater views with --port)")
     cal.add_argument("--board",
@@ -101,9 +102,9 @@ class BoardViews:
     guide: object | None = None  # guidance.CalibrationGuide over the views: their variety, what is still needed
 
 
-def collect_views(files: list[Path], board, step: int, say, image_size: tuple[int, int] | None = None,
-                  size_source: str = "the first image", spread: bool = False, image_topic: str | None = None
-                  ) -> BoardViews:
+def collect_views(files: list[Path], board: BoardSpec, step: int, say: Callable[[str], None],
+                  image_size: tuple[int, int] | None = None, size_source: str = "the first image",
+                  spread: bool = False, image_topic: str | None = None) -> BoardViews:
     """Detect the board in every frame (every `step`th of a video; `spread`: one in each run of `step` at a
     varying place, see frames.iter_video), with a progress line per frame for the first FRAME_LINES frames and
     then one every PROGRESS_EVERY_S (a frame that could not be read or has another size is always said).
@@ -444,7 +445,7 @@ def _calibrate_port(args: argparse.Namespace, say) -> int:
     return 0
 
 
-def format_calibration(result, output: Path) -> str:
+def format_calibration(result: CalibrationResult, output: Path) -> str:
     """The fit's quality indicators and parameters with their three uncertainties, as a table."""
     cam, std = result.camera, result.std
     lines = [f"calibration written to {output}",

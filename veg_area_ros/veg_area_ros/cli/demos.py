@@ -14,7 +14,7 @@ def _check_output(folder: str) -> Path:
     return Path(folder)
 
 
-def add_parsers(sub) -> None:
+def add_parsers(sub: argparse._SubParsersAction) -> None:
     demo = sub.add_parser("demo", help="the main job on the built-in default: synthetic underwater camera -> "
                           "calibration node -> area node, Af against the true area")
     demo.add_argument("--output", default="veg_area_demo", help="folder for the served calibration")

@@ -11,7 +11,7 @@ from pathlib import Path
 from .common import EXIT_FAILED, EXIT_OK
 
 
-def add_parser(sub) -> None:
+def add_parser(sub: argparse._SubParsersAction) -> None:
     doctor = sub.add_parser("doctor", help="check this PC for what makes ROS nodes or videos fail silently "
                             "(rclpy, transport profile, socket buffers, /dev/shm, ROS_* settings, ament index, "
                             "video backends); each problem with its fix")

@@ -11,7 +11,7 @@ from pathlib import Path
 from .common import EXIT_USAGE, CliError, check_outputs, check_writable, positive_float, probability
 
 
-def add_parser(sub) -> None:
+def add_parser(sub: argparse._SubParsersAction) -> None:
     vog = sub.add_parser("vogel", help="fit the Vogel exponent (Cd·Af ∝ U^psi) to an experiment table, with "
                          "its confidence interval and a log-log plot")
     vog.add_argument("inputs", nargs="+", metavar="TABLE_OR_BAGS",

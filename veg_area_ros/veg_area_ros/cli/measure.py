@@ -52,7 +52,7 @@ def _roi(text: str) -> tuple[float, ...]:
         raise argparse.ArgumentTypeError(f"{exc}, got {text!r}") from exc
 
 
-def add_parser(sub) -> None:
+def add_parser(sub: argparse._SubParsersAction) -> None:
     mea = sub.add_parser("measure", help="projected area Af of an object in images, folders or videos")
     mea.add_argument("inputs", nargs="+",
                      help="images, folders of images, videos, rosbag2 bags (folders), ROS 1 .bag files")

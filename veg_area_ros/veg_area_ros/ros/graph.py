@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -25,7 +26,7 @@ from .run import EXIT_FAILED, EXIT_OK, run_nodes
 
 
 def run_graph(output: Path, measurements: int = 10, timeout_s: float = 300.0, rate_hz: float = 10.0,
-              say=print) -> int:
+              say: Callable[[str], None] = print) -> int:
     """Run camera -> calibration -> area (run_nodes, as graph_node) until `measurements` calibrated Af values
     are in; print them against the rendered cube's true area. 0 on success, 1 on timeout, 130 on Ctrl-C."""
     output.mkdir(parents=True, exist_ok=True)

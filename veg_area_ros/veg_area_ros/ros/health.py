@@ -7,7 +7,9 @@ import os
 import time
 from collections.abc import Callable
 
+from rclpy.impl.rcutils_logger import RcutilsLogger
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 
 from ..transport import choose_transport
 
@@ -17,7 +19,8 @@ class CountedWarnings:
     always shown); each line carries how many of its kind came so far and how many like it were not shown
     since its last line (rclpy's throttle drops them unsaid)."""
 
-    def __init__(self, logger, period_s: float = 5.0, clock: Callable[[], float] = time.monotonic):
+    def __init__(self, logger: RcutilsLogger, period_s: float = 5.0,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self._logger, self._period, self._clock = logger, period_s, clock
         self._total: dict[str, int] = {}
         self._hidden: dict[tuple[str, str], int] = {}
@@ -41,7 +44,7 @@ class CountedWarnings:
         return self._total.get(kind, 0)
 
 
-def publish_safely(node: Node, publisher, msg) -> bool:
+def publish_safely(node: Node, publisher: Publisher, msg: object) -> bool:
     """Publish; a transport under back-pressure raises RCLError: log it (throttled) and go on. After Ctrl-C
     (the context is shut down) there is nobody to tell: nothing is sent, nothing logged."""
     if not node.context.ok():

@@ -155,7 +155,7 @@ def camera_to_info(camera: BrownCamera, frame_id: str = "camera", stamp: Time | 
     return msg
 
 
-def message_class(msgtype: str):
+def message_class(msgtype: str) -> type:
     """'sensor_msgs/msg/Image' -> the rclpy message class."""
     package, kind, name = msgtype.split("/")
     return getattr(importlib.import_module(f"{package}.{kind}"), name)

@@ -14,10 +14,11 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 
 Loaded = TypeVar("Loaded")
+Value = TypeVar("Value")  # a parameter's type: its default's
 
 
-def declare(node: Node, name: str, default, description: str, *, low: float | None = None,
-            high: float | None = None, choices: tuple[str, ...] = (), read_only: bool = False):
+def declare(node: Node, name: str, default: Value, description: str, *, low: float | None = None,
+            high: float | None = None, choices: tuple[str, ...] = (), read_only: bool = False) -> Value:
     """Declare a parameter with a descriptor (and a range or the allowed values in its description)."""
     text = description + (f" One of: {', '.join(choices)}." if choices else "")
     descriptor = ParameterDescriptor(description=text, read_only=read_only)

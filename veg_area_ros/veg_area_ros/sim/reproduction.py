@@ -21,7 +21,7 @@ import numpy as np
 
 from ..area import AreaMeasurer
 from ..board import BoardSpec
-from ..calibration import View, calibrate
+from ..calibration import CalibrationResult, View, calibrate
 from ..camera_model import BrownCamera
 from ..classify import Classifier
 from ..port_area import PortAreaMeasurer
@@ -95,7 +95,7 @@ class Row:
     subpixel_applied: bool = True  # the calibrated sub-pixel column used the shares (else it counted whole pixels)
 
 
-def calibrate_synthetic(setup: Setup, condition: Condition, rng: np.random.Generator):
+def calibrate_synthetic(setup: Setup, condition: Condition, rng: np.random.Generator) -> CalibrationResult:
     """Calibrate `setup`'s camera on board views rendered in `condition` at the measuring distance."""
     board = BoardSpec.parse(BOARD)
     poses = board_views(setup.camera, board, setup.views, DISTANCE_M, rng, port=condition.port)
