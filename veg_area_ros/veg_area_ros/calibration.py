@@ -212,6 +212,7 @@ def _view_roll_deg(camera: BrownCamera, detection: Detection, rvec: np.ndarray, 
 
 
 COVERAGE_CELLS = (8, 6)  # columns, rows of the grid whose share holding board points is the coverage
+CORNER_GRID = 3  # the image in thirds each way: a corner cell no board point reached is warned
 
 
 def coverage_grid(image_points: Sequence[np.ndarray], width: int, height: int, nx: int, ny: int) -> np.ndarray:
@@ -307,9 +308,9 @@ def _weak_geometry_warnings(
         warnings.append(
             f"no view is rotated by about 90 degrees (largest rotation between views {separation:.0f} deg): "
             "the principal point is poorly determined; add views with the camera or board turned by 90 deg")
-    cells = coverage_grid(image_points, width, height, 3, 3)
+    cells = coverage_grid(image_points, width, height, CORNER_GRID, CORNER_GRID)
     missing = [name for name, (r, c) in
-               {"top-left": (0, 0), "top-right": (0, 2), "bottom-left": (2, 0), "bottom-right": (2, 2)}.items()
+               {"top-left": (0, 0), "top-right": (0, -1), "bottom-left": (-1, 0), "bottom-right": (-1, -1)}.items()
                if not cells[r, c]]
     if missing:
         warnings.append(f"image corners not covered by any board point: {', '.join(missing)}; "

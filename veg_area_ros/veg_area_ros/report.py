@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .calibration import COVERAGE_CELLS, CalibrationResult, coverage_grid, radial_residuals
+from .calibration import CORNER_GRID, COVERAGE_CELLS, CalibrationResult, coverage_grid, radial_residuals
 from .files import save_figure
 
 if TYPE_CHECKING:
@@ -78,7 +78,8 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
 
     fig, ax = plt.subplots(figsize=(8, 6.5))
     columns, rows = COVERAGE_CELLS
-    held = coverage_grid(result.image_points, width, height, columns, rows)
+    inlying = [points[kept] for points, kept in zip(result.image_points, result.inliers, strict=True)]
+    held = coverage_grid(inlying, width, height, columns, rows)  # as the fit's coverage counts them
     empty = np.ma.masked_where(held, np.ones(held.shape))  # the cells no view reached, shaded
     ax.imshow(empty, extent=(0, width, height, 0), cmap="Reds", vmin=0, vmax=4, alpha=0.6, interpolation="nearest")
     for pts in result.image_points:
@@ -87,9 +88,10 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
         ax.axvline(k * width / columns, color="grey", lw=0.5)
     for k in range(1, rows):
         ax.axhline(k * height / rows, color="grey", lw=0.5)
-    for k in (1, 2):  # the thirds whose corner cells the calibration's warning checks for points
-        ax.axvline(k * width / 3, color="black", lw=1.0, ls="--", label="thirds (corners warned)" if k == 1 else None)
-        ax.axhline(k * height / 3, color="black", lw=1.0, ls="--")
+    for k in range(1, CORNER_GRID):  # the cells whose corner ones the calibration's warning checks for points
+        ax.axvline(k * width / CORNER_GRID, color="black", lw=1.0, ls="--",
+                   label="thirds (corners warned)" if k == 1 else None)
+        ax.axhline(k * height / CORNER_GRID, color="black", lw=1.0, ls="--")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.06), fontsize=8, frameon=False)
     ax.set_xlim(0, width)
     ax.set_ylim(height, 0)
