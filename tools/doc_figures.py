@@ -21,7 +21,7 @@ import yaml
 from veg_area_ros.calib_io import write_calibration
 from veg_area_ros.camera_uncertainty import CameraCovariance
 from veg_area_ros.cli import main as veg_area
-from veg_area_ros.sim.synthetic import ENDOSCOPE, bush_scene, render_scene, scene_targets
+from veg_area_ros.sim.synthetic import ENDOSCOPE, bush_scene, render_scene, scene_targets_content
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 FRAMES = 60
@@ -55,9 +55,7 @@ def bush_figures(out: Path, work: Path) -> None:
     std = dict(zip(ENDOSCOPE.param_names, CAMERA_STD, strict=True))
     write_calibration(work / "camera.yaml", ENDOSCOPE, "endoscope",
                       {"medium": "air", "camera_covariance": CameraCovariance.from_std(std, {}).as_dict()})
-    targets = scene_targets()
-    (work / "targets.yaml").write_text(yaml.safe_dump(
-        {"dictionary": targets.dictionary, "markers": {k: v.tolist() for k, v in targets.markers.items()}}))
+    (work / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
     common = ["--calibration", str(work / "camera.yaml"), "--targets", str(work / "targets.yaml"), "-q"]
     if veg_area(["measure", str(work / "bush.png"), *common, "--overlay", str(out / "measure_overlay.png")]):
         raise SystemExit("measuring the frame failed")
