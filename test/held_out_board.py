@@ -7,7 +7,10 @@ lies from the set's mean in its own std, with the targets' calliper term (the sa
 print) and without it.
 
     PYTHONPATH=veg_area_ros:test .venv/bin/python test/held_out_board.py FOLDER --board chessboard:8x6:0.03 \\
-        --medium water [--half 0|1] [--model auto]
+        --medium water [--half 0|1|all] [--model auto]
+
+`--half all` calibrates on every photo and measures every photo with that file (a camera calibrated on
+its own photos, as a user who measures the boards they calibrated on does; the photos are then not held out).
 
 The ink's gain shifts every photo of one print alike: the spread between photos and the std's cover of it are
 what is judged, the mean only bounded."""
@@ -54,13 +57,19 @@ class ModeSummary:
     within_3: int
 
 
-def halves(folder: Path, half: int) -> tuple[list[Path], list[Path]]:
-    """(the photos calibrated on, the photos measured): alternate photos in name order, `half` choosing which."""
+ALL = "all"  # every photo calibrated on and measured
+
+
+def halves(folder: Path, half: int | str) -> tuple[list[Path], list[Path]]:
+    """(the photos calibrated on, the photos measured): alternate photos in name order, `half` choosing which;
+    ALL: every photo, both times."""
     photos = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg"))
+    if half == ALL:
+        return photos, photos
     return photos[half::2], photos[1 - half::2]
 
 
-def check(folder: Path, board: str, medium: str, half: int = 0, model: str = "auto",
+def check(folder: Path, board: str, medium: str, half: int | str = 0, model: str = "auto",
           work: Path | None = None) -> tuple[list[PhotoRow], dict[str, ModeSummary], dict]:
     """(each measured photo's row, a summary per mode over the well-exposed ones, the calibration's metadata)."""
     kind, size, square = board.split(":")
@@ -175,13 +184,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("folder", type=Path)
     parser.add_argument("--board", required=True, help="chessboard:COLSxROWS:SQUARE_M")
     parser.add_argument("--medium", required=True, choices=("air", "water"))
-    parser.add_argument("--half", type=int, choices=(0, 1), default=0, help="which half is calibrated on")
+    parser.add_argument("--half", choices=("0", "1", ALL), default="0",
+                        help=f"which half is calibrated on ({ALL}: every photo, each measured with that file)")
     parser.add_argument("--model", default="auto")
     parser.add_argument("--plot", type=Path, help="draw each photo's Af from the mean with its std (PNG) here")
     args = parser.parse_args(argv)
-    rows, summary, metadata = check(args.folder, args.board, args.medium, args.half, args.model)
+    half = args.half if args.half == ALL else int(args.half)
+    rows, summary, metadata = check(args.folder, args.board, args.medium, half, args.model)
     if args.plot:
-        plot(rows, f"{args.folder.name}: half {1 - args.half} measured, calibrated on half {args.half}", args.plot)
+        title = (f"{args.folder.name}: every photo, calibrated on all of them" if half == ALL
+                 else f"{args.folder.name}: half {1 - half} measured, calibrated on half {half}")
+        plot(rows, title, args.plot)
     print(f"calibration: model {metadata.get('distortion_model', 'plumb_bob')}, "
           f"edge trend: {metadata.get('edge_trend_evidence', 'none recorded')}")
     for row in rows:
