@@ -149,12 +149,11 @@ def fitted_metadata(camera) -> dict:
     """What a calibration file from `veg-area calibrate` gives measuring beyond the camera: an edge trend learned
     (as the webcam's, its white range wide enough for any frame) and the parameters' covariance (stds of the
     webcam's calibration, no correlations)."""
-    from veg_area_ros.camera_uncertainty import CameraCovariance
     from veg_area_ros.edge_trend import EdgeTrend
+    from veg_area_ros.sim.synthetic import webcam_like_covariance
 
     trend = EdgeTrend(-0.0023, 0.0003, 128.0, (0.0, 255.0), 7, 0.013, "linear")
-    std = dict(zip(camera.param_names, (0.5, 0.5, 1.3, 0.7, 0.009, 0.04, 2.5e-4, 2.8e-4, 0.055), strict=True))
-    return {"edge_trend": trend.as_dict(), "camera_covariance": CameraCovariance.from_std(std, {}).as_dict()}
+    return {"edge_trend": trend.as_dict(), "camera_covariance": webcam_like_covariance(camera)}
 
 
 def video_case(targets: TargetsSpec, count: int, runs: int = 1, camera=ENDOSCOPE, distance_m: float = 0.7,

@@ -19,15 +19,18 @@ import numpy as np
 import yaml
 
 from veg_area_ros.calib_io import write_calibration
-from veg_area_ros.camera_uncertainty import CameraCovariance
 from veg_area_ros.cli import main as veg_area
-from veg_area_ros.sim.synthetic import ENDOSCOPE, bush_scene, render_scene, scene_targets_content
+from veg_area_ros.sim.synthetic import (
+    ENDOSCOPE,
+    bush_scene,
+    render_scene,
+    scene_targets_content,
+    webcam_like_covariance,
+)
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 FRAMES = 60
 NOISE_DN = 3.0
-# the webcam calibration's stds (docs/calibration.md), no correlations: Af's std then holds the calibration's term
-CAMERA_STD = (0.5, 0.5, 1.3, 0.7, 0.009, 0.04, 2.5e-4, 2.8e-4, 0.055)
 
 
 def calibration_figures(out: Path, work: Path) -> None:
@@ -52,9 +55,9 @@ def bush_figures(out: Path, work: Path) -> None:
         if index == 0:
             cv2.imwrite(str(work / "bush.png"), frame)
     writer.release()
-    std = dict(zip(ENDOSCOPE.param_names, CAMERA_STD, strict=True))
+    # the webcam calibration's stds: Af's std then holds the calibration's term
     write_calibration(work / "camera.yaml", ENDOSCOPE, "endoscope",
-                      {"medium": "air", "camera_covariance": CameraCovariance.from_std(std, {}).as_dict()})
+                      {"medium": "air", "camera_covariance": webcam_like_covariance(ENDOSCOPE)})
     (work / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
     common = ["--calibration", str(work / "camera.yaml"), "--targets", str(work / "targets.yaml"), "-q"]
     if veg_area(["measure", str(work / "bush.png"), *common, "--overlay", str(out / "measure_overlay.png")]):

@@ -236,6 +236,19 @@ BOARD_WHITE = 235  # grey level of the board's white squares in a well-exposed v
 DSLR = BrownCamera(3872, 2592, c=2450.0, xp=1941.0, yp=1290.5, aspect=1.0, k1=-0.09, k2=0.03, k3=0.0,
                    p1=0.0003, p2=-0.0002)
 
+# the real webcam calibration's parameter stds (docs/calibration.md; c, xp, yp px, aspect, k1-k3, p1, p2 in
+# BrownCamera.param_names' order): a rendered camera given them measures with a calibration's term in its std
+WEBCAM_CALIBRATION_STD = (0.5, 0.5, 1.3, 0.7, 0.009, 0.04, 2.5e-4, 2.8e-4, 0.055)
+
+
+def webcam_like_covariance(camera: BrownCamera) -> dict:
+    """A calibration file's `camera_covariance` for `camera` with the webcam's parameter stds and no
+    correlations (CameraCovariance.as_dict)."""
+    from ..camera_uncertainty import CameraCovariance
+
+    std = dict(zip(camera.param_names, WEBCAM_CALIBRATION_STD, strict=True))
+    return CameraCovariance.from_std(std, {}).as_dict()
+
 
 # --- measurement scenes: a target frame of ArUco markers in the object's plane, and an object --------------
 CUBE_SIDE_M = 0.1027  # the paper's cube: face area 0.01055 m²
