@@ -14,10 +14,12 @@ import contextlib
 import io
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import cv2
 import numpy as np
+from held_out_board import scatter
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.calib_io import read_calibration
@@ -41,6 +43,28 @@ def dark_area_m2(board: cv2.aruco.CharucoBoard, px_per_square: int = 1000) -> fl
     return float(np.mean(inside > 127)) * (cols - 1) * (rows - 1) * SQUARE_M**2
 
 
+def board_frames(video: Path, board: cv2.aruco.CharucoBoard) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                                np.ndarray]]:
+    """(frame, its grey inverted as the print needs, the chessboard corners refined by cornerSubPix, their ids)
+    of each frame of the video where the board is found."""
+    detector = cv2.aruco.CharucoDetector(board)
+    capture = cv2.VideoCapture(str(video))
+    try:
+        while True:
+            ok, frame = capture.read()
+            if not ok:
+                return
+            grey = 255 - cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+            corners, ids, _, _ = detector.detectBoard(grey)
+            if ids is None:
+                continue
+            refined = cv2.cornerSubPix(grey, corners.reshape(-1, 1, 2).astype(np.float32), (5, 5), (-1, -1),
+                                       (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.001))
+            yield frame, grey, refined.reshape(-1, 2), ids.ravel()
+    finally:
+        capture.release()
+
+
 def measure(video: Path) -> list[dict[str, tuple[float, float, bool]]]:
     """Per frame measured: mode -> (Af over the truth, minus 1; reported std over the truth; shares applied)."""
     calibration = Path(tempfile.mkdtemp()) / "webcam.yaml"
@@ -56,20 +80,10 @@ def measure(video: Path) -> list[dict[str, tuple[float, float, bool]]]:
                                    cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, DICTIONARY)))
     truth = dark_area_m2(board)
     chessboard = board.getChessboardCorners()[:, :2] / SQUARE_M  # in squares
-    detector = cv2.aruco.CharucoDetector(board)
-    capture = cv2.VideoCapture(str(video))
     frames = []
-    while True:
-        ok, frame = capture.read()
-        if not ok:
-            break
-        grey = 255 - cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-        corners, ids, _, _ = detector.detectBoard(grey)
-        if ids is None or not set(OUTER) <= set(ids.ravel().tolist()):
+    for frame, _, corners, ids in board_frames(video, board):
+        if not set(OUTER) <= set(ids.tolist()):
             continue
-        corners = cv2.cornerSubPix(grey, corners.reshape(-1, 1, 2).astype(np.float32), (5, 5), (-1, -1),
-                                   (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.001)).reshape(-1, 2)
-        ids = ids.ravel()
         points = [{"pixel": corners[int(np.flatnonzero(ids == c)[0])].tolist(),
                    "plane": (chessboard[c] * SQUARE_M).tolist()} for c in OUTER]
         targets = TargetsSpec.from_dict({"points": points, "pixel_std": 0.1})
@@ -84,7 +98,6 @@ def measure(video: Path) -> list[dict[str, tuple[float, float, bool]]]:
                                   area_mode=mode).measure(frame)
             row[mode] = (result.area_m2 / truth - 1, result.area_std_m2 / truth, result.subpixel_applied)
         frames.append(row)
-    capture.release()
     return frames
 
 
@@ -93,12 +106,10 @@ def main(argv: list[str] | None = None) -> int:
     frames = measure(video)
     for mode in MODES:
         errors = np.array([f[mode][0] for f in frames])
-        stds = np.array([f[mode][1] for f in frames])
-        z = np.abs(errors - errors.mean()) / stds
-        applied = sum(f[mode][2] for f in frames)
-        print(f"{mode:8s} {len(errors)} frames: mean {100 * errors.mean():+.2f} %, spread "
-              f"{100 * errors.std(ddof=1):.2f} %, worst {100 * np.abs(errors - errors.mean()).max():.2f} % from the "
-              f"mean, each within {z.max():.2f} reported std; shares applied in {applied}")
+        spread, worst, largest = scatter(errors, np.array([f[mode][1] for f in frames]))
+        print(f"{mode:8s} {len(errors)} frames: mean {100 * errors.mean():+.2f} %, spread {100 * spread:.2f} %, "
+              f"worst {100 * worst:.2f} % from the mean, each within {largest:.2f} reported std; shares applied in "
+              f"{sum(f[mode][2] for f in frames)}")
     return 0
 
 

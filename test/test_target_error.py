@@ -9,6 +9,7 @@ import itertools
 import cv2
 import numpy as np
 import pytest
+from charuco_video_board import board_frames
 from helpers import shared
 
 from veg_area_ros.area import AreaMeasurer
@@ -162,19 +163,10 @@ def test_on_a_real_webcams_markers_the_measured_std_follows_their_error_against_
     chessboard = board.getChessboardCorners()[:, :2].astype(float)
     plane_centres = {int(i): np.mean(np.asarray(o)[:, :2], axis=0)
                      for i, o in zip(board.getIds().ravel(), board.getObjPoints(), strict=True)}
-    detector = cv2.aruco.CharucoDetector(board)
-    capture = cv2.VideoCapture(str(video))
     actual, measured = [], []
-    while True:
-        ok, frame = capture.read()
-        if not ok:
-            break
-        grey = 255 - cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
-        corners, ids, _, _ = detector.detectBoard(grey)
-        if ids is None or len(ids) < 8:
+    for _, grey, corners, ids in board_frames(video, board):
+        if len(ids) < 8:
             continue
-        corners = cv2.cornerSubPix(grey, corners.reshape(-1, 1, 2).astype(np.float32), (5, 5), (-1, -1),
-                                   (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.001)).reshape(-1, 2)
         ideal_chess = view.to_ideal(corners.astype(float))
         board_map = cv2.findHomography(chessboard[ids.ravel()], ideal_chess, 0)[0]
         fitted = cv2.perspectiveTransform(chessboard[ids.ravel()].reshape(-1, 1, 2), board_map).reshape(-1, 2)
