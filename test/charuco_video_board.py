@@ -67,14 +67,14 @@ def board_frames(video: Path, board: cv2.aruco.CharucoBoard) -> Iterator[tuple[n
 
 def measure(video: Path) -> list[dict[str, tuple[float, float, bool]]]:
     """Per frame measured: mode -> (Af over the truth, minus 1; reported std over the truth; shares applied)."""
-    calibration = Path(tempfile.mkdtemp()) / "webcam.yaml"
-    with contextlib.redirect_stdout(io.StringIO()):
+    with tempfile.TemporaryDirectory() as work, contextlib.redirect_stdout(io.StringIO()):
+        calibration = Path(work) / "webcam.yaml"
         code = veg_area(["calibrate", str(video), "--board",
                          f"charuco:{SQUARES[0]}x{SQUARES[1]}:{SQUARE_M}:{MARKER_M}:{DICTIONARY}",
                          "-o", str(calibration), "--video-step", "1", "-q"])
-    if code != 0:
-        raise RuntimeError(f"veg-area calibrate exited {code}")
-    camera = read_calibration(calibration).camera
+        if code != 0:
+            raise RuntimeError(f"veg-area calibrate exited {code}")
+        camera = read_calibration(calibration).camera
     ideal = camera.ideal()
     board = cv2.aruco.CharucoBoard(SQUARES, SQUARE_M, MARKER_M,
                                    cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, DICTIONARY)))
