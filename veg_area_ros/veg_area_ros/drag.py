@@ -305,8 +305,8 @@ def format_run_table(table: list[dict]) -> str:
 def _tick_digits(low: float, high: float) -> tuple[float, ...] | None:
     """The leading digits of a log axis's labelled ticks: 1, 2 and 5 where at least two fall in [low, high], else
     every digit; None where even those are fewer than two (a span narrower than one digit's step)."""
+    decades = 10.0 ** np.arange(np.floor(np.log10(low)), np.ceil(np.log10(high)) + 1)
     for digits in ((1.0, 2.0, 5.0), tuple(float(d) for d in range(1, 10))):
-        decades = 10.0 ** np.arange(np.floor(np.log10(low)), np.ceil(np.log10(high)) + 1)
         ticks = np.outer(decades, digits).ravel()
         if np.count_nonzero((ticks >= low) & (ticks <= high)) >= 2:
             return digits

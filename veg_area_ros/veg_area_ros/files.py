@@ -13,11 +13,10 @@ import stat
 import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path, PurePath
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
-from typing import TypeVar
 
 # the largest sensors sold (200 MP phones, 150 MP medium format); measuring costs about 150 MB + 21 bytes a pixel
 # (10 MP 0.37 GB, 40 MP 1.0 GB), and a 20000x20000 PNG (400 MP) took 9 GB and minutes to decode before refusing
