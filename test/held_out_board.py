@@ -1,7 +1,8 @@
 """A held-out check of Af on real photos of a printed chessboard: calibrate with `veg-area calibrate` on every
 other photo of a folder, then measure the black area of each photo of the other half (test/board_photos.py's
 set-up: the rectangle through the outer squares' centres, the four outer inner corners as targets) in the
-default mode and counted, with the calibration file as `veg-area measure` reads it. Prints each photo's error
+default mode (auto: the reading the calibration records), with the shares and counted, with the calibration
+file as `veg-area measure` reads it. Prints each photo's error
 from the print's squares and its reported std, and per mode the spread, the worst photo and how far each photo
 lies from the set's mean in its own std, with the targets' calliper term (the same for every photo of one
 print) and without it.
@@ -32,7 +33,7 @@ from veg_area_ros.calib_io import read_calibration
 from veg_area_ros.cli import main as veg_area
 from veg_area_ros.settings import MeasurementSettings
 
-MODES = ("subpixel", "count")
+MODES = ("auto", "subpixel", "count")  # the default (the reading the calibration records), the shares, counted
 WELL_EXPOSED = 0.01  # share of the board's pixels at 250 or more
 
 
@@ -105,7 +106,7 @@ def _row(photo: board_photos.BoardPhoto, calibration) -> PhotoRow:
                                        calibration_conditions=calibration.metadata).measure(photo.frame)
             into[mode] = result.area_std_m2 / photo.true_area_m2
         errors[mode] = result.area_m2 / photo.true_area_m2 - 1
-        if mode == "subpixel":
+        if mode == "auto":
             warnings = list(result.warnings)
     return PhotoRow(photo.name, photo.clipped_share, errors, stds, bare, warnings)
 
@@ -164,7 +165,7 @@ def plot(rows: list[PhotoRow], title: str, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     well = well_exposed(rows)
-    named = {"default": "subpixel", "count": "count"}
+    named = {"default": "auto", "count": "count"}
     figure, ax = plt.subplots(figsize=(max(6.0, 0.22 * len(well) + 2), 4.2))
     draw_photos(ax, {shown: (np.array([row.errors[mode] for row in well]), np.array([row.stds[mode] for row in well]))
                      for shown, mode in named.items()},
@@ -196,7 +197,9 @@ def main(argv: list[str] | None = None) -> int:
                  else f"{args.folder.name}: half {1 - half} measured, calibrated on half {half}")
         plot(rows, title, args.plot)
     print(f"calibration: model {metadata.get('distortion_model', 'plumb_bob')}, "
-          f"edge trend: {metadata.get('edge_trend_evidence', 'none recorded')}")
+          f"edge trend: {metadata.get('edge_trend_evidence', 'none recorded')}; "
+          f"area mode {metadata.get('area_mode', 'subpixel (none recorded)')}: "
+          f"{metadata.get('area_mode_evidence', 'no evidence recorded')}")
     for row in rows:
         print(f"{row.name}  clipped {100 * row.clipped_share:5.2f} %  "
               + "  ".join(f"{mode} {100 * row.errors[mode]:+.3f} ± {100 * row.stds[mode]:.3f} %" for mode in MODES))

@@ -207,6 +207,7 @@ def test_a_real_gopros_calibration_records_srgb_and_measure_reads_its_photos_wit
     assert done.returncode == 0, done.stderr
     assert "tone curve srgb: " in done.stdout
     assert (tmp_path / "report" / "tone_curve.png").stat().st_size > 10_000  # the evidence drawn
+    assert (tmp_path / "report" / "area_mode.png").stat().st_size > 10_000  # and which reading its views favour
     block = yaml.safe_load(calibration.read_text())["veg_area_ros"]
     assert block["tone_curve"] == "srgb", block.get("tone_curve_evidence")
     assert "srgb drifts the least" in block["tone_curve_evidence"]

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .classify import AREA_MODES, CHANNELS, OBJECTS
-from .settings import THRESHOLD_MODES, TONE_CURVE_CHOICES
+from .classify import CHANNELS, OBJECTS
+from .settings import AREA_MODE_CHOICES, THRESHOLD_MODES, TONE_CURVE_CHOICES
 
 VIEWS = ("area", "calibration", "camera")  # the overlay, the calibration node's feedback, the raw camera image
 MAX_WIDTH_PX = 800  # images to the page: never wider (a 10 MP frame is not sent whole)
@@ -36,7 +36,7 @@ SERIES_POINTS = 1200
 MESSAGES_KEPT = 12
 
 # the area node's parameters the console sets, with what each must be
-CHOICES = {"threshold_mode": THRESHOLD_MODES, "object": OBJECTS, "channel": CHANNELS, "area_mode": AREA_MODES,
+CHOICES = {"threshold_mode": THRESHOLD_MODES, "object": OBJECTS, "channel": CHANNELS, "area_mode": AREA_MODE_CHOICES,
            "tone_curve": TONE_CURVE_CHOICES}
 NUMBERS = {"threshold": (0.0, 255.0), "open_px": (0, 50), "close_px": (0, 50)}
 TUNED = (*NUMBERS, *CHOICES, "roi")

@@ -17,6 +17,7 @@ from .files import save_figure
 
 if TYPE_CHECKING:
     from .guidance import CalibrationGuide
+    from .reading_evidence import ReadingChoice
     from .tone_evidence import ToneChoice
 
 
@@ -34,7 +35,7 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
                              tone: ToneChoice | None = None) -> list[Path]:
     """Write residuals.png, per_view.png, coverage.png, radial.png, uncertainty.png and calibration.json into
     `folder`; with `guide` (guidance.CalibrationGuide over the views) also variety.png, the bars; with `tone`
-    (tone_evidence.ToneChoice) that measured views, tone_curve.png."""
+    (tone_evidence.ToneChoice) that measured views, tone_curve.png, and where it judged the reading, area_mode.png."""
     plt = _pyplot()
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -149,6 +150,8 @@ def write_calibration_report(result: CalibrationResult, folder: str | Path, guid
         written.append(plot_tone_evidence(tone, folder / "tone_curve.png"))
     if tone is not None and len(tone.edges.get(tone.curve, [])) >= 2:
         written.append(plot_edge_trend(tone, folder / "edge_trend.png"))
+    if tone is not None and tone.reading is not None and tone.reading.decided:
+        written.append(plot_reading_evidence(tone.reading, folder / "area_mode.png"))
     written.append(folder / "calibration.json")
     written[-1].write_text(json.dumps(result.summary(), indent=2))
     return written
@@ -205,6 +208,30 @@ def plot_tone_evidence(tone: ToneChoice, path: str | Path) -> Path:
     verdict = f"{tone.curve} taken" if tone.decided else "not told apart: linear kept"
     ax.set_title(f"Tone curve from {len(sizes)} views: {verdict}", fontsize=10)
     ax.legend(title="read as")
+    ax.grid(alpha=0.3)
+    path = Path(path)
+    save_figure(fig, path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    return path
+
+
+def plot_reading_evidence(reading: ReadingChoice, path: str | Path) -> Path:
+    """Each measured view's error in the board's black area from the views' mean, read with the shares (each
+    with the edge trend of the other views) and counted: the reading whose points lie closer to zero is taken."""
+    plt = _pyplot()
+    order = np.argsort(reading.names, kind="stable")
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.25 * len(order) + 2), 4.2))
+    for offset, (mode, colour, label) in zip((-0.12, 0.12), (("subpixel", "tab:blue", "shares"),
+                                                             ("count", "tab:grey", "counted")), strict=True):
+        errors = 100 * np.asarray(reading.errors[mode])[order]
+        ax.plot(np.arange(len(order)) + offset, errors - errors.mean(), "o", color=colour,
+                label=f"{label}: sd {100 * reading.spreads[mode]:.2f} %")
+    ax.axhline(0, color="black", lw=0.8)
+    ax.set_xticks(np.arange(len(order)), [Path(reading.names[k]).stem for k in order], rotation=90, fontsize=6)
+    ax.set_ylabel("black area: error from the views' mean [%]")
+    taken = "the shares" if reading.mode == "subpixel" else "whole pixels counted"
+    ax.set_title(f"Reading from {reading.views} views: {taken}", fontsize=10)
+    ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     path = Path(path)
     save_figure(fig, path, dpi=110, bbox_inches="tight")

@@ -21,6 +21,7 @@ from .targets import TargetsSpec
 THRESHOLD_MODES = ("fixed", "otsu")
 # auto: the curve the calibration file records, judged on its own board views (tone_evidence), else linear
 TONE_CURVE_CHOICES = ("auto", *TONE_CURVES)
+AREA_MODE_CHOICES = ("auto", *AREA_MODES)  # auto: the reading the calibration's views favour, else the shares
 NO_ROI = (0.0,)  # how a ROS parameter (typed, never empty on the command line) says "inside the targets"
 NO_LEVELS = (0.0,)
 
@@ -57,7 +58,7 @@ class MeasurementSettings:
     roi: tuple[float, ...] | None = None
     open_px: int = 0
     close_px: int = 0
-    area_mode: str = "subpixel"
+    area_mode: str = "auto"  # each edge pixel's share or whole pixels (AREA_MODE_CHOICES)
     levels: tuple[float, float] | None = None
     sweep_step: float = 5.0
     tone_curve: str = "auto"  # how the camera encodes light in its grey levels (TONE_CURVE_CHOICES)
@@ -68,8 +69,8 @@ class MeasurementSettings:
         object.__setattr__(self, "levels", given_levels(self.levels))
         if self.tone_curve not in TONE_CURVE_CHOICES:
             raise ClassifyError(f"tone_curve must be one of {', '.join(TONE_CURVE_CHOICES)}, got {self.tone_curve!r}")
-        if self.area_mode not in AREA_MODES:
-            raise ClassifyError(f"area_mode must be one of {', '.join(AREA_MODES)}, got {self.area_mode!r}")
+        if self.area_mode not in AREA_MODE_CHOICES:
+            raise ClassifyError(f"area_mode must be one of {', '.join(AREA_MODE_CHOICES)}, got {self.area_mode!r}")
         if not (math.isfinite(self.sweep_step) and self.sweep_step > 0):
             raise ClassifyError(f"the sweep step must be a positive number of grey levels, got {self.sweep_step}")
         self.classifier()  # threshold, object, channel and morphology checked once, here
@@ -95,6 +96,16 @@ class MeasurementSettings:
             raise ClassifyError(f"the calibration file's tone_curve {curve!r} is none of {', '.join(TONE_CURVES)}")
         return "linear" if self.object == "green" else curve
 
+    def area_mode_for(self, calibration: dict | None) -> str:
+        """The reading frames are measured with: the mode set, or for 'auto' the one the calibration file's
+        metadata records (judged on its views by `veg-area calibrate`: reading_evidence), else the shares."""
+        if self.area_mode != "auto":
+            return self.area_mode
+        mode = (calibration or {}).get("area_mode", "subpixel")
+        if mode not in AREA_MODES:
+            raise ClassifyError(f"the calibration file's area_mode {mode!r} is none of {', '.join(AREA_MODES)}")
+        return mode
+
     def classifier(self, calibration: dict | None = None) -> Classifier:
         """The classifier; `calibration`: the calibration file's metadata ('auto' reads its tone curve)."""
         return Classifier(threshold=self.threshold, object=self.object, channel=self.channel,
@@ -107,9 +118,15 @@ class MeasurementSettings:
         """The measurer for frames of `camera` (None: uncalibrated); with `port_camera`, the exact flat-port model
         of that camera's calibration file. `background`: a frame of the empty scene to even the light with;
         `calibration_conditions`: the calibration file's metadata (medium, distance, said when the frames
-        leave them; the tone curve 'auto' takes). Raises ClassifyError or TargetsError with the reason."""
+        leave them; the tone curve and area mode 'auto' take). Raises ClassifyError or TargetsError with the reason."""
+        area_mode = self.area_mode_for(calibration_conditions)
+        if background is not None and area_mode != "subpixel" and self.area_mode == "auto":
+            raise ClassifyError("a background frame evens the light for sub-pixel shares, and area mode auto "
+                                "counts whole pixels here: the calibration file's views read better counted "
+                                f"({calibration_conditions.get('area_mode_evidence', 'no evidence recorded')}); "
+                                "set the area mode to subpixel to even the light with the background")
         options = dict(roi=None if self.roi is None else list(self.roi), threshold_delta=self.sweep_step,
-                       area_mode=self.area_mode, levels=self.levels, background=background)
+                       area_mode=area_mode, levels=self.levels, background=background)
         if port_camera is not None:  # the port model holds at any distance; its file records its uncertainty
             return PortAreaMeasurer(port_camera, targets, self.classifier(calibration_conditions),
                                     calibration_conditions, **options)

@@ -21,8 +21,10 @@ import numpy as np
 from .area import AreaMeasurer
 from .board import BoardSpec, Detection, to_grey
 from .camera_model import BrownCamera
-from .classify import TONE_CURVES, Classifier
+from .classify import AREA_MODES, TONE_CURVES, Classifier
 from .edge_trend import TrendChoice, ViewEdge, fit_edge_trend
+from .reading_evidence import MIN_VIEWS as MIN_READING_VIEWS
+from .reading_evidence import ReadingChoice, ViewReading, choose_reading
 from .targets import TargetsSpec
 
 MAX_VIEWS = 24  # views the tone curve is judged on, evenly over sizes: about 1.5 s each at 10 MP (both curves)
@@ -33,7 +35,6 @@ MIN_SIZE_RATIO = 1.3  # nearest to farthest board (pixels per square): below it 
 # it); crushed blacks, common in action cameras' JPEGs, move every view alike and stay in
 SPOILS_THE_EVIDENCE = ("clipped highlights", "the ROI reaches beyond the image", "no object found")
 DECISIVE_SIGMA = 3.0  # one curve's drift smaller than the other's by this many combined standard errors
-EVIDENCE_MODE = "subpixel"  # the mode frames are measured in by default
 MAX_KEPT_BYTES = 256 * 2**20  # a live calibration's kept frames, PNG: a few hundred views of 10 MP
 
 
@@ -144,10 +145,13 @@ class ToneChoice:
     errors: dict[str, list[float]] = field(default_factory=dict)  # per curve, each view's relative error
     edges: dict[str, list[ViewEdge]] = field(default_factory=dict)  # per curve, the views whose shares were used
     edge_trend: TrendChoice | None = None  # how the edges follow exposure under the curve taken (edge_trend)
+    readings: dict[str, list[ViewReading]] = field(default_factory=dict)  # per curve, each view read both ways
+    reading: ReadingChoice | None = None  # the shares or the count, judged under the curve taken (reading_evidence)
 
     def metadata(self) -> dict:
         """What a calibration file records of this judgement: the curve where decided (what measuring with
-        tone curve auto, the default, reads frames with), the edges' trend with exposure where learned, and why."""
+        tone curve auto, the default, reads frames with), the edges' trend with exposure where learned, the
+        reading (shares or count) area mode auto takes, and why."""
         recorded: dict = {"tone_curve_evidence": self.reason}
         if self.decided:
             recorded["tone_curve"] = self.curve
@@ -155,6 +159,8 @@ class ToneChoice:
             recorded["edge_trend_evidence"] = self.edge_trend.reason
             if self.edge_trend.trend is not None:
                 recorded["edge_trend"] = self.edge_trend.trend.as_dict()
+        if self.reading is not None:
+            recorded.update(self.reading.metadata())
         return recorded
 
     def as_dict(self) -> dict:
@@ -164,7 +170,8 @@ class ToneChoice:
                 "left_out": len(self.left_out),
                 "edge_trend": (None if self.edge_trend is None else
                                {"learned": self.edge_trend.trend is not None and self.edge_trend.trend.learned,
-                                "reason": self.edge_trend.reason})}
+                                "reason": self.edge_trend.reason}),
+                "reading": None if self.reading is None else self.reading.as_dict()}
 
 
 def spread_by_size(cases: list[BoardCase], count: int = MAX_VIEWS) -> list[BoardCase]:
@@ -217,7 +224,8 @@ class KeptFrames:
                                                   self.board, camera))
         pairs = ((case, cv2.imdecode(np.frombuffer(self.frames[case.name], np.uint8), cv2.IMREAD_GRAYSCALE))
                  for case in cases)
-        choice = choose_tone_curve(pairs if len(cases) >= MIN_VIEWS else iter(()), self.board, camera, judged)
+        choice = choose_tone_curve(pairs if len(cases) >= MIN_READING_VIEWS else iter(()), self.board, camera,
+                                   judged)
         if self.over_budget:
             choice.reason += f" ({self.over_budget} views past the first {len(self.frames)} kept no frame)"
         return choice
@@ -234,14 +242,15 @@ def _slope(errors: np.ndarray, inverse_size: np.ndarray) -> tuple[float, float]:
 
 def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: BoardSpec, camera: BrownCamera,
                       judged: set[str] | None = None) -> ToneChoice:
-    """The tone curve judged on the views (`judged_tone_curve`; on those named in `judged`, or all), and how the
-    edges follow exposure under it (edge_trend), on all of them: each view's error over the board's edge length
-    inside the rectangle is how far it moved its edges."""
+    """The tone curve judged on the views (`judged_tone_curve`; on those named in `judged`, or all), how the
+    edges follow exposure under it (edge_trend) and which reading reads them better (reading_evidence), on all of
+    them: each view's error over the board's edge length inside the rectangle is how far it moved its edges."""
     choice = judged_tone_curve(cases, board, camera, judged)
     if board.kind == "chessboard":
         edges = choice.edges.get(choice.curve, [])
         choice.edge_trend = fit_edge_trend([e.offset_px for e in edges], [e.white_dn for e in edges], choice.curve,
                                            [e.std_px for e in edges], [e.scale_px_per_m for e in edges])
+        choice.reading = choose_reading(choice.readings.get(choice.curve, []), choice.curve)
     return choice
 
 
@@ -259,9 +268,11 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
                                            f"the views show a {board.kind} board")
     errors: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
     edges: dict[str, list[ViewEdge]] = {curve: [] for curve in TONE_CURVES}
+    readings: dict[str, list[ViewReading]] = {curve: [] for curve in TONE_CURVES}
     sizes: list[float] = []
     left_out: dict[str, str] = {}
-    choice = ToneChoice("linear", False, "", left_out=left_out, sizes=sizes, errors=errors, edges=edges)
+    choice = ToneChoice("linear", False, "", left_out=left_out, sizes=sizes, errors=errors, edges=edges,
+                        readings=readings)
     waiting = None if judged is None else set(judged)  # judged views not read yet
     decided = False
     for case, grey in cases:
@@ -269,12 +280,13 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
         curves = TONE_CURVES if judging or not decided else (choice.curve,)
         measured = _measured(case, grey, board, camera, curves, left_out)
         if measured is not None:
-            for curve, (_, edge) in measured.items():
-                if edge is not None:
-                    edges[curve].append(edge)
+            for curve, reading in measured.items():
+                readings[curve].append(reading)
+                if reading.edge is not None:
+                    edges[curve].append(reading.edge)
             if judging:
-                for curve, (error, _) in measured.items():
-                    errors[curve].append(error)
+                for curve, reading in measured.items():
+                    errors[curve].append(reading.default_error)
                 sizes.append(case.square_px)
         if waiting is not None:
             waiting.discard(case.name)
@@ -287,9 +299,9 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
 
 
 def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, camera: BrownCamera, curves: Iterable[str],
-              left_out: dict[str, str]) -> dict[str, tuple[float, ViewEdge | None]] | None:
-    """Per curve, the view's relative error and its edge (where the shares were applied); None where the view
-    is no case (said in `left_out`)."""
+              left_out: dict[str, str]) -> dict[str, ViewReading] | None:
+    """Per curve, the view read both ways: its relative error in the default mode and its edge (where the shares
+    were applied), and counted; None where the view is no case (said in `left_out`)."""
     truth = case.true_area_m2(board, case.first_black(grey))
     # the error over the edges' length is how far they moved (m), in the view's idealized px
     px_per_m2 = case.square_px / board.square / case.edge_length_m(board)
@@ -299,8 +311,8 @@ def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, camera: Brown
     measured = {}
     for curve in curves:
         try:
-            result = AreaMeasurer(camera, targets, Classifier(threshold="otsu", tone_curve=curve),
-                                  roi=case.roi, area_mode=EVIDENCE_MODE).measure(grey)
+            result, counted = (AreaMeasurer(camera, targets, Classifier(threshold="otsu", tone_curve=curve),
+                                            roi=case.roi, area_mode=mode).measure(grey) for mode in AREA_MODES)
         except ValueError as exc:  # targets, light, a frame the measurement refuses: the view is no case
             left_out[case.name] = f"{curve}: {exc}"
             return None
@@ -313,7 +325,8 @@ def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, camera: Brown
         edge = (None if levels is None or not result.subpixel_applied else
                 ViewEdge(case.name, (result.area_m2 - truth) * px_per_m2, max(levels.object, levels.background),
                          result.area_std_m2 * px_per_m2, case.square_px / board.square))
-        measured[curve] = (result.area_m2 / truth - 1, edge)
+        measured[curve] = ViewReading(case.name, result.area_m2 / truth - 1, counted.area_m2 / truth - 1, edge,
+                                      px_per_m2 * truth)
     return measured
 
 

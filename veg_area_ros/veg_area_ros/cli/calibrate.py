@@ -338,6 +338,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
         print(f"tone curve {tone.curve}" + ("" if tone.decided else " (the default)") + f": {tone.reason}")
         if tone.edge_trend is not None:
             print(f"edge trend with exposure: {tone.edge_trend.reason}")
+        if tone.reading is not None:
+            print(f"area mode {tone.reading.mode}" + ("" if tone.reading.decided else " (the default)")
+                  + f": {tone.reading.reason}")
     return 0
 
 
@@ -349,11 +352,11 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, cam
     from collections import Counter
 
     from ..frames import iter_frames, shown_name
-    from ..tone_evidence import MIN_VIEWS, choose_tone_curve, chosen_cases, judged_first
+    from ..tone_evidence import MIN_READING_VIEWS, choose_tone_curve, chosen_cases, judged_first
 
     named = Counter(view.name for view in found.views)  # a name two files share cannot be read again surely
     cases = chosen_cases([view for view in found.views if named[view.name] == 1], board, camera)
-    if len(cases) < MIN_VIEWS:  # said as such, without reading any frame again
+    if len(cases) < MIN_READING_VIEWS:  # said as such, without reading any frame again
         return choose_tone_curve(iter(()), board, camera)
     wanted = {case.name: case for case in cases}
 

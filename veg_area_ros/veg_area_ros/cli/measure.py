@@ -8,7 +8,7 @@ import math
 import sys
 from pathlib import Path
 
-from ..settings import TONE_CURVE_CHOICES, MeasurementSettings
+from ..settings import AREA_MODE_CHOICES, TONE_CURVE_CHOICES, MeasurementSettings
 from .batch import measure_batch
 from .common import EXIT_USAGE, CliError, positive_float
 from .measure_job import SEGMENT_FRAMES, MeasureJob, TimeBound, measure, time_bound
@@ -76,9 +76,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="band the threshold acts on (dark/bright)")
     mea.add_argument("--roi", type=_roi, default=None, metavar="x1,y1,x2,y2,...",
                      help="region of interest, polygon in idealized-image pixels (default: inside the targets)")
-    mea.add_argument("--area-mode", default=DEFAULTS.area_mode, choices=["subpixel", "count"],
-                     help="subpixel (default): each edge pixel counts its object share from its grey level "
-                          "between the object's and the background's; count: whole pixels, as in the paper")
+    mea.add_argument("--area-mode", default=DEFAULTS.area_mode, choices=list(AREA_MODE_CHOICES),
+                     help="subpixel: each edge pixel counts its object share from its grey level between the "
+                          "object's and the background's; count: whole pixels, as in the paper; auto (default): "
+                          "the one the calibration file records, judged by `calibrate` on its own board views "
+                          "(the count where the shares do not read them better), else subpixel")
     mea.add_argument("--levels", type=_levels, default=None, metavar="OBJECT,BACKGROUND",
                      help="sub-pixel mode: the object's and background's grey levels (default: from each frame)")
     mea.add_argument("--tone-curve", default=DEFAULTS.tone_curve, choices=list(TONE_CURVE_CHOICES),

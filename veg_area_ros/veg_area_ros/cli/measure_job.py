@@ -277,6 +277,11 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         return (f"tone curve {curve}, as {source} records it "
                 f"({recorded.get('tone_curve_evidence', 'no evidence recorded')}); --tone-curve sets another")
 
+    def reading_note(recorded: dict, source: str) -> str:
+        """What the run says of the reading a calibration's metadata records, read under --area-mode auto."""
+        return (f"area mode {recorded['area_mode']}, as {source} records it "
+                f"({recorded.get('area_mode_evidence', 'no evidence recorded')}); --area-mode sets another")
+
     said: set[str] = set()  # what a bag's metadata made the run say, said once
 
     def say_once(note: str) -> None:
@@ -295,12 +300,16 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
             return None
         if recorded is not None and job.settings.tone_curve == "auto" and "tone_curve" in recorded:
             say_once(tone_note(recorded, "the bag's camera_info/metadata"))
+        if recorded is not None and job.settings.area_mode == "auto" and "area_mode" in recorded:
+            say_once(reading_note(recorded, "the bag's camera_info/metadata"))
         return recorded
 
     measurer = new_measurer(camera) if not from_bag else None
     recorded_metadata = None  # a bag's camera_info/metadata the measurer was made with
     if job.settings.tone_curve == "auto" and conditions and "tone_curve" in conditions:
         say(tone_note(conditions, job.calibration))
+    if job.settings.area_mode == "auto" and conditions and "area_mode" in conditions:
+        say(reading_note(conditions, job.calibration))
     if job.idealized and camera is not None:
         folder = Path(job.idealized)
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",

@@ -38,13 +38,13 @@ from ..board_hint import dictionary_hint
 from ..calib_io import metadata_for, read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, stamp_ns, unstamped
-from ..classify import AREA_MODES, CHANNELS, OBJECTS, ClassifyError
+from ..classify import CHANNELS, OBJECTS, ClassifyError
 from ..frames import read_image
 from ..idealize import FrameSizeError
 from ..latest import FrameTally
 from ..light import LightError
 from ..overlay import draw_overlay
-from ..settings import NO_LEVELS, NO_ROI, THRESHOLD_MODES, TONE_CURVE_CHOICES, MeasurementSettings
+from ..settings import AREA_MODE_CHOICES, NO_LEVELS, NO_ROI, THRESHOLD_MODES, TONE_CURVE_CHOICES, MeasurementSettings
 from ..sources import default_targets
 from ..targets import TargetsError, TargetsNotFoundError, TargetsSpec
 from .health import CountedWarnings, InputWatch, publish_safely
@@ -89,7 +89,9 @@ class AreaNode(Node):
                 high=50)
         declare(self, "targets_file", "", "Targets YAML; '' = the synthetic scene's four markers.")
         declare(self, "area_mode", DEFAULTS.area_mode, "'subpixel': each edge pixel counts its object share from "
-                "its grey level; 'count': whole pixels, as in the paper.", choices=AREA_MODES)
+                "its grey level; 'count': whole pixels, as in the paper; 'auto' the one calibration_file records "
+                "(judged on its board views by veg-area calibrate) or camera_info/metadata says, else subpixel.",
+                choices=AREA_MODE_CHOICES)
         declare(self, "levels", list(NO_LEVELS), "Sub-pixel mode: [object, background] grey levels; [0.0] = "
                 "from each frame.")
         declare(self, "tone_curve", DEFAULTS.tone_curve, "How the camera encodes light in its grey levels: "
@@ -142,8 +144,9 @@ class AreaNode(Node):
             self.camera, self.port_camera = calibration.camera, calibration.port_camera()
             self.file_camera, self.file_conditions = calibration.camera, calibration.metadata
             port = " (lens and flat port: the exact refraction model)" if self.port_camera else ""
-            tone = calibration.metadata.get("tone_curve")
-            recorded = f"; tone curve {tone} as it records (tone_curve auto reads it)" if tone else ""
+            tone, reading = calibration.metadata.get("tone_curve"), calibration.metadata.get("area_mode")
+            recorded = (f"; tone curve {tone} as it records (tone_curve auto reads it)" if tone else "") + (
+                f"; area mode {reading} as it records (area_mode auto reads it)" if reading else "")
             self.get_logger().info(f"calibration from {calibration_file}{port}{recorded}")
         self.settings = self._settings({})  # a value out of range or choices at start: the node does not start
         # read when targets_file is set (set it again to re-read an edited file), not at every new calibration
@@ -251,10 +254,11 @@ class AreaNode(Node):
         self._say_metadata(conditions)
 
     def _say_metadata(self, conditions: dict) -> None:
-        tone = conditions.get("tone_curve")
+        tone, reading = conditions.get("tone_curve"), conditions.get("area_mode")
         medium = conditions.get("medium")
         self.get_logger().info("calibration metadata with camera_info" + (f": medium {medium}" if medium else "")
-                               + (f"; tone curve {tone} (tone_curve auto reads it)" if tone else ""))
+                               + (f"; tone curve {tone} (tone_curve auto reads it)" if tone else "")
+                               + (f"; area mode {reading} (area_mode auto reads it)" if reading else ""))
 
     def _check_parameters(self, parameters) -> SetParametersResult:
         """A run-time change is accepted only if it builds a measurer (nothing is changed here)."""
