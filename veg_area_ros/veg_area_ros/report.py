@@ -227,7 +227,9 @@ def plot_reading_evidence(reading: ReadingChoice, path: str | Path) -> Path:
         ax.plot(np.arange(len(order)) + offset, errors - errors.mean(), "o", color=colour,
                 label=f"{label}: sd {100 * reading.spreads[mode]:.2f} %")
     ax.axhline(0, color="black", lw=0.8)
-    ax.set_xticks(np.arange(len(order)), [Path(reading.names[k]).stem for k in order], rotation=90, fontsize=6)
+    # a photo by its stem, a video's or bag's frame (NAME#N) by its number too
+    labels = [Path(name).name if "#" in name else Path(name).stem for name in (reading.names[k] for k in order)]
+    ax.set_xticks(np.arange(len(order)), labels, rotation=90, fontsize=6)
     ax.set_ylabel("black area: error from the views' mean [%]")
     taken = "the shares" if reading.mode == "subpixel" else "whole pixels counted"
     ax.set_title(f"Reading from {reading.views} views: {taken}", fontsize=10)
