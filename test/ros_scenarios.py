@@ -400,7 +400,8 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
             out["persisted_fx"] = read_calibration(calibration_file).camera.fx
             out["persisted_model"] = read_calibration(calibration_file).metadata.get("model_choice")
             out["persisted_tone"] = {key: read_calibration(calibration_file).metadata.get(key)
-                                     for key in ("tone_curve", "tone_curve_evidence")}
+                                     for key in ("tone_curve", "tone_curve_evidence", "area_mode",
+                                                 "area_mode_evidence")}
         if camera_infos:
             out["served_fx"] = info_to_camera(camera_infos[-1]).fx
 

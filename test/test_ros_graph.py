@@ -86,7 +86,9 @@ def test_parameters_are_validated_and_change_at_run_time(graph):
     assert not ok and "subpixel, count" in reason
     ok, reason = graph["bad_levels"]
     assert not ok and "too close" in reason
-    assert graph["area_modes_before"] == ["subpixel"]
+    # area_mode auto (the default) reads the reading the live calibration judged on its kept views and serves
+    assert graph["persisted_tone"]["area_mode_evidence"], graph["persisted_tone"]
+    assert graph["area_modes_before"] == [graph["persisted_tone"]["area_mode"]], graph["persisted_tone"]
     assert graph["good_area_mode"] is True and graph["area_modes_after_change"] == ["count"]
     assert graph["tone_curves_by_default"] == ["linear"]  # auto, with no calibration file to read a curve from
     ok, reason = graph["bad_tone_curve"]

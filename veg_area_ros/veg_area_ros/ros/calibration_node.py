@@ -254,12 +254,16 @@ class CalibrationNode(Node):
         warnings = list(result.warnings)
         metadata = fit_metadata(result.summary(), self.medium, self.distance, str(self.board), "calibration_node")
         tone = self.kept_frames.judge(self.views, result.camera)
-        metadata.update(tone.metadata())  # the tone curve and edge trend measuring reads, and why
+        metadata.update(tone.metadata())  # the tone curve, edge trend and reading measuring takes, and why
         described = (f"{result.views_used} views ({result.camera.model}"
                      + (f"; {result.model_choice['reason']}" if result.model_choice else "")
                      + f"): RMS {result.rms_px:.4f} px, fx {result.camera.fx:.2f} fy {result.camera.fy:.2f} "
                      f"cx {result.camera.xp:.2f} cy {result.camera.yp:.2f}; tone curve "
-                     + (tone.curve if tone.decided else tone.reason))
+                     + (tone.curve if tone.decided else tone.reason)
+                     + ("" if tone.reading is None else "; area mode " + (
+                         f"{tone.reading.mode} (its views spread {100 * tone.reading.spreads['subpixel']:.2f} % with "
+                         f"the shares, {100 * tone.reading.spreads['count']:.2f} % counted)" if tone.reading.decided
+                         else tone.reading.reason)))
         verdict = (judge(self.camera, self.served_metadata, result) if self.camera is not None
                    else Judgement(True, "no calibration served yet"))
         if not verdict.replace:
