@@ -268,19 +268,23 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         except TargetsError as exc:
             raise CliError(str(exc)) from exc
 
-    def tone_note(recorded: dict, source: str) -> str:
-        """What the run says of the tone curve a calibration's metadata records, read under --tone-curve auto."""
-        curve = job.settings.tone_curve_for(recorded)
-        if curve != recorded["tone_curve"]:  # the excess-green index is no light to decode
-            return (f"tone curve {curve}: {source} records {recorded['tone_curve']}, which does not apply to "
-                    f"--object {job.settings.object}")
-        return (f"tone curve {curve}, as {source} records it "
-                f"({recorded.get('tone_curve_evidence', 'no evidence recorded')}); --tone-curve sets another")
-
-    def reading_note(recorded: dict, source: str) -> str:
-        """What the run says of the reading a calibration's metadata records, read under --area-mode auto."""
-        return (f"area mode {recorded['area_mode']}, as {source} records it "
-                f"({recorded.get('area_mode_evidence', 'no evidence recorded')}); --area-mode sets another")
+    def auto_notes(recorded: dict | None, source: str) -> list[str]:
+        """What the run says of the tone curve and the reading a calibration's metadata records, for each set
+        to auto that the metadata decides."""
+        notes = []
+        if recorded and job.settings.tone_curve == "auto" and "tone_curve" in recorded:
+            curve = job.settings.tone_curve_for(recorded)
+            if curve != recorded["tone_curve"]:  # the excess-green index is no light to decode
+                notes.append(f"tone curve {curve}: {source} records {recorded['tone_curve']}, which does not "
+                             f"apply to --object {job.settings.object}")
+            else:
+                evidence = recorded.get("tone_curve_evidence", "no evidence recorded")
+                notes.append(f"tone curve {curve}, as {source} records it ({evidence}); --tone-curve sets another")
+        if recorded and job.settings.area_mode == "auto" and "area_mode" in recorded:
+            evidence = recorded.get("area_mode_evidence", "no evidence recorded")
+            notes.append(f"area mode {recorded['area_mode']}, as {source} records it ({evidence}); "
+                         "--area-mode sets another")
+        return notes
 
     said: set[str] = set()  # what a bag's metadata made the run say, said once
 
@@ -298,18 +302,14 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         except ValueError as exc:
             say_once(f"the bag's camera_info/metadata is not used: {exc}")
             return None
-        if recorded is not None and job.settings.tone_curve == "auto" and "tone_curve" in recorded:
-            say_once(tone_note(recorded, "the bag's camera_info/metadata"))
-        if recorded is not None and job.settings.area_mode == "auto" and "area_mode" in recorded:
-            say_once(reading_note(recorded, "the bag's camera_info/metadata"))
+        for note in auto_notes(recorded, "the bag's camera_info/metadata"):
+            say_once(note)
         return recorded
 
     measurer = new_measurer(camera) if not from_bag else None
     recorded_metadata = None  # a bag's camera_info/metadata the measurer was made with
-    if job.settings.tone_curve == "auto" and conditions and "tone_curve" in conditions:
-        say(tone_note(conditions, job.calibration))
-    if job.settings.area_mode == "auto" and conditions and "area_mode" in conditions:
-        say(reading_note(conditions, job.calibration))
+    for note in auto_notes(conditions, job.calibration):
+        say(note)
     if job.idealized and camera is not None:
         folder = Path(job.idealized)
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
