@@ -1412,7 +1412,8 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
     camera node (camera_info_url as camera_info_manager's default: ${ROS_HOME}/camera_info/${NAME}.yaml) or the
     calibration node (its camera_info_url) to an area node given no
     calibration_file (tone_curve auto): the tone curve the area node's results were read with, and what the
-    file's edge trend did to them."""
+    file's edge trend did to them. With `area_mode` the file records that reading too, and with `background` the
+    area node is given a frame of the empty scene (which only the shares use)."""
     from veg_area_ros.calib_io import write_calibration
     from veg_area_ros.sim.synthetic import ENDOSCOPE
 
@@ -1427,15 +1428,26 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
     from veg_area_ros.camera_uncertainty import CameraCovariance
 
     covariance = CameraCovariance.from_std(dict.fromkeys(ENDOSCOPE.param_names, 1e-3), {}).as_dict()
-    write_calibration(calibration, ENDOSCOPE, "endoscope", {"medium": "air", "tone_curve": options["tone_curve"],
-                                                            "edge_trend": trend, "camera_covariance": covariance})
+    metadata = {"medium": "air", "tone_curve": options["tone_curve"], "edge_trend": trend,
+                "camera_covariance": covariance}
+    if options.get("area_mode"):
+        metadata.update(area_mode=options["area_mode"], area_mode_evidence="3 views: spread 0.61 % with the "
+                        "shares, 0.52 % counted")
+    write_calibration(calibration, ENDOSCOPE, "endoscope", metadata)
     if options["server"] == "camera":
         nodes.start("camera_node", rate_hz=5.0, synthetic_scene="cube", synthetic_medium="air",
                     camera_info_url="file://${ROS_HOME}/camera_info/${NAME}.yaml", camera_name="endoscope")
     else:
         nodes.start("calibration_node", camera_info_url=f"file://{calibration}")
         nodes.start("camera_node", rate_hz=5.0, synthetic_scene="cube", synthetic_medium="air")
-    nodes.start("area_node")
+    area_options = {}
+    if options.get("background"):
+        import cv2
+
+        background = Path("empty_flume.png").resolve()
+        cv2.imwrite(str(background), np.full((ENDOSCOPE.height, ENDOSCOPE.width), 200, np.uint8))
+        area_options["background_file"] = str(background)
+    nodes.start("area_node", **area_options)
     import rclpy
     from rclpy.node import Node
     from std_msgs.msg import String
@@ -1447,9 +1459,9 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
     infos: list[dict] = []
     probe.create_subscription(String, "projected_area/info", lambda m: infos.append(json.loads(m.data)), RESULT_QOS)
     try:
-        def settled() -> bool:  # ten results, the last five read with one curve
-            curves = [i.get("tone_curve") for i in infos if i.get("calibrated")]
-            return len(curves) >= 10 and len(set(curves[-5:])) == 1
+        def settled() -> bool:  # ten results, the last five read with one curve and one reading
+            read = [(i.get("tone_curve"), i.get("area_mode")) for i in infos if i.get("calibrated")]
+            return len(read) >= 10 and len(set(read[-5:])) == 1
 
         spin_for(probe, 0.0, until=settled, longest=float(options["seconds"]))
     finally:
@@ -1457,7 +1469,8 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
         rclpy.try_shutdown()
     return {"tone_curves": [i.get("tone_curve") for i in infos if i.get("calibrated")],
             "edge_trends": [i.get("edge_trend") for i in infos if i.get("calibrated")],
-            "calibration_stds": [i.get("calibration_std_m2") for i in infos if i.get("calibrated")]}
+            "calibration_stds": [i.get("calibration_std_m2") for i in infos if i.get("calibrated")],
+            "area_modes": [i.get("area_mode") for i in infos if i.get("calibrated")]}
 
 
 if __name__ == "__main__":

@@ -894,6 +894,25 @@ def test_an_area_node_given_camera_info_reads_the_calibrations_tone_curve(tmp_pa
     assert all(std > 0 for std in stds[came:]) and all(std == 0 for std in stds[:came]), stds
 
 
+def test_an_area_node_given_a_background_frame_counts_when_the_served_calibration_reads_better_counted(tmp_path):
+    """area_mode auto with a background_file (which evens the light for the shares only), and a calibration
+    served on camera_info whose metadata says its views read better counted: the node measured nothing when the
+    metadata came first (the calibration was 'not applied' for good) and kept the shares against the
+    calibration's evidence when it came after. It now counts, as it does for a calibration_file at start, and
+    its log says the background frame was left out and why."""
+    from ros_harness import run_scenario
+
+    result = run_scenario("metadata", tmp_path, server="calibration", tone_curve="linear", area_mode="count",
+                          background=True, seconds=90.0)
+    modes = result["area_modes"]
+    assert len(modes) >= 10, result["log"]
+    first = modes.index("count")  # a frame measured before the metadata came reads the shares
+    assert set(modes[first:]) == {"count"} and len(modes) - first >= 5, modes
+    lines = [line for line in result["whole_log"].splitlines() if "parameter background_file:" in line]
+    assert lines and "counts whole pixels here" in lines[0], result["log"]
+    assert "not applied" not in result["whole_log"], result["log"]
+
+
 def test_a_driver_that_does_not_stamp_its_images_is_timed_by_the_bag_and_says_so(workspace, scenes):
     """A camera driver that leaves header.stamp at 0: every row was at time 0 (a flat Af(t), no pairing with the
     flume's instruments); each frame is timed by when the bag received it, and its row says why."""

@@ -190,13 +190,15 @@ class AreaNode(Node):
         return image
 
     def _build_or_log(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None):
-        """`_build` at start: a background frame that does not fit these settings is logged and left out."""
+        """`_build` at start and for a calibration heard later: a background frame that does not fit these
+        settings (e.g. area_mode auto counting whole pixels, as the calibration's metadata decides) is logged and
+        left out, so the frames are measured rather than none."""
         try:
             return self._build(settings, camera, targets, self.background)
         except ValueError as exc:
             if self.background is None:
                 raise
-            self.get_logger().error(f"parameter background_file: {exc}; the light is fitted in each frame instead")
+            self.get_logger().error(f"parameter background_file: {exc}; the frames are measured without it")
             self.background = None
             return self._build(settings, camera, targets, None)
 
@@ -244,7 +246,7 @@ class AreaNode(Node):
         if conditions is None:
             return
         try:
-            measurer = self._build(self.settings, self.camera, self.targets, self.background)
+            measurer = self._build_or_log(self.settings, self.camera, self.targets)
         except Exception as exc:  # e.g. a tone curve this version does not know: measured as before
             self.get_logger().error(f"camera_info/metadata not applied ({exc.__class__.__name__}: {exc})")
             return
@@ -340,7 +342,7 @@ class AreaNode(Node):
         if camera == self.camera:
             return
         try:
-            measurer = self._build(self.settings, camera, self.targets, self.background)
+            measurer = self._build_or_log(self.settings, camera, self.targets)
         except Exception as exc:  # e.g. no memory for its pixel maps: the node goes on with what it had
             self.get_logger().error(f"calibration received but not applied ({exc.__class__.__name__}: {exc}); "
                                     "frames are measured with the previous one", throttle_duration_sec=10.0)
