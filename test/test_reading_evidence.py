@@ -94,7 +94,8 @@ def test_a_webcam_whose_views_read_better_counted_is_measured_counted_by_default
     """The right webcam of OpenCV's stereo pair (test/data/opencv-right), calibrated on half its photos: its
     views read better counted than with the shares, the file records count with the evidence, and the other
     half measured with it in the default mode reads as counted (held out, the shares spread 0.69 % against
-    counting's 0.52 %): the default is not worse than counting there. `measure` says the mode and why."""
+    counting's 0.52 %): the default is not worse than counting there. `measure` says the mode and why, also where
+    a file records no reading and the shares are read."""
     import held_out_board
 
     rows, summary, metadata = held_out_board.check(OPENCV_RIGHT, "chessboard:9x6:0.025", "air", half=0,
@@ -122,6 +123,16 @@ def test_a_webcam_whose_views_read_better_counted_is_measured_counted_by_default
     assert done.returncode == 0, done.stderr
     assert "area mode count, as" in done.stderr and "--area-mode sets another" in done.stderr, done.stderr
     assert json.loads(done.stdout.splitlines()[-1])["area_mode"] == "count"
+    # the same lens as a file made elsewhere records no reading: the shares are read, and the run says so
+    elsewhere = yaml.safe_load(calibration.read_text())
+    for key in ("area_mode", "area_mode_evidence"):
+        del elsewhere["veg_area_ros"][key]
+    (tmp_path / "elsewhere.yaml").write_text(yaml.safe_dump(elsewhere))
+    done = run_cli("measure", str(tmp_path / "measured" / photo.name), "--calibration", "elsewhere.yaml",
+                   "--targets", str(targets), "--roi", roi, "--json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "area mode subpixel: elsewhere.yaml records no reading judged on its views" in done.stderr, done.stderr
+    assert json.loads(done.stdout.splitlines()[-1])["area_mode"] == "subpixel"
 
 
 def test_the_report_draws_each_views_error_in_both_readings(tmp_path):

@@ -310,6 +310,13 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
     recorded_metadata = None  # a bag's camera_info/metadata the measurer was made with
     for note in auto_notes(conditions, job.calibration):
         say(note)
+    if job.settings.area_mode == "auto" and not from_bag and camera is not None and "area_mode" not in (conditions
+                                                                                                       or {}):
+        why = (conditions or {}).get("area_mode_evidence", "no board views of this camera were measured with it: "
+                                     "made elsewhere or from a ChArUco board")
+        say(f"area mode subpixel: {job.calibration} records no reading judged on its views ({why}); the shares "
+            "are exact on renders, but some cameras' real photos read better counted: calibrate with veg-area "
+            "calibrate on chessboard photos to judge it, or set --area-mode")
     if job.idealized and camera is not None:
         folder = Path(job.idealized)
         write_calibration(folder / "ideal_camera.yaml", camera.ideal(), "ideal",
