@@ -73,9 +73,10 @@ def whole_command_case(label: str, files: list[Path], board: BoardSpec, repeats:
     ours_rms, same_points_rms = rms_on_the_same_points(files, board)
     print(f"{len(files):5d} {label}, whole command: opencv script {opencv:.3f} s, veg-area calibrate "
           f"{whole:.3f} s ({whole / opencv:.2f}x); every fit converged: {summary['converged']}, views used "
-          f"{summary['views_used']} (the script's {script_views}); RMS ours {summary['rms_px']:.4f} px, "
-          f"calibrateCamera on the very points our fit kept {same_points_rms:.4f} px (difference "
-          f"{abs(ours_rms - same_points_rms):.4f}), the script's {script_rms:.4f} px on its own detections")
+          f"{summary['views_used']} (the script's {script_views}); RMS of the command's "
+          f"{summary['distortion_model']} {summary['rms_px']:.4f} px; plumb_bob on the very points our fit kept: "
+          f"ours {ours_rms:.4f} px, calibrateCamera's {same_points_rms:.4f} px (difference "
+          f"{abs(ours_rms - same_points_rms):.4f}); the script's {script_rms:.4f} px on its own detections")
 
 
 def rms_on_the_same_points(files: list[Path], board: BoardSpec) -> tuple[float, float]:

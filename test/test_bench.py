@@ -71,9 +71,10 @@ def test_calibration_speed_ours_fits_no_worse_than_opencv():
     assert "every fit converged: True" in large and numbers(large.split("(")[1])[0] > 0, large
     real = next(line for line in out.splitlines() if "real photos in opencv-left" in line)
     assert "views used 13 (the script's 13)" in real, real
-    ours, on_the_same_points = (float(v) for v in re.findall(r"RMS ours ([\d.]+) px, calibrateCamera on the very "
-                                                             r"points our fit kept ([\d.]+) px", real)[0])
+    ours, on_the_same_points = (float(v) for v in re.findall(r"plumb_bob on the very points our fit kept: ours "
+                                                             r"([\d.]+) px, calibrateCamera's ([\d.]+) px", real)[0])
     assert abs(ours - on_the_same_points) <= 1e-3, real  # the same least-squares problem: the same minimum
+    assert f"RMS of the command's plumb_bob {ours:.4f} px" in real, real  # auto's model for it: the same fit
 
 
 @pytest.mark.skipif(not netns_available(), reason="the ROS benches' fixed domains need a private network namespace")

@@ -23,6 +23,7 @@ from .board import BoardSpec, Detection, to_grey
 from .camera_model import BrownCamera
 from .classify import AREA_MODES, TONE_CURVES, Classifier
 from .edge_trend import TrendChoice, ViewEdge, fit_edge_trend
+from .idealize import IdealView
 from .reading_evidence import MIN_VIEWS as MIN_READING_VIEWS
 from .reading_evidence import ReadingChoice, ViewReading, choose_reading
 from .targets import TargetsSpec
@@ -275,10 +276,11 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
                         readings=readings)
     waiting = None if judged is None else set(judged)  # judged views not read yet
     decided = False
+    shared = _SharedCameraWork(IdealView(camera))
     for case, grey in cases:
         judging = judged is None or case.name in judged
         curves = TONE_CURVES if judging or not decided else (choice.curve,)
-        measured = _measured(case, grey, board, camera, curves, left_out)
+        measured = _measured(case, grey, board, shared, curves, left_out)
         if measured is not None:
             for curve, reading in measured.items():
                 readings[curve].append(reading)
@@ -298,8 +300,24 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     return choice
 
 
-def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, camera: BrownCamera, curves: Iterable[str],
-              left_out: dict[str, str]) -> dict[str, ViewReading] | None:
+@dataclass
+class _SharedCameraWork:
+    """What every view's measurers share, being the camera's alone: its idealizing maps and the pixel geometry
+    (built over the first view's window, then once over the whole frame)."""
+    view: IdealView
+    last: AreaMeasurer | None = None
+
+    def measurer(self, targets: TargetsSpec, curve: str, roi: np.ndarray, mode: str) -> AreaMeasurer:
+        measurer = AreaMeasurer(self.view.camera, targets, Classifier(threshold="otsu", tone_curve=curve), roi=roi,
+                                area_mode=mode, view=self.view)
+        if self.last is not None:
+            measurer.share_pixel_geometry(self.last)
+        self.last = measurer
+        return measurer
+
+
+def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, shared: _SharedCameraWork,
+              curves: Iterable[str], left_out: dict[str, str]) -> dict[str, ViewReading] | None:
     """Per curve, the view read both ways: its relative error in the default mode and its edge (where the shares
     were applied), and counted; None where the view is no case (said in `left_out`)."""
     truth = case.true_area_m2(board, case.first_black(grey))
@@ -311,8 +329,7 @@ def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, camera: Brown
     measured = {}
     for curve in curves:
         try:
-            result, counted = (AreaMeasurer(camera, targets, Classifier(threshold="otsu", tone_curve=curve),
-                                            roi=case.roi, area_mode=mode).measure(grey) for mode in AREA_MODES)
+            result, counted = (shared.measurer(targets, curve, case.roi, mode).measure(grey) for mode in AREA_MODES)
         except ValueError as exc:  # targets, light, a frame the measurement refuses: the view is no case
             left_out[case.name] = f"{curve}: {exc}"
             return None
