@@ -127,7 +127,7 @@ def test_the_views_share_the_cameras_work_and_each_reads_as_a_measurer_of_its_ow
     then over the whole frame once), which are the camera's alone: each view reads, to the last bit, as a fresh
     measurer of its own reads it, both ways. (A GoPro's 27 views took 35 s to judge, each measurer inverting the
     lens over the whole image again; 4 s shared, the file the same: docs/benchmarks.md.) A measurer refuses
-    another camera's geometry or view."""
+    another camera's view."""
     from dataclasses import replace
 
     from veg_area_ros.idealize import IdealView
@@ -148,9 +148,6 @@ def test_the_views_share_the_cameras_work_and_each_reads_as_a_measurer_of_its_ow
     case, _ = cases[0]
     with pytest.raises(ValueError, match="another camera"):
         AreaMeasurer(other, case.targets, Classifier(), view=IdealView(ENDOSCOPE))
-    with pytest.raises(ValueError, match="another camera"):
-        AreaMeasurer(other, case.targets, Classifier()).share_pixel_geometry(
-            AreaMeasurer(ENDOSCOPE, case.targets, Classifier()))
 
 
 @pytest.mark.parametrize("tone_curve", ["linear", "srgb"])

@@ -49,23 +49,19 @@ class Carried:
 
 
 class AreaMeasurer:
-    """Measures the frames of one camera: per-pixel geometry once per camera (over the ROI's raw window, or the
-    whole frame once the ROI moves out of it), weights once per target layout, the light while it holds."""
+    """Measures one camera's frames (`view`: its IdealView, if shared): per-pixel geometry once per camera (over
+    the ROI's raw window, or the whole frame once the ROI moves), weights per target layout, the light as it holds."""
 
     def __init__(self, camera: BrownCamera | None, targets: TargetsSpec, classifier: Classifier,
                  roi: np.ndarray | None = None, threshold_delta: float = 5.0, area_mode: str = "subpixel",
                  levels: tuple[float, float] | None = None, background: np.ndarray | None = None,
                  even_light: bool = True, calibration_conditions: dict | None = None,
                  calibration_spread: CalibrationSpread | None = None, view: IdealView | None = None):
-        """`view`: the camera's IdealView to share (its idealizing maps are the camera's alone, costly to build
-        for a model OpenCV cannot map): many measurers of one camera's views, e.g. a calibration judging them."""
         if area_mode not in AREA_MODES:
             raise ClassifyError(f"area mode must be one of {', '.join(AREA_MODES)}, got {area_mode!r}")
         self.camera, self.targets, self.classifier = camera, targets, classifier
         self.area_mode, self.threshold_delta = area_mode, threshold_delta
-        if view is not None and view.camera != camera:
-            raise ValueError("the shared ideal view is another camera's")
-        self.view = view if view is not None else IdealView(camera)
+        self.view = IdealView.of(camera, view)
         self.light_settings = LightSettings.checked(classifier, area_mode, levels, background, even_light,
                                                     camera.image_size if camera is not None else None)
         self.locator = Locator(targets, self.view, classifier.tone_curve)
@@ -115,14 +111,6 @@ class AreaMeasurer:
             if weights is not None and self.weighting.spread != previous.weighting.spread:
                 weights.calibration = self.weighting.calibration_sensitivity(weights)
         return alike
-
-    def share_pixel_geometry(self, other: AreaMeasurer) -> None:
-        """Start from `other`'s pixel geometry (raw pixels' positions in the idealized image and their footprints,
-        the camera's alone; each pixel's computed on its own, so the same wherever its window lies): many
-        measurers of one camera's frames build it once, e.g. a calibration measuring each view several ways."""
-        if other.camera != self.camera:
-            raise ValueError("the pixel geometry to share is another camera's")
-        self.carried.weights.geometry = other.carried.weights.geometry
 
     def start_segment(self) -> None:
         """Forget what is carried from frame to frame (tracked markers, weights, light): the next frame is

@@ -73,6 +73,16 @@ class IdealView:
         self.camera = camera
         self.idealizer = Idealizer(camera) if camera is not None else None
 
+    @classmethod
+    def of(cls, camera: BrownCamera | None, shared: IdealView | None = None) -> IdealView:
+        """`camera`'s view: `shared` where given (its maps are the camera's alone, costly for a model OpenCV
+        cannot map; many measurers of one camera's frames build them once), else a new one."""
+        if shared is None:
+            return cls(camera)
+        if shared.camera != camera:
+            raise ValueError("the shared ideal view is another camera's")
+        return shared
+
     @property
     def calibrated(self) -> bool:
         return self.camera is not None

@@ -19,6 +19,7 @@ import cv2
 import numpy as np
 
 from .area import AreaMeasurer
+from .area_result import AreaResult
 from .board import BoardSpec, Detection, to_grey
 from .camera_model import BrownCamera
 from .classify import AREA_MODES, TONE_CURVES, Classifier
@@ -27,6 +28,7 @@ from .idealize import IdealView
 from .reading_evidence import MIN_VIEWS as MIN_READING_VIEWS
 from .reading_evidence import ReadingChoice, ViewReading, choose_reading
 from .targets import TargetsSpec
+from .weights import PixelGeometry
 
 MAX_VIEWS = 24  # views the tone curve is judged on, evenly over sizes: about 1.5 s each at 10 MP (both curves)
 MAX_TREND_VIEWS = 48  # views measured for how the edges follow exposure (edge_trend): the bright few show a shoulder
@@ -303,17 +305,19 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
 @dataclass
 class _SharedCameraWork:
     """What every view's measurers share, being the camera's alone: its idealizing maps and the pixel geometry
-    (built over the first view's window, then once over the whole frame)."""
+    (built over the first view's window, then once over the whole frame; each pixel's is computed on its own,
+    so the same wherever its window lies)."""
     view: IdealView
-    last: AreaMeasurer | None = None
+    geometry: PixelGeometry | None = None
 
-    def measurer(self, targets: TargetsSpec, curve: str, roi: np.ndarray, mode: str) -> AreaMeasurer:
+    def measure(self, grey: np.ndarray, targets: TargetsSpec, curve: str, roi: np.ndarray, mode: str) -> AreaResult:
         measurer = AreaMeasurer(self.view.camera, targets, Classifier(threshold="otsu", tone_curve=curve), roi=roi,
                                 area_mode=mode, view=self.view)
-        if self.last is not None:
-            measurer.share_pixel_geometry(self.last)
-        self.last = measurer
-        return measurer
+        measurer.carried.weights.geometry = self.geometry
+        try:
+            return measurer.measure(grey)
+        finally:
+            self.geometry = measurer.carried.weights.geometry
 
 
 def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, shared: _SharedCameraWork,
@@ -329,7 +333,7 @@ def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, shared: _Shar
     measured = {}
     for curve in curves:
         try:
-            result, counted = (shared.measurer(targets, curve, case.roi, mode).measure(grey) for mode in AREA_MODES)
+            result, counted = (shared.measure(grey, targets, curve, case.roi, mode) for mode in AREA_MODES)
         except ValueError as exc:  # targets, light, a frame the measurement refuses: the view is no case
             left_out[case.name] = f"{curve}: {exc}"
             return None
