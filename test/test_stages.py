@@ -104,3 +104,26 @@ def test_the_orchestrator_is_short_and_each_stage_module_is_under_400_lines():
         text = (PACKAGE / f"{stage}.py").read_text()
         assert len(text.splitlines()) < 400, stage
         assert "exists because" in text.split('"""')[1] or "exists apart" in text.split('"""')[1], stage
+
+
+def test_settings_that_replace_a_measurer_of_the_same_camera_take_over_its_cameras_work():
+    """A parameter tuned live (the threshold, the ROI) rebuilds the area node's measurer: the camera's own work,
+    its idealizing maps and pixel geometry (seconds at 4K for a wide-angle model OpenCV cannot map), is taken
+    over from the measurer replaced where it is the same camera, and each frame reads as with a fresh measurer;
+    another camera's is not taken."""
+    from dataclasses import replace
+
+    from veg_area_ros.settings import MeasurementSettings
+
+    frames = [render_scene(ENDOSCOPE, cube_scene(), 0.7, seed=seed, noise_sigma=3.0) for seed in range(2)]
+    targets = scene_targets()
+    first = MeasurementSettings(threshold=120).measurer(ENDOSCOPE, targets)
+    first.measure(frames[0])
+    tuned = MeasurementSettings(threshold=110)
+    taken = tuned.measurer(ENDOSCOPE, targets, previous=first)
+    assert taken.view is first.view and taken.carried.weights.geometry is first.carried.weights.geometry
+    fresh = tuned.measurer(ENDOSCOPE, targets)
+    assert fresh.view is not first.view and fresh.carried.weights.geometry is None
+    assert [taken.measure(f).summary() for f in frames] == [fresh.measure(f).summary() for f in frames]
+    other = tuned.measurer(replace(ENDOSCOPE, k1=ENDOSCOPE.k1 + 0.01), targets, previous=first)
+    assert other.view is not first.view and other.carried.weights.geometry is None

@@ -113,12 +113,15 @@ class MeasurementSettings:
                           tone_curve=self.tone_curve_for(calibration))
 
     def measurer(self, camera: BrownCamera | None, targets: TargetsSpec, port_camera: FlatPortCamera | None = None,
-                 background: np.ndarray | None = None,
-                 calibration_conditions: dict | None = None) -> AreaMeasurer | PortAreaMeasurer:
+                 background: np.ndarray | None = None, calibration_conditions: dict | None = None,
+                 previous: object | None = None) -> AreaMeasurer | PortAreaMeasurer:
         """The measurer for frames of `camera` (None: uncalibrated); with `port_camera`, the exact flat-port model
         of that camera's calibration file. `background`: a frame of the empty scene to even the light with;
         `calibration_conditions`: the calibration file's metadata (medium, distance, said when the frames
-        leave them; the tone curve and area mode 'auto' take). Raises ClassifyError or TargetsError with the reason."""
+        leave them; the tone curve and area mode 'auto' take); `previous`: the measurer these settings replace,
+        whose camera's own work (idealizing maps, pixel geometry) is taken over where it is the same camera's
+        (a wide-angle model's maps take seconds at 4K: a threshold tuned live would stall on each change).
+        Raises ClassifyError or TargetsError with the reason."""
         area_mode = self.area_mode_for(calibration_conditions)
         if background is not None and area_mode != "subpixel" and self.area_mode == "auto":
             raise ClassifyError("a background frame evens the light for sub-pixel shares, and area mode auto "
@@ -130,6 +133,10 @@ class MeasurementSettings:
         if port_camera is not None:  # the port model holds at any distance; its file records its uncertainty
             return PortAreaMeasurer(port_camera, targets, self.classifier(calibration_conditions),
                                     calibration_conditions, **options)
-        return AreaMeasurer(camera, targets, self.classifier(calibration_conditions),
-                            calibration_conditions=calibration_conditions,
-                            **options)
+        same = isinstance(previous, AreaMeasurer) and camera is not None and previous.camera == camera
+        measurer = AreaMeasurer(camera, targets, self.classifier(calibration_conditions),
+                                calibration_conditions=calibration_conditions, view=previous.view if same else None,
+                                **options)
+        if same:
+            measurer.carried.weights.geometry = previous.carried.weights.geometry
+        return measurer

@@ -156,6 +156,7 @@ class AreaNode(Node):
         background_file = self.get_parameter("background_file").value
         self.background = read_start_file(self, "background_file", lambda: self._load_background(background_file),
                                           "the light is fitted in each frame instead") if background_file else None
+        self.measurer = None
         self.measurer = self._build_or_log(self.settings, self.camera, self.targets)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -219,7 +220,8 @@ class AreaNode(Node):
             return None
         from_file = camera is not None and camera == self.file_camera  # not a camera_info that replaced it
         return settings.measurer(camera, targets, self.port_camera if from_file else None, background,
-                                 self.file_conditions if from_file else self._info_conditions(camera))
+                                 self.file_conditions if from_file else self._info_conditions(camera),
+                                 self.measurer)  # its camera's maps, where it is the same camera
 
     def _info_conditions(self, camera) -> dict | None:
         """The metadata heard on camera_info/metadata if it belongs to `camera` (a camera_info's), else None."""
