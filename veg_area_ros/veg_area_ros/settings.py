@@ -114,7 +114,7 @@ class MeasurementSettings:
 
     def measurer(self, camera: BrownCamera | None, targets: TargetsSpec, port_camera: FlatPortCamera | None = None,
                  background: np.ndarray | None = None, calibration_conditions: dict | None = None,
-                 previous: object | None = None) -> AreaMeasurer | PortAreaMeasurer:
+                 previous: AreaMeasurer | PortAreaMeasurer | None = None) -> AreaMeasurer | PortAreaMeasurer:
         """The measurer for frames of `camera` (None: uncalibrated); with `port_camera`, the exact flat-port model
         of that camera's calibration file. `background`: a frame of the empty scene to even the light with;
         `calibration_conditions`: the calibration file's metadata (medium, distance, said when the frames
