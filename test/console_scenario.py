@@ -273,6 +273,13 @@ def scenario_console(options: dict, nodes) -> dict:
 
             # --- recording -----------------------------------------------------------------------------------
             out["steps"]["record_start"] = click_and_wait(page, "#record-start", "recording into")
+            # the recorder subscribes to each topic as its discovery finds it, seconds apart on a busy machine:
+            # the results it can hold are counted from when its log says it records them
+            def recorder_takes_the_results() -> bool:
+                said = "".join(p.read_text(errors="replace") for p in bags.glob("*.log"))
+                return "recording /projected_area (" in said and "recording /projected_area/info (" in said
+
+            out["recorder_takes_results"] = spin_until(recorder_takes_the_results, 90)
             recording_from = len(infos)
             # a few seconds of frames (a latched camera_info reaches the recorder after discovery)
             page.wait_for_function("(t => t.startsWith('recording into') && parseFloat(t.split(': ').pop()) >= 8)"

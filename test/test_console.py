@@ -407,6 +407,7 @@ def test_a_roi_drawn_on_the_page_becomes_the_nodes_roi(console):
 def test_recording_starts_and_stops_from_the_page(console):
     assert "MB" in console["recording_text"]
     assert "closed" in console["steps"]["record_stop"], console["recorder_log"]
+    assert console["recorder_takes_results"], console["recorder_log"]  # its log said it subscribed to them
     counts = console["bag_counts"]
     assert counts.get("/image_raw", 0) > 5 and counts.get("/projected_area", 0) > 5, \
         (counts, console["results_while_recording"])
