@@ -22,13 +22,12 @@ from .area import AreaMeasurer
 from .area_result import AreaResult
 from .board import BoardSpec, Detection, to_grey
 from .camera_model import BrownCamera
-from .classify import AREA_MODES, TONE_CURVES, Classifier
+from .classify import AREA_MODES, TONE_CURVES
 from .edge_trend import TrendChoice, ViewEdge, fit_edge_trend
-from .idealize import IdealView
 from .reading_evidence import MIN_VIEWS as MIN_READING_VIEWS
 from .reading_evidence import ReadingChoice, ViewReading, choose_reading
+from .settings import MeasurementSettings
 from .targets import TargetsSpec
-from .weights import PixelGeometry
 
 MAX_VIEWS = 24  # views the tone curve is judged on, evenly over sizes: about 1.5 s each at 10 MP (both curves)
 MAX_TREND_VIEWS = 48  # views measured for how the edges follow exposure (edge_trend): the bright few show a shoulder
@@ -278,7 +277,7 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
                         readings=readings)
     waiting = None if judged is None else set(judged)  # judged views not read yet
     decided = False
-    shared = _SharedCameraWork(IdealView(camera))
+    shared = _SharedCameraWork(camera)
     for case, grey in cases:
         judging = judged is None or case.name in judged
         curves = TONE_CURVES if judging or not decided else (choice.curve,)
@@ -304,20 +303,15 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
 
 @dataclass
 class _SharedCameraWork:
-    """What every view's measurers share, being the camera's alone: its idealizing maps and the pixel geometry
-    (built over the first view's window, then once over the whole frame; each pixel's is computed on its own,
-    so the same wherever its window lies)."""
-    view: IdealView
-    geometry: PixelGeometry | None = None
+    """The views' measurers, each taking over the camera's own work from the one before (its idealizing maps and
+    pixel geometry: MeasurementSettings.measurer's `previous`), built once instead of for every measurement."""
+    camera: BrownCamera
+    last: AreaMeasurer | None = None
 
     def measure(self, grey: np.ndarray, targets: TargetsSpec, curve: str, roi: np.ndarray, mode: str) -> AreaResult:
-        measurer = AreaMeasurer(self.view.camera, targets, Classifier(threshold="otsu", tone_curve=curve), roi=roi,
-                                area_mode=mode, view=self.view)
-        measurer.carried.weights.geometry = self.geometry
-        try:
-            return measurer.measure(grey)
-        finally:
-            self.geometry = measurer.carried.weights.geometry
+        settings = MeasurementSettings(threshold="otsu", roi=tuple(np.ravel(roi)), area_mode=mode, tone_curve=curve)
+        self.last = settings.measurer(self.camera, targets, previous=self.last)
+        return self.last.measure(grey)
 
 
 def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, shared: _SharedCameraWork,
