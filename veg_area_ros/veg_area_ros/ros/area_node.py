@@ -156,7 +156,7 @@ class AreaNode(Node):
         background_file = self.get_parameter("background_file").value
         self.background = read_start_file(self, "background_file", lambda: self._load_background(background_file),
                                           "the light is fitted in each frame instead") if background_file else None
-        self.measurer = None
+        self.measurer = None  # _build reads it: none yet to take the camera's maps from
         self.measurer = self._build_or_log(self.settings, self.camera, self.targets)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
