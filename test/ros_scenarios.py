@@ -1413,7 +1413,8 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
     calibration node (its camera_info_url) to an area node given no
     calibration_file (tone_curve auto): the tone curve the area node's results were read with, and what the
     file's edge trend did to them. With `area_mode` the file records that reading too, and with `background` the
-    area node is given a frame of the empty scene (which only the shares use)."""
+    area node is given a frame of the empty scene, with `levels` the object's and background's levels (which only
+    the shares use)."""
     from veg_area_ros.calib_io import write_calibration
     from veg_area_ros.sim.synthetic import ENDOSCOPE
 
@@ -1447,6 +1448,8 @@ def scenario_metadata(options: dict, nodes: Nodes) -> dict:
         background = Path("empty_flume.png").resolve()
         cv2.imwrite(str(background), np.full((ENDOSCOPE.height, ENDOSCOPE.width), 200, np.uint8))
         area_options["background_file"] = str(background)
+    if options.get("levels"):
+        area_options["levels"] = [40.0, 200.0]
     nodes.start("area_node", **area_options)
     import rclpy
     from rclpy.node import Node

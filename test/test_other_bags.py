@@ -913,6 +913,22 @@ def test_an_area_node_given_a_background_frame_counts_when_the_served_calibratio
     assert "not applied" not in result["whole_log"], result["log"]
 
 
+def test_an_area_node_given_levels_counts_when_the_served_calibration_reads_better_counted(tmp_path):
+    """The same with the levels parameter (the shares' object and background levels, which counting does not
+    read): the node counts, says the levels were left out and why, and sets the parameter back to [0.0]."""
+    from ros_harness import run_scenario
+
+    result = run_scenario("metadata", tmp_path, server="calibration", tone_curve="linear", area_mode="count",
+                          levels=True, seconds=90.0)
+    modes = result["area_modes"]
+    assert len(modes) >= 10, result["log"]
+    first = modes.index("count")
+    assert set(modes[first:]) == {"count"} and len(modes) - first >= 5, modes
+    lines = [line for line in result["whole_log"].splitlines() if "parameter levels:" in line]
+    assert lines and "counts whole pixels here" in lines[0] and "set back to [0.0]" in lines[0], result["log"]
+    assert "not applied" not in result["whole_log"], result["log"]
+
+
 def test_a_driver_that_does_not_stamp_its_images_is_timed_by_the_bag_and_says_so(workspace, scenes):
     """A camera driver that leaves header.stamp at 0: every row was at time 0 (a flat Af(t), no pairing with the
     flume's instruments); each frame is timed by when the bag received it, and its row says why."""

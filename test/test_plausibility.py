@@ -113,6 +113,7 @@ def test_the_cli_says_no_object_and_exits_1_keeping_the_row(folder):
 
 @pytest.mark.parametrize("extra, code, message", [
     (("--levels", "230,40"), 2, "are reversed for a dark object"),
+    (("--area-mode", "count", "--levels", "40,200"), 2, "they do not apply to count mode"),
     (("--object", "green"), 1, "has no colour"),
 ])
 def test_the_cli_refuses_what_cannot_be_right(folder, extra, code, message):

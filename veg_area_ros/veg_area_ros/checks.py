@@ -33,6 +33,7 @@ NEARLY_ALL = 0.98  # of the ROI's pixels taken for object: the classification to
 # of the ROI's border taken for object: what surrounds the object was classified as object (a plant's stem
 # crossing the border takes a few per cent of it, a board's squares along a ROI through its corners about half)
 SURROUNDS = 0.75
+GIVEN_LEVELS_APART_DN = 8.0  # given levels this far from the frame's (and beyond its spread) are another light's
 SHARES_APART = 0.2  # sub-pixel Af this far from the count (real photos: a few %): the levels are not this frame's
 CLIP_HIGH, CLIP_LOW = 250, 5  # band values a sensor or JPEG has clipped: whites burnt out, shadows crushed
 CLIP_REACH_PX = 2  # blooming and the lens's blur carry a clipped pixel's light this far into its neighbours
@@ -93,6 +94,9 @@ def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, ban
         result.area_std_m2 = float(np.hypot(result.area_std_m2, result.exposure_std_m2))
     result.edge_widths = _edge_widths(looked_at, mask, roi_count, weights, result.levels, markers)
     result.warnings = _warnings(result, mask, weights, located, settings)
+    unlike = _given_levels_unlike_the_frame(result, estimator)
+    if unlike:
+        result.warnings.append(unlike)
     absent = estimator.no_object(result.threshold)
     if absent is not None:  # never a large number from the background's noise or texture
         mask = np.zeros_like(mask)
@@ -101,6 +105,26 @@ def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, ban
         result.warnings = [f"no object found: {absent}; Af is 0"] + [
             w for w in result.warnings if w.split(":", 1)[0] not in OBJECT_WARNINGS]
     return mask
+
+
+def _given_levels_unlike_the_frame(result: AreaResult, estimator: LevelEstimator) -> str | None:
+    """What to say where the shares were read at given levels that this frame's own object or background
+    lies far from (beyond twice its spread and GIVEN_LEVELS_APART_DN): another light, or a slip in --levels."""
+    given = result.levels
+    if given is None or given.estimated or not result.subpixel_applied:
+        return None
+    seen = estimator.at(result.threshold)
+    if seen is None:
+        return None
+    apart = [(name, level, found) for name, level, found, spread in (
+        ("object", given.object, seen.object, seen.object_spread),
+        ("background", given.background, seen.background, seen.background_spread))
+        if abs(level - found) > max(GIVEN_LEVELS_APART_DN, 2 * spread)]
+    if not apart:
+        return None
+    told = ", ".join(f"the {name}'s {level:.0f} DN where this frame shows {found:.0f}" for name, level, found in apart)
+    return (f"given levels unlike this frame: {told}; the shares are read at levels the frame does not show and "
+            "Af's std does not hold it (give this light's levels, or leave --levels out to read them per frame)")
 
 
 def _roi_holds(roi_ideal: np.ndarray, pixel: np.ndarray) -> bool:

@@ -46,6 +46,14 @@ class ClassifyError(ValueError):
     """Settings or a region that cannot classify a frame."""
 
 
+class SharesOnlyError(ClassifyError):
+    """An option of the sub-pixel shares (`option`: 'background' or 'levels') given where they are not read."""
+
+    def __init__(self, message: str, option: str) -> None:
+        super().__init__(message)
+        self.option = option
+
+
 def to_light(values: ArrayLike, tone_curve: str) -> np.ndarray:
     """Band values (0..255, float allowed) as light on the same 0..255 scale, through the tone curve."""
     values = np.asarray(values, float)

@@ -25,6 +25,7 @@ from .classify import (
     ClassifyError,
     LevelEstimator,
     Levels,
+    SharesOnlyError,
     check_levels,
     otsu_level,
     pure_level,
@@ -52,6 +53,9 @@ class LightSettings:
                 background: np.ndarray | None, even_light: bool, image_size: tuple[int, int] | None) -> LightSettings:
         """The settings, each refused with its reason where it does not apply (ClassifyError)."""
         given = check_levels(levels)
+        if given is not None and area_mode != "subpixel":
+            raise SharesOnlyError("levels give the sub-pixel shares the object's and background's grey levels; "
+                                  "they do not apply to count mode (whole pixels are taken at the threshold)", "levels")
         if given is not None:  # reversed levels turned Af inside out (+906 %)
             object_level, background_level = given
             if (object_level > background_level) != (classifier.object != "dark"):
@@ -63,9 +67,9 @@ class LightSettings:
         # scene, else fitted per frame); not for the excess-green index, which is no brightness
         even_light = even_light and area_mode == "subpixel" and classifier.object != "green"
         if background is not None and not even_light:
-            raise ClassifyError("a background frame evens the light for sub-pixel shares of a dark or bright "
-                                "object; it does not apply to " + ("count mode" if area_mode != "subpixel"
-                                                                   else "the excess-green index"))
+            raise SharesOnlyError("a background frame evens the light for sub-pixel shares of a dark or bright "
+                                  "object; it does not apply to " + ("count mode" if area_mode != "subpixel"
+                                                                     else "the excess-green index"), "background")
         if background is not None and image_size is not None:
             check_background_frame(background, (image_size[1], image_size[0]))
         band = None if background is None else classifier.index_image(background)
@@ -154,7 +158,10 @@ def levels_at(estimator: LevelEstimator, threshold: float, settings: LightSettin
     if settings.given_levels is None:
         return estimated if estimated is not None and estimated.resolvable() else None
     object_level, background_level = settings.given_levels
-    spreads = ((estimated.object_spread, estimated.background_spread) if estimated is not None
+    # the classes' spreads as the light leaves them: the evened interiors where the light was read (the band's
+    # histogram at the threshold holds the shading too: 13 DN for 3.5 on a shaded print, never resolvable)
+    spread_from = light.levels if light is not None and light.levels is not None else estimated
+    spreads = ((spread_from.object_spread, spread_from.background_spread) if spread_from is not None
                else (MIN_SPREAD_DN, MIN_SPREAD_DN))
     given = Levels(object_level, background_level, *spreads, estimated=False,
                    tone_curve=settings.classifier.tone_curve)

@@ -13,7 +13,15 @@ import numpy as np
 
 from .area import AreaMeasurer
 from .camera_model import BrownCamera
-from .classify import AREA_MODES, TONE_CURVES, Classifier, ClassifyError, check_levels, check_polygon
+from .classify import (
+    AREA_MODES,
+    TONE_CURVES,
+    Classifier,
+    ClassifyError,
+    SharesOnlyError,
+    check_levels,
+    check_polygon,
+)
 from .flat_port import FlatPortCamera
 from .port_area import PortAreaMeasurer
 from .targets import TargetsSpec
@@ -123,11 +131,16 @@ class MeasurementSettings:
         (a wide-angle model's maps take seconds at 4K: a threshold tuned live would stall on each change).
         Raises ClassifyError or TargetsError with the reason."""
         area_mode = self.area_mode_for(calibration_conditions)
-        if background is not None and area_mode != "subpixel" and self.area_mode == "auto":
-            raise ClassifyError("a background frame evens the light for sub-pixel shares, and area mode auto "
-                                "counts whole pixels here: the calibration file's views read better counted "
-                                f"({calibration_conditions.get('area_mode_evidence', 'no evidence recorded')}); "
-                                "set the area mode to subpixel to even the light with the background")
+        if area_mode != "subpixel" and self.area_mode == "auto":
+            for given, option, what, does in (
+                    (background, "background", "a background frame", "evens the light for sub-pixel shares"),
+                    (self.levels, "levels", "given levels", "are the sub-pixel shares' object and background levels")):
+                if given is not None:
+                    raise SharesOnlyError(
+                        f"{what} {does}, and area mode auto counts whole pixels here: the "
+                        "calibration file's views read better counted "
+                        f"({calibration_conditions.get('area_mode_evidence', 'no evidence recorded')}); set the "
+                        f"area mode to subpixel to read the shares with {what}", option)
         options = dict(roi=None if self.roi is None else list(self.roi), threshold_delta=self.sweep_step,
                        area_mode=area_mode, levels=self.levels, background=background)
         if port_camera is not None:  # the port model holds at any distance; its file records its uncertainty

@@ -19,6 +19,7 @@ import json
 import math
 import time
 from collections import deque
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,7 @@ from geometry_msgs.msg import Vector3Stamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import CameraInfo, Image
 from std_msgs.msg import String
 
@@ -38,7 +40,7 @@ from ..board_hint import dictionary_hint
 from ..calib_io import metadata_for, read_calibration
 from ..camera_info import info_to_camera
 from ..cdr import decode_camera_info, stamp_ns, unstamped
-from ..classify import CHANNELS, OBJECTS, ClassifyError
+from ..classify import CHANNELS, OBJECTS, ClassifyError, SharesOnlyError
 from ..frames import read_image
 from ..idealize import FrameSizeError
 from ..latest import FrameTally
@@ -191,17 +193,22 @@ class AreaNode(Node):
         return image
 
     def _build_or_log(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None):
-        """`_build` at start and for a calibration heard later: a background frame that does not fit these
-        settings (e.g. area_mode auto counting whole pixels, as the calibration's metadata decides) is logged and
-        left out, so the frames are measured rather than none."""
+        """`_build` at start and for a calibration heard later: a background frame or given levels that do not
+        fit these settings (e.g. area_mode auto counting whole pixels, as the calibration's metadata decides) are
+        logged and left out (the levels parameter set back to [0.0], so later changes are judged without them),
+        and the frames are measured rather than none."""
         try:
             return self._build(settings, camera, targets, self.background)
-        except ValueError as exc:
-            if self.background is None:
-                raise
-            self.get_logger().error(f"parameter background_file: {exc}; the frames are measured without it")
-            self.background = None
-            return self._build(settings, camera, targets, None)
+        except SharesOnlyError as exc:
+            if exc.option == "background":
+                self.get_logger().error(f"parameter background_file: {exc}; the frames are measured without it")
+                self.background = None
+            else:
+                self.get_logger().error(f"parameter levels: {exc}; set back to {list(NO_LEVELS)}, each frame's "
+                                        "own levels are read")
+                self.settings = settings = replace(settings, levels=None)
+                self.set_parameters([Parameter("levels", Parameter.Type.DOUBLE_ARRAY, list(NO_LEVELS))])
+            return self._build_or_log(settings, camera, targets)
 
     def _settings(self, changed: dict) -> MeasurementSettings:
         """The measurement settings from the parameters, with `changed` (name -> value) over them; raises
