@@ -462,6 +462,7 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         mark = len(infos)
         spin_until(lambda: len(calibrated(mark)) >= 6, 30)
         out["area_modes_after_change"] = sorted({i["area_mode"] for i in calibrated(mark)[3:]})
+        out["levels_while_counting"] = refusal("levels", [40.0, 200.0])
         set_parameter("area_mode", "subpixel")
         mark = len(infos)  # tone_curve auto (the default), a calibration from camera_info: read as grey levels
         spin_until(lambda: len(calibrated(mark)) >= 5, 30)

@@ -90,6 +90,8 @@ def test_parameters_are_validated_and_change_at_run_time(graph):
     assert graph["persisted_tone"]["area_mode_evidence"], graph["persisted_tone"]
     assert graph["area_modes_before"] == [graph["persisted_tone"]["area_mode"]], graph["persisted_tone"]
     assert graph["good_area_mode"] is True and graph["area_modes_after_change"] == ["count"]
+    ok, reason = graph["levels_while_counting"]  # the shares' levels: ignored without a word while counting
+    assert not ok and "do not apply to count mode" in reason
     assert graph["tone_curves_by_default"] == ["linear"]  # auto, with no calibration file to read a curve from
     ok, reason = graph["bad_tone_curve"]
     assert not ok and "auto, linear, srgb" in reason
