@@ -274,6 +274,10 @@ def test_targets_file_with_a_duplicate_id(workspace, tmp_path):
                                            "pixels"),
     (["--roi", "10,10,20"], "needs at least 3 x,y corner pairs"),
     (["--video-step", "0"], "--video-step must be 1 or more"),
+    (["--video-step", "3"], "--video-step 3 takes every Nth frame of a video; the inputs are images"),
+    (["--segment-frames", "10"], "--segment-frames 10 splits a video or bag into segments; the inputs are images"),
+    (["--image-topic", "/left/image_raw"], "picks a bag's image topic; the inputs hold no bag"),
+    (["--area-mode", "count", "--levels", "40,200"], "they do not apply to count mode"),
     (["--tone-curve", "srgb", "--object", "green"], "use tone curve linear with object green"),
     (["--tone-curve", "gamma"], "argument --tone-curve: invalid choice: 'gamma'"),
 ])

@@ -234,6 +234,12 @@ def test_a_spreadsheets_csv_with_a_bom_is_read(tmp_path):
       "--report", "plots"), "--medium air, --report do not apply with --port/--lens"),
     (("calibrate", "photos", "--board", "chessboard:9x6:1", "-o", "c.yaml", "--water-index", "1.34"),
      "--water-index applies only with --port and --lens"),
+    (("calibrate", "photos", "--board", "chessboard:9x6:1", "-o", "c.yaml", "--outlier-sigma", "3",
+      "--no-outlier-rejection"), "--no-outlier-rejection rejects none: give one of them"),
+    (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--idealized", "ideal"),
+     "with --calibration none there is none"),
+    (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--object", "green", "--channel",
+      "red"), "channel red does not apply to object green"),
     (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler",
       "tcp://127.0.0.1:eighty"), "the port 'eighty' is not a number from 1 to 65535"),
     (("measure", "photos", "--calibration", "none", "--targets", "t.yaml", "--scheduler",
@@ -246,7 +252,9 @@ def test_a_spreadsheets_csv_with_a_bom_is_read(tmp_path):
 def test_numbers_and_options_that_cannot_apply_are_refused(tmp_path, args, message):
     """`demo --measurements 0` printed "Af over 0 frames: nan"; a confidence of 1.5, nan or 0 fitted;
     --fit-water-index without a port's underwater views, --overlay with --scheduler, the board fit's options
-    with --port and the port's options without it were ignored without a word."""
+    with --port and the port's options without it, --outlier-sigma with --no-outlier-rejection, --idealized
+    without a calibration (no frame written) and a channel with the excess-green index were ignored without a
+    word."""
     from helpers import run_cli
 
     (tmp_path / "photos").mkdir()

@@ -94,6 +94,9 @@ class Classifier:
             raise ClassifyError(f"object must be one of {', '.join(OBJECTS)}, got {self.object!r}")
         if self.channel not in CHANNELS:
             raise ClassifyError(f"channel must be one of {', '.join(CHANNELS)}, got {self.channel!r}")
+        if self.object == "green" and self.channel != "grey":  # it was ignored without a word
+            raise ClassifyError(f"channel {self.channel} does not apply to object green: the excess-green index reads "
+                                "all three colour channels; leave the channel at grey")
         numeric = isinstance(self.threshold, int | float) and not isinstance(self.threshold, bool)
         if self.threshold != "otsu" and not (numeric and np.isfinite(self.threshold) and 0 <= self.threshold <= 255):
             raise ClassifyError(f"threshold must be 0..255 or 'otsu', got {self.threshold!r}")

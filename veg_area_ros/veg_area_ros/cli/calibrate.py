@@ -245,6 +245,9 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     if args.fit_water_index and not (args.port and args.lens and args.inputs):
         raise CliError("--fit-water-index fits the water's index from underwater views through a port: it needs "
                        "--port, --lens and the underwater views", EXIT_USAGE)
+    if args.no_outlier_rejection and args.outlier_sigma != DEFAULT_OUTLIER_SIGMA:
+        raise CliError(f"--outlier-sigma {args.outlier_sigma:g} sets where outliers are rejected, and "
+                       "--no-outlier-rejection rejects none: give one of them", EXIT_USAGE)
     if args.port or args.lens:
         if args.model is not None:
             raise CliError("--model does not apply with --port/--lens: the lens's model is its air calibration's "

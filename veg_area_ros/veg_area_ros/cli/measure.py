@@ -109,7 +109,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="measure on a Dask cluster: the address of its scheduler (tcp://head:8786); the inputs "
                           "must be readable by the workers at the same paths (a shared filesystem); long videos "
                           "and bags are split into segments over the workers")
-    mea.add_argument("--segment-frames", type=int, default=SEGMENT_FRAMES, metavar="N",
+    mea.add_argument("--segment-frames", type=int, default=None, metavar="N",
                      help=f"a video or bag is measured in segments of N frames, each begun afresh (markers found "
                           f"anew, weights and light rebuilt), whoever measures it (default {SEGMENT_FRAMES})")
     mea.add_argument("--output-dir", default=None, metavar="DIR",
@@ -119,17 +119,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _refuse_options_the_inputs_ignore(args: argparse.Namespace) -> None:
-    """--video-step where no input can be a video (bags included) and --image-topic where none is a bag were ignored
-    in silence.
+    """--video-step where no input can be a video (bags included), --segment-frames where none is a video or bag
+    and --image-topic where none is a bag were ignored in silence.
     Photos a folder holds that OpenCV does not read are said here, once, whoever measures (a batch's processes, a
     cluster's workers)."""
     from ..frames import IMAGE_SUFFIXES, InputError, expand_inputs, is_bag
 
+    segments_given = args.segment_frames is not None
+    if not segments_given:
+        args.segment_frames = SEGMENT_FRAMES
     unread: list[str] = []
     try:
         files = expand_inputs(args.inputs, unread)
     except InputError:
         return  # said with its reason where the inputs are read
+    if segments_given and files and all(f.suffix.lower() in IMAGE_SUFFIXES for f in files):
+        raise CliError(f"--segment-frames {args.segment_frames} splits a video or bag into segments; the inputs are "
+                       "images", EXIT_USAGE)
     for note in unread:
         print(f"warning: {note}", file=sys.stderr, flush=True)
     if args.video_step > 1 and files and all(f.suffix.lower() in IMAGE_SUFFIXES or is_bag(f) for f in files):

@@ -122,6 +122,9 @@ class MeasureJob:
             raise CliError(str(exc), EXIT_USAGE) from exc
         if args.segment_frames < 1:
             raise CliError("--segment-frames must be 1 or more", EXIT_USAGE)
+        if args.idealized and args.calibration.lower() == "none":  # nothing was written, without a word
+            raise CliError("--idealized writes the frames idealized by their calibration; with --calibration none "
+                           "there is none (the raw frames are the input)", EXIT_USAGE)
         names = {f.name for f in fields(cls)} - {"settings", "inputs", "frame_range"}
         return cls(inputs=tuple(args.inputs), settings=settings, **{name: getattr(args, name) for name in names})
 
