@@ -114,6 +114,29 @@ def test_vogel_command_on_an_experiment_table(tmp_path):
     assert bad.returncode == 1 and "needs columns" in bad.stderr
 
 
+def test_vogel_on_a_table_refuses_what_only_bags_read_and_a_density_no_row_takes(tmp_path):
+    """The bags' options (axes, topics) with a table, and --density where every row gives its own, were ignored
+    without a word; a density some rows lack is taken for those rows alone."""
+    from veg_area_ros.cli.flume import WATER_DENSITY as PARSER_DENSITY
+
+    assert PARSER_DENSITY == WATER_DENSITY  # the parser's default, kept apart so the parser loads no numpy
+    table = tmp_path / "runs.csv"
+    table.write_text("velocity_m_s,force_n,area_m2,density\n0.1,0.05,0.01,1000\n0.2,0.17,0.009,1000\n"
+                     "0.3,0.35,0.0085,1000\n")
+    for option in (["--force-axis=-y"], ["--velocity-topic", "/adv/velocity"], ["--area-topic", "/a", "--force-topic",
+                                                                                  "/f"]):
+        done = run_cli("vogel", str(table), *option)
+        assert done.returncode == 2 and "read bags of recorded runs" in done.stderr.replace("reads", "read"), \
+            done.stderr
+    done = run_cli("vogel", str(table), "--density", "1025")
+    assert done.returncode == 2 and "every row of" in done.stderr and "gives its density" in done.stderr
+    table.write_text("velocity_m_s,force_n,area_m2,density\n0.1,0.05,0.01,1000\n0.2,0.17,0.009,\n"
+                     "0.3,0.35,0.0085,1000\n")
+    done = run_cli("vogel", str(table), "--density", "1025", "--json")
+    assert done.returncode == 0, done.stderr
+    assert [r["density"] for r in json.loads(done.stdout)["per_run"]] == [1000, 1025, 1000]
+
+
 def test_vogel_command_on_bags_one_run_each(tmp_path):
     """Bags recorded in the flume (force, velocity, Af topics), one per run: the exponent of the runs' means,
     with the balance pointing upstream (-y) and the probe along +x. Af as ProjectedArea in two runs and as the
