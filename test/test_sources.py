@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import cv2
 import numpy as np
 import pytest
@@ -73,6 +75,22 @@ def test_bad_sources_say_why(tmp_path):
         open_source(str(tmp_path / "nothing*.png"))
     with pytest.raises(SourceError, match="synthetic scene"):
         SyntheticSource("teapot")
+
+
+@pytest.mark.parametrize("settings, said", [
+    (dict(source="synthetic", width=1280, height=720), "image_width/image_height applies only to a device"),
+    (dict(source="synthetic", loop=True), "loop applies only to files"),
+    (dict(source="0", synthetic_scene="cube"), "synthetic_scene applies only to the synthetic camera"),
+    (dict(source="/dev/video3", loop=True, synthetic_medium="air"),
+     "loop applies only to files (videos, folders, bags); synthetic_medium applies only to the synthetic camera"),
+    (dict(source="run3.mp4", width=640), "is files (videos, folders, bags): image_width/image_height applies only"),
+])
+def test_a_setting_the_source_has_no_use_for_is_refused(settings, said):
+    """The camera node's size for a video, its synthetic scene for a device, looping a device: ignored without a
+    word before (a device opened at its own size while the launch file asked for 1280x720 went unnoticed)."""
+    source = settings.pop("source")
+    with pytest.raises(SourceError, match=re.escape(said)):
+        open_source(source, **settings)
 
 
 def test_synthetic_source_shows_board_views_then_the_cube():

@@ -204,13 +204,28 @@ class DeviceSource:
         self._capture.release()
 
 
+SOURCE_KINDS = {"device": "a device", "file": "files (videos, folders, bags)", "synthetic": "the synthetic camera"}
+SOURCE_SETTINGS = (("image_width/image_height", "device"), ("loop", "file"), ("synthetic_scene", "synthetic"),
+                   ("synthetic_medium", "synthetic"))  # each setting and the kind of source that uses it
+
+
 def open_source(source: str, loop: bool = False, width: int = 0, height: int = 0,
                 synthetic_scene: str = "board_then_cube", synthetic_medium: str = "water"
                 ) -> SyntheticSource | DeviceSource | FileSource:
-    """`synthetic`, a device (index or /dev/video*), a video file, an image folder, a rosbag2 bag or a glob."""
-    if source == "synthetic":
+    """`synthetic`, a device (index or /dev/video*), a video file, an image folder, a rosbag2 bag or a glob.
+    A setting the source has no use for (a device's size for a file, the synthetic scene for a device, looping a
+    device) is refused with the reason (SourceError): it was ignored without a word."""
+    kind = ("synthetic" if source == "synthetic" else "device" if source.isdigit() or source.startswith("/dev/video")
+            else "file")
+    given = {"image_width/image_height": bool(width or height), "loop": loop,
+             "synthetic_scene": synthetic_scene != "board_then_cube", "synthetic_medium": synthetic_medium != "water"}
+    unused = [(name, used_by) for name, used_by in SOURCE_SETTINGS if given[name] and used_by != kind]
+    if unused:
+        said = "; ".join(f"{name} applies only to {SOURCE_KINDS[used_by]}" for name, used_by in unused)
+        raise SourceError(f"source {source!r} is {SOURCE_KINDS[kind]}: {said} (leave it at its default)")
+    if kind == "synthetic":
         return SyntheticSource(synthetic_scene, synthetic_medium)
-    if source.isdigit() or source.startswith("/dev/video"):
+    if kind == "device":
         return DeviceSource(int(source) if source.isdigit() else source, width, height)
     path = Path(source)
     if path.exists():  # a folder, an image, a video (or a file OpenCV may still open as one), a bag
