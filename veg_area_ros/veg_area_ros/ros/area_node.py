@@ -199,15 +199,17 @@ class AreaNode(Node):
         and the frames are measured rather than none."""
         try:
             return self._build(settings, camera, targets, self.background)
-        except SharesOnlyError as exc:
-            if exc.option == "background":
-                self.get_logger().error(f"parameter background_file: {exc}; the frames are measured without it")
-                self.background = None
-            else:
+        except ValueError as exc:
+            if isinstance(exc, SharesOnlyError) and exc.option == "levels":
                 self.get_logger().error(f"parameter levels: {exc}; set back to {list(NO_LEVELS)}, each frame's "
                                         "own levels are read")
                 self.settings = settings = replace(settings, levels=None)
                 self.set_parameters([Parameter("levels", Parameter.Type.DOUBLE_ARRAY, list(NO_LEVELS))])
+            elif self.background is not None:  # it does not apply, or not to this camera's frames (their size)
+                self.get_logger().error(f"parameter background_file: {exc}; the frames are measured without it")
+                self.background = None
+            else:
+                raise
             return self._build_or_log(settings, camera, targets)
 
     def _settings(self, changed: dict) -> MeasurementSettings:
