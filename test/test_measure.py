@@ -280,6 +280,7 @@ def test_targets_file_with_a_duplicate_id(workspace, tmp_path):
     (["--area-mode", "count", "--levels", "40,200"], "they do not apply to count mode"),
     (["--tone-curve", "srgb", "--object", "green"], "use tone curve linear with object green"),
     (["--tone-curve", "gamma"], "argument --tone-curve: invalid choice: 'gamma'"),
+    (["--sweep-step", "300"], "the sweep step must be a positive number of grey levels up to 127"),
 ])
 def test_usage_errors(workspace, args, message):
     done = measure(workspace, *args)

@@ -125,25 +125,40 @@ def _even_odd(u: np.ndarray, v: np.ndarray, polygon: np.ndarray) -> np.ndarray:
 def test_the_views_share_the_cameras_work_and_each_reads_as_a_measurer_of_its_own_would():
     """The views' measurers share the camera's idealizing maps and pixel geometry (over the first view's window,
     then over the whole frame once), which are the camera's alone: each view reads, to the last bit, as a fresh
-    measurer of its own reads it, both ways. (`veg-area calibrate` of the GoPro's 37 photos took 35 s, each of its
-    102 measurers inverting the lens over the whole image again; 5 s shared, the file the same:
-    docs/benchmarks.md.) A measurer refuses another camera's view."""
+    measurer of its own reads it, both ways and under both curves. (`veg-area calibrate` of the GoPro's 37 photos
+    took 35 s, each of its 102 measurers inverting the lens over the whole image again; 5 s shared, the file the
+    same: docs/benchmarks.md.) The four measurements of one view share its pixel weights too: built once a view.
+    A measurer refuses another camera's view."""
     from dataclasses import replace
 
     from veg_area_ros.idealize import IdealView
+    from veg_area_ros.weights import Weighting
 
     cases = _cases("linear")
-    choice = choose_tone_curve(cases, BOARD, ENDOSCOPE)
-    readings = {reading.name: reading for reading in choice.readings["linear"]}
-    assert len(readings) >= 10
-    for case, image in cases:
-        if case.name not in readings:
-            continue
-        truth = case.true_area_m2(BOARD, case.first_black(image))
-        fresh = [AreaMeasurer(ENDOSCOPE, replace(case.targets, distance_std_m=0.0), Classifier(threshold="otsu"),
-                              roi=case.roi, area_mode=mode).measure(image).area_m2 / truth - 1
-                 for mode in ("subpixel", "count")]
-        assert [readings[case.name].default_error, readings[case.name].count_error] == fresh, case.name
+    built = []
+    build = Weighting._build
+
+    def counted_build(self, *args, **kwargs):
+        built.append(self)
+        return build(self, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Weighting, "_build", counted_build)
+        choice = choose_tone_curve(cases, BOARD, ENDOSCOPE)
+    assert choice.readings["srgb"] and not choice.left_out
+    assert len(built) == len(cases), (len(built), len(cases))  # once a view, not once a measurement
+    for curve in ("linear", "srgb"):
+        readings = {reading.name: reading for reading in choice.readings[curve]}
+        assert len(readings) >= 10
+        for case, image in cases:
+            if case.name not in readings:
+                continue
+            truth = case.true_area_m2(BOARD, case.first_black(image))
+            fresh = [AreaMeasurer(ENDOSCOPE, replace(case.targets, distance_std_m=0.0),
+                                  Classifier(threshold="otsu", tone_curve=curve), roi=case.roi,
+                                  area_mode=mode).measure(image).area_m2 / truth - 1
+                     for mode in ("subpixel", "count")]
+            assert [readings[case.name].default_error, readings[case.name].count_error] == fresh, (curve, case.name)
     other = replace(ENDOSCOPE, k1=ENDOSCOPE.k1 + 0.01)
     case, _ = cases[0]
     with pytest.raises(ValueError, match="another camera"):

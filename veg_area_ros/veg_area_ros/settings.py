@@ -29,6 +29,7 @@ from .targets import TargetsSpec
 THRESHOLD_MODES = ("fixed", "otsu")
 # auto: the curve the calibration file records, judged on its own board views (tone_evidence), else linear
 TONE_CURVE_CHOICES = ("auto", *TONE_CURVES)
+MAX_SWEEP_STEP = 127  # grey levels: threshold +/- a wider step lies outside 0..255 whatever the threshold
 AREA_MODE_CHOICES = ("auto", *AREA_MODES)  # auto: the reading the calibration's views favour, else the shares
 NO_ROI = (0.0,)  # how a ROS parameter (typed, never empty on the command line) says "inside the targets"
 NO_LEVELS = (0.0,)
@@ -79,8 +80,10 @@ class MeasurementSettings:
             raise ClassifyError(f"tone_curve must be one of {', '.join(TONE_CURVE_CHOICES)}, got {self.tone_curve!r}")
         if self.area_mode not in AREA_MODE_CHOICES:
             raise ClassifyError(f"area_mode must be one of {', '.join(AREA_MODE_CHOICES)}, got {self.area_mode!r}")
-        if not (math.isfinite(self.sweep_step) and self.sweep_step > 0):
-            raise ClassifyError(f"the sweep step must be a positive number of grey levels, got {self.sweep_step}")
+        if not (math.isfinite(self.sweep_step) and 0 < self.sweep_step <= MAX_SWEEP_STEP):
+            raise ClassifyError(f"the sweep step must be a positive number of grey levels up to {MAX_SWEEP_STEP} "
+                                f"(a wider step leaves the band at both ends of any threshold, and the threshold "
+                                f"term would be the whole ROI's), got {self.sweep_step:g}")
         self.classifier()  # threshold, object, channel and morphology checked once, here
 
     @property

@@ -95,7 +95,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                      help="sub-pixel mode: a frame of the empty scene (the flume before the plant goes in), same "
                           "camera and settings, to even the light with (default: the light is fitted per frame)")
     mea.add_argument("--sweep-step", type=positive_float, default=DEFAULTS.sweep_step,
-                     help="threshold step of the sweep and of the threshold uncertainty (grey levels)")
+                     help="threshold step of the sweep and of the threshold uncertainty (grey levels, at most 127)")
     mea.add_argument("--json", action="store_true", help="one JSON object per frame on stdout (a batch: per input)")
     mea.add_argument("--overlay", metavar="PNG_OR_DIR", help="draw mask, ROI and targets (a file, or a folder)")
     mea.add_argument("--csv", metavar="FILE", help="time series CSV (+ PNG plot beside it); "
