@@ -106,6 +106,24 @@ def test_auto_picks_a_model_that_predicts_held_out_views_and_says_why(model):
         assert choice["chosen"] == "equidistant"
 
 
+def test_many_views_compare_the_models_on_an_even_sample_and_fit_the_one_taken_to_all(monkeypatch):
+    """Past MAX_VIEWS_TO_CHOOSE views (a video's hundreds) the models are compared on that many views evenly
+    through them and the model taken is fitted to every view: the same camera as fitting that model to all, the
+    same model as comparing on all here, and the reason says how many views compared them."""
+    import veg_area_ros.calibration as calibration
+
+    views = list(_views("equidistant", "air"))
+    on_all = calibrate(views, FISHEYE.image_size, model="auto")
+    monkeypatch.setattr(calibration, "MAX_VIEWS_TO_CHOOSE", 10)
+    on_a_sample = calibrate(views, FISHEYE.image_size, model="auto")
+    chosen = on_a_sample.model_choice["chosen"]
+    assert chosen == on_all.model_choice["chosen"] == "equidistant"
+    assert on_a_sample.camera == calibrate(views, FISHEYE.image_size, model=chosen).camera == on_all.camera
+    assert f"(compared on 10 of the {len(views)} views, evenly through them; fitted to all)" in \
+        on_a_sample.model_choice["reason"]
+    assert "compared on" not in on_all.model_choice["reason"]
+
+
 @pytest.mark.parametrize("medium", ["air", "water"])
 @pytest.mark.parametrize("model", list(LENSES))
 def test_af_through_a_wide_lens_within_0_3_percent(model, medium):
