@@ -109,7 +109,8 @@ def test_auto_picks_a_model_that_predicts_held_out_views_and_says_why(model):
 def test_many_views_compare_the_models_on_an_even_sample_and_fit_the_one_taken_to_all(monkeypatch):
     """Past MAX_VIEWS_TO_CHOOSE views (a video's hundreds) the models are compared on that many views evenly
     through them and the model taken is fitted to every view: the same camera as fitting that model to all, the
-    same model as comparing on all here, and the reason says how many views compared them."""
+    same model as comparing on all here, and the reason says how many views compared them. A sample too small
+    to split leaves the comparison to all the views."""
     import veg_area_ros.calibration as calibration
 
     views = list(_views("equidistant", "air"))
@@ -122,6 +123,9 @@ def test_many_views_compare_the_models_on_an_even_sample_and_fit_the_one_taken_t
     assert f"(compared on 10 of the {len(views)} views, evenly through them; fitted to all)" in \
         on_a_sample.model_choice["reason"]
     assert "compared on" not in on_all.model_choice["reason"]
+    monkeypatch.setattr(calibration, "MAX_VIEWS_TO_CHOOSE", 5)  # too few to split: all views compare them
+    too_few = calibrate(views, FISHEYE.image_size, model="auto")
+    assert too_few.model_choice["reason"] == on_all.model_choice["reason"] and too_few.camera == on_all.camera
 
 
 @pytest.mark.parametrize("medium", ["air", "water"])

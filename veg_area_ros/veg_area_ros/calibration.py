@@ -913,7 +913,8 @@ def _chosen_on_a_sample(views: Sequence[View], image_size: tuple[int, int], robu
                         ) -> CalibrationResult | None:
     """The model compared on MAX_VIEWS_TO_CHOOSE views evenly through `views`, then fitted to all of them (the
     same fit as `calibrate` with that model); None where the sample cannot tell the models apart (no held-out
-    figure) or the model taken is implausible over all the views' points: then all views choose."""
+    figure), or the model taken does not fit all the views or is implausible over their points: then all views
+    choose."""
     step = len(views) / MAX_VIEWS_TO_CHOOSE
     sample = [views[int(k * step)] for k in range(MAX_VIEWS_TO_CHOOSE)]
     try:
@@ -923,7 +924,10 @@ def _chosen_on_a_sample(views: Sequence[View], image_size: tuple[int, int], robu
     choice = judged.model_choice
     if not any(np.isfinite(c.get("held_out_rms_px", math.nan)) for c in choice["candidates"].values()):
         return None
-    result = calibrate(views, image_size, robust_loss, outlier_sigma, progress, True, choice["chosen"])
+    try:
+        result = calibrate(views, image_size, robust_loss, outlier_sigma, progress, True, choice["chosen"])
+    except CalibrationError:
+        return None
     covered = np.vstack([p[k] for p, k in zip(result.image_points, result.inliers, strict=True)])
     if implausibility(result.camera, covered=covered) is not None:
         return None
