@@ -376,6 +376,8 @@ def model_reach(camera: BrownCamera) -> tuple[float, float] | None:
     the smallest distorted radius the circle there reaches. Raw pixels farther out than the distorted radius
     (and ideal ones beyond the ideal radius) have no trustworthy ray. None: it holds over the whole image. A
     polynomial fitted to a wide lens bends back beyond the board's reach; inside it, it is as good as any."""
+    if camera.pinhole and not np.any(camera.dist):  # no distortion (an ideal camera): the identity never folds
+        return None
     width, height = camera.image_size
     corners = np.array([[0.0, 0.0], [width - 1, 0.0], [0.0, height - 1], [width - 1, height - 1]])
     image_reach = float(np.max(np.hypot((corners[:, 0] - camera.xp) / camera.fx,
