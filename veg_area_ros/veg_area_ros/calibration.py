@@ -876,8 +876,7 @@ def choose_model(views: Sequence[View], image_size: tuple[int, int], robust_loss
             candidates[model] = {"error": str(exc)}
             continue
         fitted[model] = fit
-        problem = implausibility(fit.camera, covered=np.vstack([p[k] for p, k in zip(fit.image_points, fit.inliers,
-                                                                                         strict=True)]))
+        problem = _implausible_over_its_points(fit)
         held_out = fit.halves.get("held_out_rms_px", math.nan)
         candidates[model] = {"rms_px": fit.rms_px, "held_out_rms_px": held_out, "problem": problem}
         if problem is None and np.isfinite(held_out):
@@ -908,6 +907,12 @@ def choose_model(views: Sequence[View], image_size: tuple[int, int], robust_loss
     return result
 
 
+def _implausible_over_its_points(fit: CalibrationResult) -> str | None:
+    """Why the fitted model cannot be this lens over the region its board points (the inliers) cover, or None."""
+    covered = np.vstack([points[kept] for points, kept in zip(fit.image_points, fit.inliers, strict=True)])
+    return implausibility(fit.camera, covered=covered)
+
+
 def _chosen_on_a_sample(views: Sequence[View], image_size: tuple[int, int], robust_loss: str,
                         outlier_sigma: float | None, progress: Callable[[str], None] | None
                         ) -> CalibrationResult | None:
@@ -928,8 +933,7 @@ def _chosen_on_a_sample(views: Sequence[View], image_size: tuple[int, int], robu
         result = calibrate(views, image_size, robust_loss, outlier_sigma, progress, True, choice["chosen"])
     except CalibrationError:
         return None
-    covered = np.vstack([p[k] for p, k in zip(result.image_points, result.inliers, strict=True)])
-    if implausibility(result.camera, covered=covered) is not None:
+    if _implausible_over_its_points(result) is not None:
         return None
     result.model_choice = {**choice, "reason": f"{choice['reason']} (compared on {len(sample)} of the "
                                                f"{len(views)} views, evenly through them; fitted to all)",

@@ -309,16 +309,14 @@ class _SharedCameraWork:
     which neither the curve nor the reading changes (half the judgement's time went on building them again)."""
     camera: BrownCamera
     last: AreaMeasurer | None = None
-    last_view: tuple[TargetsSpec, bytes] | None = None
 
     def measure(self, grey: np.ndarray, targets: TargetsSpec, curve: str, roi: np.ndarray, mode: str) -> AreaResult:
         settings = MeasurementSettings(threshold="otsu", roi=tuple(np.ravel(roi)), area_mode=mode, tone_curve=curve)
-        previous, view = self.last, (targets, np.asarray(roi, float).tobytes())
+        previous = self.last
         self.last = settings.measurer(self.camera, targets, previous=previous)
-        same_view = self.last_view is not None and self.last_view[0] is targets and self.last_view[1] == view[1]
-        if same_view and isinstance(previous, AreaMeasurer):
-            self.last.carried.weights = previous.carried.weights
-        self.last_view = view
+        if (isinstance(previous, AreaMeasurer) and previous.targets is targets
+                and np.array_equal(previous.region.user_polygon, self.last.region.user_polygon)):
+            self.last.carried.weights = previous.carried.weights  # the same view
         return self.last.measure(grey)
 
 
