@@ -83,7 +83,7 @@ class MeasurementSettings:
         if not (math.isfinite(self.sweep_step) and 0 < self.sweep_step <= MAX_SWEEP_STEP):
             raise ClassifyError(f"the sweep step must be a positive number of grey levels up to {MAX_SWEEP_STEP} "
                                 f"(a wider step leaves the band at both ends of any threshold, and the threshold "
-                                f"term would be the whole ROI's), got {self.sweep_step:g}")
+                                f"term would be about half the ROI's area), got {self.sweep_step:g}")
         self.classifier()  # threshold, object, channel and morphology checked once, here
 
     @property
