@@ -1,9 +1,10 @@
 """The real ChArUco webcam video (`../shared/data/charuco-video/cam_0.mp4`, a 4x5 board printed white on
 black) as an Af measurement: `veg-area calibrate` on the video itself, then in each frame that shows the four
 outer inner corners, the dark area of the print inside the plane rectangle through the outer squares' centres,
-those four corners as hand-picked targets, in the default mode and counted. The truth is the board's own
-drawing (OpenCV's, inverted as printed). A weak reference (a weak calibration, crushed blacks): docs/measuring.md
-quotes it as such.
+those four corners as hand-picked targets, in the default mode (auto: the reading the calibration records,
+judged on the video's own board views), with the shares and counted, with the calibration file as
+`veg-area measure` reads it. The truth is the board's own drawing (OpenCV's, inverted as printed). A weak
+reference (a weak calibration, crushed blacks): docs/measuring.md quotes it as such.
 
     PYTHONPATH=veg_area_ros:test .venv/bin/python test/charuco_video_board.py [VIDEO]
 """
@@ -21,16 +22,15 @@ import cv2
 import numpy as np
 from held_out_board import scatter
 
-from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.calib_io import read_calibration
-from veg_area_ros.classify import Classifier
 from veg_area_ros.cli import main as veg_area
+from veg_area_ros.settings import MeasurementSettings
 from veg_area_ros.targets import TargetsSpec
 
 VIDEO = Path(__file__).resolve().parents[2] / "shared/data/charuco-video/cam_0.mp4"
 SQUARES, SQUARE_M, MARKER_M, DICTIONARY = (4, 5), 0.054, 0.0405, "DICT_4X4_1000"
 OUTER = (0, 2, 11, 9)  # the four outer inner corners of a 4x5 board's 3x4, around the rectangle
-MODES = ("subpixel", "count")
+MODES = ("auto", "subpixel", "count")  # the default (the reading the calibration records), the shares, counted
 
 
 def dark_area_m2(board: cv2.aruco.CharucoBoard, px_per_square: int = 1000) -> float:
@@ -65,8 +65,9 @@ def board_frames(video: Path, board: cv2.aruco.CharucoBoard) -> Iterator[tuple[n
         capture.release()
 
 
-def measure(video: Path) -> list[dict[str, tuple[float, float, bool]]]:
-    """Per frame measured: mode -> (Af over the truth, minus 1; reported std over the truth; shares applied)."""
+def measure(video: Path) -> tuple[list[dict[str, tuple[float, float, bool]]], dict]:
+    """(per frame measured: mode -> (Af over the truth, minus 1; reported std over the truth; shares applied),
+    the calibration file's veg_area_ros block)."""
     with tempfile.TemporaryDirectory() as work, contextlib.redirect_stdout(io.StringIO()):
         calibration = Path(work) / "webcam.yaml"
         code = veg_area(["calibrate", str(video), "--board",
@@ -74,7 +75,8 @@ def measure(video: Path) -> list[dict[str, tuple[float, float, bool]]]:
                          "-o", str(calibration), "--video-step", "1", "-q"])
         if code != 0:
             raise RuntimeError(f"veg-area calibrate exited {code}")
-        camera = read_calibration(calibration).camera
+        calibration_file = read_calibration(calibration)
+    camera = calibration_file.camera
     ideal = camera.ideal()
     board = cv2.aruco.CharucoBoard(SQUARES, SQUARE_M, MARKER_M,
                                    cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, DICTIONARY)))
@@ -94,16 +96,19 @@ def measure(video: Path) -> list[dict[str, tuple[float, float, bool]]]:
         roi = cv2.perspectiveTransform(rectangle.reshape(-1, 1, 2), homography).reshape(-1, 2).astype(float)
         row = {}
         for mode in MODES:
-            result = AreaMeasurer(camera, targets, Classifier(threshold="otsu"), roi=roi,
-                                  area_mode=mode).measure(frame)
+            settings = MeasurementSettings(threshold="otsu", roi=tuple(np.ravel(roi)), area_mode=mode)
+            result = settings.measurer(camera, targets,
+                                       calibration_conditions=calibration_file.metadata).measure(frame)
             row[mode] = (result.area_m2 / truth - 1, result.area_std_m2 / truth, result.subpixel_applied)
         frames.append(row)
-    return frames
+    return frames, calibration_file.metadata
 
 
 def main(argv: list[str] | None = None) -> int:
     video = Path((argv or sys.argv[1:] or [str(VIDEO)])[0])
-    frames = measure(video)
+    frames, recorded = measure(video)
+    print(f"the calibration records area mode {recorded.get('area_mode', 'none')}: "
+          f"{recorded.get('area_mode_evidence')}")
     for mode in MODES:
         errors = np.array([f[mode][0] for f in frames])
         spread, worst, largest = scatter(errors, np.array([f[mode][1] for f in frames]))

@@ -19,9 +19,18 @@ from veg_area_ros.board import BoardSpec
 from veg_area_ros.classify import Classifier, ClassifyError, polygon_roi
 from veg_area_ros.settings import MeasurementSettings
 from veg_area_ros.sim.synthetic import ENDOSCOPE, board_views, look_at_pose, render_board_views
-from veg_area_ros.tone_evidence import MAX_VIEWS, board_case, choose_tone_curve, judged_first
+from veg_area_ros.tone_evidence import (
+    MAX_VIEWS,
+    MIN_CELL_PX,
+    board_case,
+    choose_tone_curve,
+    corner_rectangles,
+    could_be_case,
+    judged_first,
+)
 
 BOARD = BoardSpec.parse("chessboard:9x6:0.02")
+CHARUCO = BoardSpec.parse("charuco:5x4:0.02:0.015:DICT_4X4_50")  # markers of 6 cells of 2.5 mm
 
 
 @functools.cache
@@ -208,12 +217,15 @@ def test_the_curve_is_judged_on_its_views_and_the_edges_on_all():
 
 def test_views_at_one_distance_leave_the_default_and_say_why():
     """Ten views at about 0.4 m, little tilted (squares within 1.3x of each other): not judged, linear kept,
-    and the reason says to photograph the board near and far. A ChArUco board is not judged either."""
+    and the reason says to photograph the board near and far. A circle grid is not judged (no squares to read),
+    nor a ChArUco board without views."""
     choice = choose_tone_curve(_cases("srgb", near_and_far=False), BOARD, ENDOSCOPE)
     assert not choice.decided and choice.curve == "linear"
     assert "too alike in distance" in choice.reason and "near and far" in choice.reason
-    charuco = choose_tone_curve(iter(()), BoardSpec.parse("charuco:5x7:0.04:0.03:DICT_4X4_50"), ENDOSCOPE)
-    assert not charuco.decided and "charuco" in charuco.reason
+    circles = choose_tone_curve(iter(()), BoardSpec.parse("circles:4x11:0.02"), ENDOSCOPE)
+    assert not circles.decided and "circles board" in circles.reason
+    charuco = choose_tone_curve(iter(()), CHARUCO, ENDOSCOPE)  # one of the boards read, with no view to read
+    assert not charuco.decided and "a rectangle of its corners" in charuco.reason and "0 could be" in charuco.reason
 
 
 def test_auto_reads_the_calibrations_curve_and_refuses_one_it_does_not_know():
@@ -346,3 +358,106 @@ def test_a_live_calibration_keeps_its_views_frames_and_judges_the_curve_on_them(
     assert len(small.frames) == 1 and small.over_budget == len(views) - 1
     assert not small.judge(views, ENDOSCOPE).decided
     assert f"({len(views) - 1} views past the first 1 kept no frame)" in small.judge(views, ENDOSCOPE).reason
+
+
+def _charuco_views(tone_curve: str, distances: tuple[float, ...] = (0.15, 0.17, 0.195, 0.22)) -> list[np.ndarray]:
+    """The ChArUco board rendered (blur 0.7 px, 2 DN of noise) three times at each distance, a little tilted:
+    47-69 px a square at 0.15-0.22 m (marker cells of 5.9-8.6 px)."""
+    middle = (2.5 * CHARUCO.square, 2 * CHARUCO.square)
+    poses = [look_at_pose(distance, tilt_x, tilt_y, roll, plane_point=middle) for distance in distances
+             for tilt_x, tilt_y, roll in ((12, -5, 3), (-8, 10, -4), (4, -12, 8))]
+    return render_board_views(ENDOSCOPE, CHARUCO, poses, noise_sigma=2.0, rng=np.random.default_rng(1),
+                              blur_sigma_px=0.7, tone_curve=tone_curve)
+
+
+@functools.cache
+def _charuco_cases(tone_curve: str, inverted: bool = False) -> list:
+    """(case, image) of each rendered ChArUco view; `inverted`: printed white on black (light inverted)."""
+    found = []
+    for k, image in enumerate(_charuco_views(tone_curve)):
+        image = 245 - image if inverted else image
+        detection = CHARUCO.detect(image)
+        assert detection is not None and detection.inverted == inverted
+        case = board_case(f"view{k}", detection, CHARUCO, ENDOSCOPE)
+        if case is not None:
+            found.append((case, image))
+    return found
+
+
+def test_a_charuco_boards_dark_print_is_known_exactly_inside_any_rectangle_of_its_corners():
+    """A ChArUco board's dark area inside a rectangle (its black squares and its markers' black cells, from the
+    dictionary's bits as OpenCV places them) and the length of its edges there are computed exactly: they
+    equal the pixels of OpenCV's own drawing at 120 px a square (where every cell is whole pixels), for the
+    whole board, the rectangle through the outer squares' centres, a smaller one, and the print inverted.
+    A partly found board is measured inside the largest rectangle whose four corners were found."""
+    from veg_area_ros.tone_evidence import _drawn_dark
+
+    per_square = 120
+    drawing = CHARUCO.texture(per_square / CHARUCO.square) < 128  # pixel (0, 0) at squares (-0.5, -0.5)
+    metres = CHARUCO.square / per_square
+    for rectangle in ((0, 0, 5, 4), (0.5, 0.5, 4.5, 3.5), (1.5, 0.5, 3.5, 2.5)):
+        for inverted in (False, True):
+            x0, y0, x1, y1 = (round((value + 0.5) * per_square) for value in rectangle)
+            dark = drawing[y0:y1, x0:x1] != inverted
+            edges = np.count_nonzero(dark[:, 1:] != dark[:, :-1]) + np.count_nonzero(dark[1:] != dark[:-1])
+            area_m2, edge_m = _drawn_dark(CHARUCO, rectangle, inverted)
+            assert area_m2 == pytest.approx(np.count_nonzero(dark) * metres**2, rel=1e-9), (rectangle, inverted)
+            assert edge_m == pytest.approx(edges * metres, rel=1e-9), (rectangle, inverted)
+    cols, _ = CHARUCO.corner_grid()  # 4 x 3 corners
+    assert corner_rectangles(CHARUCO, range(12))[0] == (0, 0, 3, 2)
+    found = [0, 1, 2, 4, 5, 6, 8, 9, 10]  # the last column of corners not found
+    assert corner_rectangles(CHARUCO, found)[0] == (0, 0, 2, 2)
+    assert all({r0 * cols + c0, r0 * cols + c1, r1 * cols + c0, r1 * cols + c1} <= set(found)
+               for c0, r0, c1, r1 in corner_rectangles(CHARUCO, found))
+    assert corner_rectangles(CHARUCO, [0, 1, 2, 3]) == []  # one row: no rectangle
+
+
+@pytest.mark.parametrize("inverted", [False, True])
+def test_a_charuco_board_near_and_far_is_a_measurement_with_a_known_answer(inverted):
+    """ChArUco views from 47 to 69 px a square, printed black on white or white on black: each one's dark area
+    inside the rectangle through the outer squares' centres reads within 0.5 % of the print's in the default
+    mode (its edges are four times a chessboard's). Views whose marker cells are under MIN_CELL_PX are no
+    evidence: there the cells' interiors are too small for the levels, the view is counted, and the count's
+    threshold moves every cell edge alike (more than 1 % off at 3.6 px a cell)."""
+    cases = _charuco_cases("linear", inverted)
+    assert len(cases) == 12
+    for case, image in cases:
+        truth = case.known_area_m2(CHARUCO, image)
+        assert case.targets.points[0][1] == pytest.approx((CHARUCO.square, CHARUCO.square))
+        result = AreaMeasurer(ENDOSCOPE, case.targets, Classifier(threshold="otsu"), roi=case.roi).measure(image)
+        assert result.subpixel_applied and abs(result.area_m2 / truth - 1) < 0.005, (case.name, result.area_m2 / truth)
+    far = _charuco_views("linear", (0.36,))[0]
+    far = 245 - far if inverted else far
+    detection = CHARUCO.detect(far)
+    assert board_case("far", detection, CHARUCO, ENDOSCOPE) is None
+    whole = board_case("far", detection, CHARUCO, ENDOSCOPE, inside_only=False)
+    assert whole.square_px * CHARUCO.marker_cell() / CHARUCO.square < MIN_CELL_PX
+    result = AreaMeasurer(ENDOSCOPE, whole.targets, Classifier(threshold="otsu"), roi=whole.roi).measure(far)
+    assert abs(result.area_m2 / whole.known_area_m2(CHARUCO, far) - 1) > 0.01
+
+
+@pytest.mark.parametrize("tone_curve", ["linear", "srgb"])
+def test_a_charuco_boards_views_tell_the_curve_and_the_reading(tone_curve):
+    """The curve is judged on ChArUco views as on a chessboard's: rendered near and far with either curve, the
+    camera's is taken; the reading (shares or count) and the edges' trend are judged on them too. A live
+    calibration keeps a ChArUco view's frame, and a board found without a rectangle of corners is no case."""
+    from veg_area_ros.calibration import View
+    from veg_area_ros.tone_evidence import KeptFrames
+
+    cases = _charuco_cases(tone_curve)
+    assert len(cases) >= 10
+    choice = choose_tone_curve(cases, CHARUCO, ENDOSCOPE)
+    assert choice.decided and choice.curve == tone_curve, choice.reason
+    assert choice.reading is not None and choice.reading.decided and choice.reading.views == len(cases)
+    assert choice.edge_trend is not None
+    kept = KeptFrames(CHARUCO)
+    views = []
+    for case, image in cases:
+        detection = CHARUCO.detect(image)
+        views.append(View(case.name, detection))
+        kept.offer(case.name, detection, image)
+    assert set(kept.frames) == {case.name for case, _ in cases}
+    assert kept.judge(views, ENDOSCOPE).curve == tone_curve
+    row = views[0].detection
+    one_row = type(row)(row.image_points[:4], row.object_points[:4], np.arange(4))
+    assert not could_be_case(CHARUCO, one_row) and board_case("row", one_row, CHARUCO, ENDOSCOPE) is None

@@ -116,6 +116,11 @@ class BoardSpec:
             xy = np.column_stack([(2 * j + i % 2).ravel(), i.ravel()]) * self.square
         return np.column_stack([xy, np.zeros(len(xy))]).astype(np.float64)
 
+    def corner_grid(self) -> tuple[int, int]:
+        """(columns, rows) of the board's points: a chessboard's inner corners, a ChArUco board's chessboard
+        corners (one fewer than its squares each way; id = row * columns + column), a circle grid's circles."""
+        return (self.cols - 1, self.rows - 1) if self.kind == "charuco" else (self.cols, self.rows)
+
     def extent(self) -> tuple[float, float, float, float]:
         """Printed area (x0, y0, x1, y1) in board metres, quiet margin included."""
         s = self.square
@@ -125,6 +130,31 @@ class BoardSpec:
             return (-0.5 * s, -0.5 * s, (self.cols + 0.5) * s, (self.rows + 0.5) * s)
         columns = self.cols if self.symmetric else 2 * self.cols
         return (-1.5 * s, -1.5 * s, (columns + 0.5) * s, (self.rows + 0.5) * s)
+
+    def dark_cells(self) -> np.ndarray:
+        """A ChArUco board's dark print as disjoint rectangles (N, 4: x0, y0, x1, y1 in board metres, as its
+        points): the black squares and each marker's black cells, placed as OpenCV draws the board."""
+        if self.kind != "charuco":
+            raise ValueError(f"dark_cells: a charuco board's, not a {self.kind} board's")
+        board = self._charuco_board()
+        dictionary = board.getDictionary()
+        side = dictionary.markerSize + 2  # the bits and a black border of one cell
+        cell = self.marker_cell()
+        cells, holding = [], set()
+        for marker_id, corners in zip(np.ravel(board.getIds()), board.getObjPoints(), strict=True):
+            x0, y0 = np.asarray(corners, np.float64)[0, :2]
+            holding.add((int(x0 // self.square), int(y0 // self.square)))
+            bits = dictionary.generateImageMarker(int(marker_id), side, borderBits=1)
+            for row, col in zip(*np.nonzero(bits < 128), strict=True):
+                cells.append((x0 + col * cell, y0 + row * cell, x0 + (col + 1) * cell, y0 + (row + 1) * cell))
+        s = self.square
+        cells += [(c * s, r * s, (c + 1) * s, (r + 1) * s) for r in range(self.rows) for c in range(self.cols)
+                  if (c, r) not in holding]
+        return np.array(cells, np.float64)
+
+    def marker_cell(self) -> float:
+        """A ChArUco board's markers' cell side (m): the marker over its bits and its border of one cell."""
+        return self.marker / (self._charuco_board().getDictionary().markerSize + 2)
 
     def _charuco_board(self) -> cv2.aruco.CharucoBoard:
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))

@@ -168,8 +168,9 @@ def fit_edge_trend(offsets_px: list[float], whites_dn: list[float], tone_curve: 
     10 DN without it, -0.03 +/- 0.05 with it)."""
     n = len(offsets_px)
     if n < MIN_VIEWS:
-        return TrendChoice(None, f"not learned: {MIN_VIEWS} or more views of the whole chessboard, whites not "
-                                 f"clipped, show how the edges follow exposure; {n} could be measured")
+        return TrendChoice(None, f"not learned: {MIN_VIEWS} or more views of the whole chessboard (or a ChArUco "
+                                 f"board's rectangle of corners), whites not clipped, show how the edges follow "
+                                 f"exposure; {n} could be measured")
     offsets, whites = np.asarray(offsets_px, float), np.asarray(whites_dn, float)
     span = float(whites.max() - whites.min())
     centre, reach = float(whites.mean()), (float(whites.min()), float(whites.max()))

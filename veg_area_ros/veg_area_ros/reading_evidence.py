@@ -82,8 +82,9 @@ def choose_reading(readings: list[ViewReading], tone_curve: str) -> ReadingChoic
     better), measured as module's docstring says."""
     n = len(readings)
     if n < MIN_VIEWS:
-        return ReadingChoice(SHARES, False, f"not judged: {MIN_VIEWS} or more views of the whole chessboard, "
-                                            f"whites not clipped, tell the readings apart; {n} could be measured",
+        return ReadingChoice(SHARES, False, f"not judged: {MIN_VIEWS} or more views of the whole chessboard (or "
+                                            f"a ChArUco board's rectangle of corners), whites not clipped, tell "
+                                            f"the readings apart; {n} could be measured",
                              n)
     errors = {SHARES: trend_corrected(readings, tone_curve).tolist(), COUNT: [r.count_error for r in readings]}
     spreads = {mode: float(np.std(values, ddof=1)) for mode, values in errors.items()}

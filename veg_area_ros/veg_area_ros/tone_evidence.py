@@ -4,13 +4,17 @@ A JPEG's grey levels are encoded light (most cameras: the sRGB curve). An edge b
 symmetrically in encoded levels, so read with the wrong curve every edge moves a fixed fraction of a pixel
 towards one side, and the error in an area goes as one over the object's size in pixels. A chessboard seen at
 several distances shows it: the black area inside the rectangle through its outer squares' centres is known
-(the board's squares), so each view is a measurement with a known answer; under the camera's curve the views
+(the board's squares; on a ChArUco board the squares and the markers as the board's drawing has them, inside the
+largest rectangle of corners the view found), so each view is a measurement with a known answer; under the
+camera's curve the views
 from afar read as the near ones, under another they drift with 1/(pixels per square). The curve whose drift is
 clearly the smaller is taken; views too alike in distance cannot tell the curves apart, and the result says so.
 """
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
@@ -38,6 +42,11 @@ MIN_SIZE_RATIO = 1.3  # nearest to farthest board (pixels per square): below it 
 SPOILS_THE_EVIDENCE = ("clipped highlights", "the ROI reaches beyond the image", "no object found")
 DECISIVE_SIGMA = 3.0  # one curve's drift smaller than the other's by this many combined standard errors
 MAX_KEPT_BYTES = 256 * 2**20  # a live calibration's kept frames, PNG: a few hundred views of 10 MP
+CASE_KINDS = ("chessboard", "charuco")  # boards whose dark area inside a rectangle of their corners is known
+# a ChArUco marker's cells below this (px) lose their interiors: the levels go unread, the view is counted, and
+# the count's threshold moves every one of the many cell edges alike (renders: -3 to -6 % at 2.6-4 px a cell,
+# the shares within 0.2 % from 4.3 px where they apply)
+MIN_CELL_PX = 5.5
 
 
 @dataclass
@@ -45,11 +54,21 @@ class BoardCase:
     """One view of a chessboard as an Af measurement with a known answer."""
 
     name: str
-    targets: TargetsSpec  # the four outer inner corners, their board coordinates in metres
+    targets: TargetsSpec  # the rectangle's four corners (a chessboard's outer inner corners), in board metres
     roi: np.ndarray  # (4, 2) idealized px: the rectangle through the centres of the squares `inset` in
     square_px: float  # idealized pixels per square: the board's size in the image
     first_black_probe: np.ndarray  # (2, 2) raw px: the rectangle's corner square at the first corner, and its neighbour
     inset: int = 0  # 0: the rectangle through the outer squares' centres; 1: one square further in
+    drawn: tuple[float, float] | None = None  # a ChArUco board's (dark area m², edges m) inside the rectangle
+
+    def known_area_m2(self, board: BoardSpec, grey: np.ndarray) -> float:
+        """The print's dark area inside the rectangle: drawn (ChArUco), or the chessboard's squares with the
+        first one's colour read in the view's grey image."""
+        return self.drawn[0] if self.drawn is not None else self.true_area_m2(board, self.first_black(grey))
+
+    def known_edge_m(self, board: BoardSpec) -> float:
+        """The dark area's edges inside the rectangle (m)."""
+        return self.drawn[1] if self.drawn is not None else self.edge_length_m(board)
 
     def true_area_m2(self, board: BoardSpec, first_black: bool) -> float:
         """The black squares' area inside the rectangle: quarter squares at its corners, halves along its sides."""
@@ -73,35 +92,57 @@ class BoardCase:
 
 def board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownCamera, inside_only: bool = True
                ) -> BoardCase | None:
-    """The view as a measurement, or None where it cannot be one: not a full chessboard, or (`inside_only`)
-    the rectangle or the probe of the first square's colour reaching beyond the image. With `inside_only`, a
-    view whose outer squares reach the image's edge is measured one square further in, where the board has
-    room (a board filling the frame is still evidence)."""
-    if not inside_only:
-        return _board_case(name, detection, board, camera, 0, False)
-    return next((case for inset in (0, 1) if min(board.cols, board.rows) > 2 * inset + 1
-                 and (case := _board_case(name, detection, board, camera, inset, True)) is not None), None)
-
-
-def _board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownCamera, inset: int,
-                inside_only: bool) -> BoardCase | None:
-    cols, rows = board.cols, board.rows
+    """The view as a measurement, or None where it cannot be one: not a full chessboard (a ChArUco board: no
+    rectangle of corners found at its four corners), or (`inside_only`) the rectangle or the probe of the first
+    square's colour reaching beyond the image. With `inside_only`, a chessboard whose outer squares reach the
+    image's edge is measured one square further in, where the board has room (a board filling the frame is
+    still evidence); a ChArUco board inside its largest rectangle of found corners that lies in the image."""
+    if board.kind == "charuco":
+        return next((case for rectangle in corner_rectangles(board, detection.ids)
+                     if (case := _board_case(name, detection, board, camera, rectangle, 0, inside_only)) is not None),
+                    None)
+    cols, rows = board.corner_grid()
     if board.kind != "chessboard" or len(detection) != cols * rows:
         return None
+    whole = (0, 0, cols - 1, rows - 1)
+    if not inside_only:
+        return _board_case(name, detection, board, camera, whole, 0, False)
+    return next((case for inset in (0, 1) if min(board.cols, board.rows) > 2 * inset + 1
+                 and (case := _board_case(name, detection, board, camera, whole, inset, True)) is not None), None)
+
+
+def corner_rectangles(board: BoardSpec, ids: Iterable[int]) -> list[tuple[int, int, int, int]]:
+    """The rectangles of the board's corner grid (first column, first row, last column, last row) whose four
+    corners are among `ids`, largest first (a ChArUco board is often found in part)."""
+    cols, rows = board.corner_grid()
+    found = {int(i) for i in np.ravel(list(ids))}
+    rectangles = [(c0, r0, c1, r1) for c0, c1 in itertools.combinations(range(cols), 2)
+                  for r0, r1 in itertools.combinations(range(rows), 2)
+                  if {r0 * cols + c0, r0 * cols + c1, r1 * cols + c1, r1 * cols + c0} <= found]
+    return sorted(rectangles, key=lambda r: (-(r[2] - r[0] + 1) * (r[3] - r[1] + 1), r))
+
+
+def _board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownCamera,
+                rectangle: tuple[int, int, int, int], inset: int, inside_only: bool) -> BoardCase | None:
+    """The view measured inside the rectangle through the centres of the squares around `rectangle`'s corners
+    (`inset` squares further in)."""
+    cols = board.corner_grid()[0]
+    c0, r0, c1, r1 = rectangle
     ideal = camera.ideal()
     ids = np.asarray(detection.ids).ravel()
     squares = np.asarray(detection.object_points, float)[:, :2] / board.square  # board coordinates in squares
     raw = np.asarray(detection.image_points, float).reshape(-1, 2)
-    points = []
-    for corner in (0, cols - 1, cols * rows - 1, cols * (rows - 1)):
+    points, inside = [], []
+    for corner in (r0 * cols + c0, r0 * cols + c1, r1 * cols + c1, r1 * cols + c0):
         k = int(np.flatnonzero(ids == corner)[0])
         points.append({"pixel": raw[k].tolist(), "plane": (squares[k] * board.square).tolist()})
+        inside.append(squares[k])
     targets = TargetsSpec.from_dict({"points": points, "pixel_std": 0.1})
     idealized = ideal.normalized_to_pixels(camera.pixels_to_normalized(raw))
     homography, _ = cv2.findHomography(squares.astype(np.float32), idealized.astype(np.float32))
     if homography is None:
         return None
-    (x0, y0), (x1, y1) = squares.min(axis=0) - 0.5 + inset, squares.max(axis=0) + 0.5 - inset
+    (x0, y0), (x1, y1) = np.min(inside, axis=0) - 0.5 + inset, np.max(inside, axis=0) + 0.5 - inset
 
     def placed(board_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Board points in idealized and in raw pixels."""
@@ -110,7 +151,7 @@ def _board_case(name: str, detection: Detection, board: BoardSpec, camera: Brown
 
     corners = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
     roi, _ = placed(corners)
-    sx, sy = squares[0]
+    sx, sy = inside[0]
     _, probe = placed(np.array([[sx - 0.5 + inset, sy - 0.5 + inset], [sx + 0.5 + inset, sy - 0.5 + inset]]))
     # the rectangle's outline, sampled, must lie inside the idealized image (a wide lens's is cropped) and
     # have raw pixels behind it (the lens bends its sides outwards), the probe too
@@ -121,7 +162,51 @@ def _board_case(name: str, detection: Detection, board: BoardSpec, camera: Brown
                             and _within(np.concatenate([raw_outline, probe]), camera, 2)):
         return None
     square_px = math.sqrt(cv2.contourArea(np.float32(roi)) / ((x1 - x0) * (y1 - y0)))
-    return BoardCase(name, targets, roi, square_px, probe, inset)
+    if board.kind == "charuco" and inside_only and square_px * board.marker_cell() / board.square < MIN_CELL_PX:
+        return None
+    drawn = (_drawn_dark(board, (float(x0), float(y0), float(x1), float(y1)), detection.inverted)
+             if board.kind == "charuco" else None)
+    return BoardCase(name, targets, roi, square_px, probe, inset, drawn)
+
+
+@functools.lru_cache(maxsize=4)
+def _dark_cells(board: BoardSpec) -> np.ndarray:
+    """The board's dark rectangles (BoardSpec.dark_cells) in squares, to a millionth (OpenCV places the markers
+    in single precision: a side meant on a rectangle's side would otherwise lie a hair beside it)."""
+    return np.round(board.dark_cells() / board.square, 6)
+
+
+def _drawn_dark(board: BoardSpec, rectangle: tuple[float, float, float, float], inverted: bool
+                ) -> tuple[float, float]:
+    """(dark area m², its edges' length m) of a ChArUco board's print inside `rectangle` (board squares),
+    exact: on the grid of every cell's and the rectangle's sides, each grid cell is dark or light, each side
+    between two unlike ones an edge. A print found inverted (white on black) is dark where the drawing is
+    light, the board's own margin too."""
+    cells = _dark_cells(board)
+    x0, y0, x1, y1 = rectangle
+
+    def grid(low: float, high: float, sides: np.ndarray) -> np.ndarray:
+        inside = sides[(sides > low) & (sides < high)]
+        return np.unique(np.round(np.concatenate([[low, high], inside]), 9))
+
+    xs, ys = grid(x0, x1, cells[:, [0, 2]].ravel()), grid(y0, y1, cells[:, [1, 3]].ravel())
+    dark = np.zeros((len(ys) - 1, len(xs) - 1), bool)
+    centres_x, centres_y = (xs[:-1] + xs[1:]) / 2, (ys[:-1] + ys[1:]) / 2
+    for cx0, cy0, cx1, cy1 in cells:
+        dark[np.ix_((centres_y > cy0) & (centres_y < cy1), (centres_x > cx0) & (centres_x < cx1))] = True
+    dark ^= inverted
+    widths, heights = np.diff(xs), np.diff(ys)
+    area = float(heights @ dark @ widths)
+    edges = float(np.sum((dark[:, 1:] != dark[:, :-1]) * heights[:, None])
+                  + np.sum((dark[1:] != dark[:-1]) * widths[None, :]))
+    return area * board.square**2, edges * board.square
+
+
+def could_be_case(board: BoardSpec, detection: Detection) -> bool:
+    """Whether a view's board can be a measurement in some camera (board_case without the image's bounds)."""
+    if board.kind == "charuco":
+        return bool(corner_rectangles(board, detection.ids))
+    return board.kind == "chessboard" and len(detection) == math.prod(board.corner_grid())
 
 
 def _within(points: np.ndarray, camera: BrownCamera, margin: float) -> bool:
@@ -202,7 +287,8 @@ def judged_first(cases: list[BoardCase]) -> tuple[list[BoardCase], set[str]]:
 class KeptFrames:
     """The grey frames of the views a live calibration keeps (the calibration node; `veg-area calibrate` reads
     its files again instead), PNG-encoded (lossless) until its fit judges the tone curve on them. Frames whose
-    board is not a whole chessboard are not kept; past MAX_KEPT_BYTES none are, and the judgement says so."""
+    board cannot be a measurement (not a whole chessboard; a ChArUco board without a rectangle of found corners)
+    are not kept; past MAX_KEPT_BYTES none are, and the judgement says so."""
 
     board: BoardSpec
     frames: dict[str, bytes] = field(default_factory=dict)
@@ -210,7 +296,7 @@ class KeptFrames:
     over_budget: int = 0
 
     def offer(self, name: str, detection: Detection, image: np.ndarray) -> None:
-        if self.board.kind != "chessboard" or len(detection) != self.board.cols * self.board.rows:
+        if not could_be_case(self.board, detection):
             return
         if self.size >= MAX_KEPT_BYTES:
             self.over_budget += 1
@@ -248,7 +334,7 @@ def choose_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     edges follow exposure under it (edge_trend) and which reading reads them better (reading_evidence), on all of
     them: each view's error over the board's edge length inside the rectangle is how far it moved its edges."""
     choice = judged_tone_curve(cases, board, camera, judged)
-    if board.kind == "chessboard":
+    if board.kind in CASE_KINDS:
         edges = choice.edges.get(choice.curve, [])
         choice.edge_trend = fit_edge_trend([e.offset_px for e in edges], [e.white_dn for e in edges], choice.curve,
                                            [e.std_px for e in edges], [e.scale_px_per_m for e in edges])
@@ -265,9 +351,9 @@ def judged_tone_curve(cases: Iterable[tuple[BoardCase, np.ndarray]], board: Boar
     highlights, no object found or the ROI beyond the image are left out. With `judged`, only the views it
     names judge the curve (MAX_VIEWS of them); the others are evidence of the edges only, read under the curve
     taken once every judged view has been read (so under both curves only where they come before)."""
-    if board.kind != "chessboard":
-        return ToneChoice("linear", False, f"not judged: the tone curve is read from a chessboard's squares, "
-                                           f"the views show a {board.kind} board")
+    if board.kind not in CASE_KINDS:
+        return ToneChoice("linear", False, f"not judged: the tone curve is read from a chessboard's or a ChArUco "
+                                           f"board's squares, the views show a {board.kind} board")
     errors: dict[str, list[float]] = {curve: [] for curve in TONE_CURVES}
     edges: dict[str, list[ViewEdge]] = {curve: [] for curve in TONE_CURVES}
     readings: dict[str, list[ViewReading]] = {curve: [] for curve in TONE_CURVES}
@@ -324,9 +410,9 @@ def _measured(case: BoardCase, grey: np.ndarray, board: BoardSpec, shared: _Shar
               curves: Iterable[str], left_out: dict[str, str]) -> dict[str, ViewReading] | None:
     """Per curve, the view read both ways: its relative error in the default mode and its edge (where the shares
     were applied), and counted; None where the view is no case (said in `left_out`)."""
-    truth = case.true_area_m2(board, case.first_black(grey))
+    truth = case.known_area_m2(board, grey)
     # the error over the edges' length is how far they moved (m), in the view's idealized px
-    px_per_m2 = case.square_px / board.square / case.edge_length_m(board)
+    px_per_m2 = case.square_px / board.square / case.known_edge_m(board)
     # the board's squares exact, as the calibration takes them: an error of the print's scale is every view's
     # alike, so it is no part of a view's own std, against which the views' scatter is judged
     targets = replace(case.targets, distance_std_m=0.0)
@@ -358,7 +444,7 @@ def _decide(choice: ToneChoice) -> None:
     span = choice.square_px = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
     if n < MIN_VIEWS:
         choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard inside the image (all "
-                         "but its outer squares will do), "
+                         "but its outer squares will do; of a ChArUco board, a rectangle of its corners), "
                          f"whites not clipped, near and far, tell the curves apart; {n} could be measured")
         return
     inverse = 1.0 / np.array(sizes)

@@ -349,7 +349,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
 
 def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, camera: BrownCamera, step: int,
                      spread: bool, say: Callable[[str], None], image_topic: str | None = None) -> ToneChoice:
-    """Which tone curve the camera encodes light with, judged on the calibration's own chessboard views
+    """Which tone curve the camera encodes light with, judged on the calibration's own board views
     (tone_evidence): up to tone_evidence.MAX_TREND_VIEWS of them (MAX_VIEWS judge the curve), evenly over the
     board's sizes, read again one at a time (a frame is kept only while it is measured)."""
     from collections import Counter
