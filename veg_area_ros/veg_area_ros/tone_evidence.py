@@ -97,18 +97,17 @@ def board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownC
     square's colour reaching beyond the image. With `inside_only`, a chessboard whose outer squares reach the
     image's edge is measured one square further in, where the board has room (a board filling the frame is
     still evidence); a ChArUco board inside its largest rectangle of found corners that lies in the image."""
+    if not could_be_case(board, detection) or (placement := _Placement.of(detection, board, camera)) is None:
+        return None
     if board.kind == "charuco":
         return next((case for rectangle in corner_rectangles(board, detection.ids)
-                     if (case := _board_case(name, detection, board, camera, rectangle, 0, inside_only)) is not None),
-                    None)
+                     if (case := _board_case(name, placement, rectangle, 0, inside_only)) is not None), None)
     cols, rows = board.corner_grid()
-    if board.kind != "chessboard" or len(detection) != cols * rows:
-        return None
     whole = (0, 0, cols - 1, rows - 1)
     if not inside_only:
-        return _board_case(name, detection, board, camera, whole, 0, False)
+        return _board_case(name, placement, whole, 0, False)
     return next((case for inset in (0, 1) if min(board.cols, board.rows) > 2 * inset + 1
-                 and (case := _board_case(name, detection, board, camera, whole, inset, True)) is not None), None)
+                 and (case := _board_case(name, placement, whole, inset, True)) is not None), None)
 
 
 def corner_rectangles(board: BoardSpec, ids: Iterable[int]) -> list[tuple[int, int, int, int]]:
@@ -122,26 +121,42 @@ def corner_rectangles(board: BoardSpec, ids: Iterable[int]) -> list[tuple[int, i
     return sorted(rectangles, key=lambda r: (-(r[2] - r[0] + 1) * (r[3] - r[1] + 1), r))
 
 
-def _board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownCamera,
-                rectangle: tuple[int, int, int, int], inset: int, inside_only: bool) -> BoardCase | None:
+@dataclass(frozen=True)
+class _Placement:
+    """A view's board points as the rectangles of its corners need them, computed once for all of them."""
+    detection: Detection
+    board: BoardSpec
+    camera: BrownCamera
+    ids: np.ndarray
+    squares: np.ndarray  # board coordinates in squares
+    raw: np.ndarray  # raw pixels
+    homography: np.ndarray  # board squares -> idealized pixels
+
+    @classmethod
+    def of(cls, detection: Detection, board: BoardSpec, camera: BrownCamera) -> _Placement | None:
+        squares = np.asarray(detection.object_points, float)[:, :2] / board.square
+        raw = np.asarray(detection.image_points, float).reshape(-1, 2)
+        idealized = camera.ideal().normalized_to_pixels(camera.pixels_to_normalized(raw))
+        homography, _ = cv2.findHomography(squares.astype(np.float32), idealized.astype(np.float32))
+        if homography is None:
+            return None
+        return cls(detection, board, camera, np.asarray(detection.ids).ravel(), squares, raw, homography)
+
+
+def _board_case(name: str, placement: _Placement, rectangle: tuple[int, int, int, int], inset: int,
+                inside_only: bool) -> BoardCase | None:
     """The view measured inside the rectangle through the centres of the squares around `rectangle`'s corners
     (`inset` squares further in)."""
+    board, camera, homography = placement.board, placement.camera, placement.homography
+    ideal = camera.ideal()
     cols = board.corner_grid()[0]
     c0, r0, c1, r1 = rectangle
-    ideal = camera.ideal()
-    ids = np.asarray(detection.ids).ravel()
-    squares = np.asarray(detection.object_points, float)[:, :2] / board.square  # board coordinates in squares
-    raw = np.asarray(detection.image_points, float).reshape(-1, 2)
     points, inside = [], []
     for corner in (r0 * cols + c0, r0 * cols + c1, r1 * cols + c1, r1 * cols + c0):
-        k = int(np.flatnonzero(ids == corner)[0])
-        points.append({"pixel": raw[k].tolist(), "plane": (squares[k] * board.square).tolist()})
-        inside.append(squares[k])
+        k = int(np.flatnonzero(placement.ids == corner)[0])
+        points.append({"pixel": placement.raw[k].tolist(), "plane": (placement.squares[k] * board.square).tolist()})
+        inside.append(placement.squares[k])
     targets = TargetsSpec.from_dict({"points": points, "pixel_std": 0.1})
-    idealized = ideal.normalized_to_pixels(camera.pixels_to_normalized(raw))
-    homography, _ = cv2.findHomography(squares.astype(np.float32), idealized.astype(np.float32))
-    if homography is None:
-        return None
     (x0, y0), (x1, y1) = np.min(inside, axis=0) - 0.5 + inset, np.max(inside, axis=0) + 0.5 - inset
 
     def placed(board_points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -164,7 +179,7 @@ def _board_case(name: str, detection: Detection, board: BoardSpec, camera: Brown
     square_px = math.sqrt(cv2.contourArea(np.float32(roi)) / ((x1 - x0) * (y1 - y0)))
     if board.kind == "charuco" and inside_only and square_px * board.marker_cell() / board.square < MIN_CELL_PX:
         return None
-    drawn = (_drawn_dark(board, (float(x0), float(y0), float(x1), float(y1)), detection.inverted)
+    drawn = (_drawn_dark(board, (float(x0), float(y0), float(x1), float(y1)), placement.detection.inverted)
              if board.kind == "charuco" else None)
     return BoardCase(name, targets, roi, square_px, probe, inset, drawn)
 
@@ -176,6 +191,7 @@ def _dark_cells(board: BoardSpec) -> np.ndarray:
     return np.round(board.dark_cells() / board.square, 6)
 
 
+@functools.lru_cache(maxsize=256)  # a calibration's views share a few rectangles, most the whole board
 def _drawn_dark(board: BoardSpec, rectangle: tuple[float, float, float, float], inverted: bool
                 ) -> tuple[float, float]:
     """(dark area m², its edges' length m) of a ChArUco board's print inside `rectangle` (board squares),
@@ -444,7 +460,8 @@ def _decide(choice: ToneChoice) -> None:
     span = choice.square_px = (min(sizes), max(sizes)) if sizes else (math.nan, math.nan)
     if n < MIN_VIEWS:
         choice.reason = (f"not judged: {MIN_VIEWS} or more views of the whole chessboard inside the image (all "
-                         "but its outer squares will do; of a ChArUco board, a rectangle of its corners), "
+                         "but its outer squares will do; of a ChArUco board, a rectangle of its corners, its "
+                         f"markers' cells {MIN_CELL_PX:g} px or more), "
                          f"whites not clipped, near and far, tell the curves apart; {n} could be measured")
         return
     inverse = 1.0 / np.array(sizes)
