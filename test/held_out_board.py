@@ -196,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         title = (f"{args.folder.name}: every photo, calibrated on all of them" if half == ALL
                  else f"{args.folder.name}: half {1 - half} measured, calibrated on half {half}")
         plot(rows, title, args.plot)
-    print(f"calibration: model {metadata.get('distortion_model', 'plumb_bob')}, "
+    print(f"calibration: model {metadata.get('model_choice', {}).get('chosen', 'plumb_bob (none chosen)')}, "
           f"edge trend: {metadata.get('edge_trend_evidence', 'none recorded')}; "
           f"area mode {metadata.get('area_mode', 'subpixel (none recorded)')}: "
           f"{metadata.get('area_mode_evidence', 'no evidence recorded')}")

@@ -27,7 +27,6 @@ from .common import (
 if TYPE_CHECKING:
     from ..board import BoardSpec
     from ..calibration import CalibrationResult
-    from ..camera_model import BrownCamera
     from ..tone_evidence import ToneChoice
 
 VIEWS_PER_VIDEO = 60  # consecutive frames add little but time
@@ -313,7 +312,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
                        f"{result.camera.aspect:.3g}, principal point ({result.camera.xp:.0f}, {result.camera.yp:.0f}) "
                        f"px): is --board {board} the board in the images? Nothing was written")
 
-    tone = judge_tone_curve(found, files, board, result.camera, step, args.video_step <= 0, say, args.image_topic)
+    tone = judge_tone_curve(found, files, board, result, step, args.video_step <= 0, say, args.image_topic)
     summary = result.summary()
     summary.update(unreadable=found.unreadable, no_board=found.no_board, wrong_size=found.wrong_size,
                    repeated_poses=found.repeated, output=str(output), variety=found.guide.summary(),
@@ -347,7 +346,7 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
     return 0
 
 
-def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, camera: BrownCamera, step: int,
+def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, fit: CalibrationResult, step: int,
                      spread: bool, say: Callable[[str], None], image_topic: str | None = None) -> ToneChoice:
     """Which tone curve the camera encodes light with, judged on the calibration's own board views
     (tone_evidence): up to tone_evidence.MAX_TREND_VIEWS of them (MAX_VIEWS judge the curve), evenly over the
@@ -358,7 +357,10 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, cam
     from ..tone_evidence import MIN_READING_VIEWS, choose_tone_curve, chosen_cases, judged_first
 
     named = Counter(view.name for view in found.views)  # a name two files share cannot be read again surely
-    cases = chosen_cases([view for view in found.views if named[view.name] == 1], board, camera)
+    camera = fit.camera
+    # the views the fit used: one it rejected has corners it does not trust, a repeat would count twice
+    cases = chosen_cases([view for view in found.views if named[view.name] == 1
+                          and view.name not in fit.rejected_views], board, camera)
     if len(cases) < MIN_READING_VIEWS:  # said as such, without reading any frame again
         return choose_tone_curve(iter(()), board, camera)
     wanted = {case.name: case for case in cases}
