@@ -97,11 +97,14 @@ def board_case(name: str, detection: Detection, board: BoardSpec, camera: BrownC
     square's colour reaching beyond the image. With `inside_only`, a chessboard whose outer squares reach the
     image's edge is measured one square further in, where the board has room (a board filling the frame is
     still evidence); a ChArUco board inside its largest rectangle of found corners that lies in the image."""
+    if board.kind == "charuco":
+        rectangles = corner_rectangles(board, detection.ids)
+        if not rectangles or (placement := _Placement.of(detection, board, camera)) is None:
+            return None
+        return next((case for rectangle in rectangles
+                     if (case := _board_case(name, placement, rectangle, 0, inside_only)) is not None), None)
     if not could_be_case(board, detection) or (placement := _Placement.of(detection, board, camera)) is None:
         return None
-    if board.kind == "charuco":
-        return next((case for rectangle in corner_rectangles(board, detection.ids)
-                     if (case := _board_case(name, placement, rectangle, 0, inside_only)) is not None), None)
     cols, rows = board.corner_grid()
     whole = (0, 0, cols - 1, rows - 1)
     if not inside_only:
