@@ -172,6 +172,23 @@ def test_a_repeated_view_counts_once_and_the_fit_says_so():
     assert not any("counted once" in w for w in alone.warnings)
 
 
+def test_the_views_a_fit_used_are_neither_its_rejected_nor_its_repeated_ones():
+    """What the views' judgement (tone curve, edge trend, reading) is given, in calibrate and the calibration
+    node alike: a view whose corners the fit does not trust and a repeat are left out, the rest kept in order."""
+    from dataclasses import replace
+
+    from veg_area_ros.calibration import View, calibrate
+
+    views = _real_views()
+    corners = views[3].detection.image_points
+    shaken = corners + np.random.default_rng(0).normal(0, 8, corners.shape)  # 8 px off: no corner to trust
+    offered = [*views, View("again.jpg", views[2].detection),
+               View("shaken.jpg", replace(views[3].detection, image_points=shaken.astype(corners.dtype)))]
+    result = calibrate(offered, (640, 480), cross_validate=False)
+    assert "outliers" in result.rejected_views["shaken.jpg"] and "again.jpg" in result.rejected_views
+    assert [view.name for view in result.used(offered)] == [view.name for view in views]
+
+
 def test_a_fifo_and_a_dangling_symlink_are_named_for_what_they_are(folder):
     import os
 

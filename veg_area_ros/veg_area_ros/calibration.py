@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -99,6 +99,11 @@ class CalibrationResult:
     @property
     def views_used(self) -> int:
         return len(self.views)
+
+    def used(self, views: Iterable[View]) -> list[View]:
+        """The views of `views` this fit used: not one it rejected (corners it does not trust) nor a repeat of
+        one it counted (judged again, it would count twice)."""
+        return [view for view in views if view.name not in self.rejected_views]
 
     @property
     def rejected(self) -> dict[str, str]:

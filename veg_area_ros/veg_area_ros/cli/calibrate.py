@@ -358,9 +358,7 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, fit
 
     named = Counter(view.name for view in found.views)  # a name two files share cannot be read again surely
     camera = fit.camera
-    # the views the fit used: one it rejected has corners it does not trust, a repeat would count twice
-    cases = chosen_cases([view for view in found.views if named[view.name] == 1
-                          and view.name not in fit.rejected_views], board, camera)
+    cases = chosen_cases([view for view in fit.used(found.views) if named[view.name] == 1], board, camera)
     if len(cases) < MIN_READING_VIEWS:  # said as such, without reading any frame again
         return choose_tone_curve(iter(()), board, camera)
     wanted = {case.name: case for case in cases}

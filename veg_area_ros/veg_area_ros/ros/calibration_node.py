@@ -253,9 +253,7 @@ class CalibrationNode(Node):
                                 result.residuals[-1] if result.residuals else None, fit_reach(result.camera))
         warnings = list(result.warnings)
         metadata = fit_metadata(result.summary(), self.medium, self.distance, str(self.board), "calibration_node")
-        # on the views the fit used: one it rejected has corners it does not trust, a repeat would count twice
-        tone = self.kept_frames.judge([view for view in self.views if view.name not in result.rejected_views],
-                                      result.camera)
+        tone = self.kept_frames.judge(result.used(self.views), result.camera)
         metadata.update(tone.metadata())  # the tone curve, edge trend and reading measuring takes, and why
         described = (f"{result.views_used} views ({result.camera.model}"
                      + (f"; {result.model_choice['reason']}" if result.model_choice else "")
