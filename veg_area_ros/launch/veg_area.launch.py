@@ -18,7 +18,7 @@ from launch_ros.parameter_descriptions import ParameterValue
 from veg_area_ros.transport import choose_transport
 
 
-def generate_launch_description():
+def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory("veg_area_ros")
     config = os.path.join(share, "config")
     # the nodes' own rule (VEG_AREA_TRANSPORT, a user's FASTDDS_DEFAULT_PROFILES_FILE kept), said once

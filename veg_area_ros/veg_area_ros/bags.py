@@ -24,6 +24,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
+from typing import TYPE_CHECKING
 
 import yaml
 from rosbags.interfaces import (
@@ -69,6 +70,9 @@ from .video_packets import (
     decode_video_packet,
     is_keyframe,
 )
+
+if TYPE_CHECKING:
+    from .cdr import Buffer
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 STORAGES = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
@@ -453,7 +457,7 @@ def recover_bag(broken: str | Path, output: str | Path) -> Recovery:
 class BagFrame:
     index: int
     timestamp_ns: int  # when the recorder received it
-    image: ImageFields | CompressedImageFields
+    image: ImageFields | CompressedImageFields | DecodedVideoFrame
     camera_info: CameraInfoFields | None  # the latest camera_info of its camera recorded before this frame
     camera_info_problem: str = ""  # why camera_info is None although one was recorded
     camera_metadata: str | None = None  # the latest camera_info/metadata beside that camera_info, as recorded
@@ -576,7 +580,7 @@ def _info_connections(reader: Reader, path: str | Path, image_topic: str) -> tup
                 f"({', '.join(sorted({c.topic for c in infos}))}): which camera's is meant cannot be told")
 
 
-def _decode_image(msgtype: str, data):
+def _decode_image(msgtype: str, data: Buffer) -> ImageFields | CompressedImageFields | VideoPacket:
     if msgtype in DECODED_VIDEO_TYPES:
         return decode_video_packet(msgtype, data)
     return IMAGE_DECODERS[msgtype](data)
@@ -689,7 +693,8 @@ def iter_bag_frames(path: str | Path, image_topic: str | None = None, start: int
             stack.callback(video.close)  # before its folder is removed
         index = 0
 
-        def paired(timestamp: int, image, info: CameraInfoFields | None, note: str = "") -> BagFrame:
+        def paired(timestamp: int, image: ImageFields | CompressedImageFields | DecodedVideoFrame,
+                   info: CameraInfoFields | None, note: str = "") -> BagFrame:
             problem = unpaired
             if info is not None and image.header.frame_id and info.header.frame_id and (
                     image.header.frame_id != info.header.frame_id):

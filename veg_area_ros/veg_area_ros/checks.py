@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -27,6 +28,9 @@ from .locate import Located
 from .markers import DetectedMarker
 from .scale import relative_area_std
 from .weights import Weights
+
+if TYPE_CHECKING:
+    from collections.abc import Iterable
 
 ROI_CUT_SHARE = 1e-3  # of the ROI without a pixel behind it: said (the remap's border is never counted)
 NEARLY_ALL = 0.98  # of the ROI's pixels taken for object: the classification took the background too
@@ -138,7 +142,7 @@ def _outline(mask: np.ndarray) -> int:
     return cv2.countNonZero(cv2.subtract(mask, cv2.erode(mask, np.ones((3, 3), np.uint8))))
 
 
-def _marker_edge_width(frame: np.ndarray, markers) -> float | None:
+def _marker_edge_width(frame: np.ndarray, markers: Iterable[DetectedMarker]) -> float | None:
     """The printed markers' edge width in px (median over the markers): in each marker's box, the pixels
     between its black's and white's outer 15 % per pixel of the outline at their midpoint."""
     widths = []

@@ -423,7 +423,8 @@ def crossing_edges(polygon: np.ndarray) -> tuple[int, int] | None:
     end = np.roll(polygon, -1, axis=0)
     count = len(polygon)
 
-    def side(a, b, c):  # the sign of c's side of the line a -> b, for every pair at once
+    # the sign of c's side of the line a -> b, for every pair at once
+    def side(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
         along, to = b - a, c - a
         return np.sign(along[..., 0] * to[..., 1] - along[..., 1] * to[..., 0])
 

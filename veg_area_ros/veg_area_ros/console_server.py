@@ -10,11 +10,14 @@ import json
 import threading
 from collections.abc import Callable
 from importlib import resources
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from aiohttp import web
 
 from .console_state import CHOICES, Access, ConsoleInputError, ImageFeed, host_allowed, now, roi_from_drag
+
+if TYPE_CHECKING:
+    from aiohttp.typedefs import Handler
 
 PAGE_FILES = {"/": ("index.html", "text/html"), "/console.js": ("console.js", "text/javascript"),
               "/console.css": ("console.css", "text/css")}
@@ -99,7 +102,7 @@ class ConsoleServer:
 
     # --- requests ------------------------------------------------------------------------------------------
     @web.middleware
-    async def _guard(self, request: web.Request, handler):
+    async def _guard(self, request: web.Request, handler: Handler) -> web.StreamResponse:
         self.requests += 1
         if not host_allowed(request.host, self.access):
             return web.json_response({"error": "this console answers only to a loopback host name"}, status=421)

@@ -8,11 +8,14 @@ from __future__ import annotations
 import re
 import struct
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 
 from .camera_model import MODEL_DIST_NAMES
+
+if TYPE_CHECKING:
+    from xml.etree.ElementTree import Element
 
 
 class ForeignCalibrationError(ValueError):
@@ -107,7 +110,7 @@ def _opencv_fields(text: str) -> dict[str, Any]:
         reason = (str(cause).strip().splitlines() or ["a parse error"])[-1]
         raise ForeignCalibrationError(f"not a readable OpenCV FileStorage file ({reason})") from exc
 
-    def node(*names: str):
+    def node(*names: str) -> tuple[str, cv2.FileNode | None]:
         return next(((name, storage.getNode(name)) for name in names if not storage.getNode(name).empty()),
                     (names[0], None))
 
@@ -207,7 +210,7 @@ def is_metashape_xml(text: str) -> bool:
 METASHAPE_UNSUPPORTED = {"k4": "k4 (r⁸)", "p3": "p3", "p4": "p4", "b2": "b2 (skew)"}
 
 
-def _metashape_sensor_calibration(document):
+def _metashape_sensor_calibration(document: Element) -> Element:
     """The one sensor's calibration in Metashape's cameras.xml (its adjusted one where it has an initial one too);
     several sensors (cameras) are refused with their labels."""
     sensors = [sensor for sensor in document.iter("sensor") if sensor.findall("calibration")]

@@ -16,6 +16,7 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -26,6 +27,11 @@ from .exif import capture_time, is_tiff
 from .files import in_name_order, special_file, too_many_pixels
 from .orientation import as_stored, orientation_note, stored_orientation, video_rotation_note
 from .video_container import hdr_note
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from .bags import BagFrame
 
 IMAGE_SUFFIXES = {".jpg", ".jpeg", ".jpe", ".jfif", ".png", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp",
                   ".avif", ".jp2", ".j2k"}
@@ -473,7 +479,7 @@ UNSTAMPED_NOTE = ("header stamp 0: the camera driver does not stamp its images, 
                   "bag received it (time_s; stamp_sec and stamp_nanosec stay 0), late by the transport's delay")
 
 
-def _bag_frame(path: Path, frame) -> Frame:
+def _bag_frame(path: Path, frame: BagFrame) -> Frame:
     """One bag image message as a Frame, with the reason where its pixels cannot be decoded. A 16-bit image's
     depth is judged on its own values, as a file's: a frame's reading must not depend on where a split of the
     bag (`--jobs`, a cluster) began."""
@@ -586,7 +592,8 @@ def decoded(items: Iterator[Frame | Packet], workers: int = 2) -> Iterator[Frame
         yield frame
 
 
-def _then(first, rest: Iterator, convert=None) -> Iterator:
+def _then(first: Frame, rest: Iterator[Frame], convert: Callable[[Frame], Frame] | None = None
+          ) -> Iterator[Frame]:
     """`first`, then `rest`, each through `convert`; closing this closes `rest` (a video's capture released when
     a run stops early)."""
     try:

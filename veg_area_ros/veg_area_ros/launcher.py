@@ -13,7 +13,8 @@ EXIT_INTERRUPTED = 130
 def main() -> int:
     interrupted = []
 
-    def on_interrupt(signum, frame):  # remembered: inside numpy's C start-up it surfaces as an ImportError
+    # remembered: inside numpy's C start-up it surfaces as an ImportError
+    def on_interrupt(signum: int, frame: object) -> None:  # frame: a FrameType, left unimported to start fast
         interrupted.append(signum)
         raise KeyboardInterrupt
 

@@ -31,7 +31,7 @@ def prefetched(items: Iterator[Item], depth: int = 2) -> Iterator[Item]:
     waiting: queue.Queue = queue.Queue(maxsize=depth)
     stop = threading.Event()
 
-    def put(item) -> bool:
+    def put(item: Item) -> bool:
         while not stop.is_set():
             try:
                 waiting.put(item, timeout=0.1)

@@ -16,12 +16,14 @@ from .calibration import CORNER_GRID, COVERAGE_CELLS, CalibrationResult, coverag
 from .files import save_figure
 
 if TYPE_CHECKING:
+    from types import ModuleType
+
     from .guidance import CalibrationGuide
     from .reading_evidence import ReadingChoice
     from .tone_evidence import ToneChoice
 
 
-def _pyplot():
+def _pyplot() -> ModuleType:
     import matplotlib
 
     matplotlib.use("Agg")  # files only, no display

@@ -24,13 +24,13 @@ class StrictYamlError(ValueError):
 
 
 class _StrictLoader(yaml.SafeLoader):
-    def compose_node(self, parent, index):
+    def compose_node(self, parent: yaml.Node | None, index: object) -> yaml.Node | None:
         if self.check_event(yaml.events.AliasEvent):
             event = self.peek_event()
             raise StrictYamlError(f"aliases (*{event.anchor}) are not allowed, at line {event.start_mark.line + 1}")
         return super().compose_node(parent, index)
 
-    def construct_mapping(self, node, deep=False):
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
         keys = set()
         for key_node, _ in node.value:
             key = self.construct_object(key_node, deep=deep)

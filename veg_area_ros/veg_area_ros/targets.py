@@ -45,7 +45,7 @@ class TargetsNotFoundError(TargetsError):
         self.markers_found = markers_found
 
 
-def _pair(value, what: str) -> np.ndarray:
+def _pair(value: object, what: str) -> np.ndarray:
     try:
         pair = np.array(value, dtype=float).ravel()
     except (TypeError, ValueError) as exc:
@@ -141,5 +141,5 @@ class TargetsSpec:
         return np.array([*self.markers.values(), *(plane for _, plane in self.points)], float).reshape(-1, 2)
 
 
-def _is_number(value) -> bool:
+def _is_number(value: object) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and bool(np.isfinite(value))

@@ -22,11 +22,16 @@ import signal
 import sys
 import threading
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from .. import __version__
 from ..files import FileWriteError
 from . import bags, calibrate, demos, doctor, flume, measure
 from .common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, CliError
+
+if TYPE_CHECKING:
+    from types import FrameType
+    from typing import NoReturn
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -42,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _terminate_as_interrupt(number, frame) -> None:
+def _terminate_as_interrupt(number: int, frame: FrameType | None) -> NoReturn:
     """SIGTERM (timeout, Slurm, docker stop) ends a run as Ctrl-C does: what was measured is kept."""
     raise KeyboardInterrupt
 

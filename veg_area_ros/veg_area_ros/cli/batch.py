@@ -16,6 +16,7 @@ import traceback
 from concurrent.futures import FIRST_COMPLETED, CancelledError, ProcessPoolExecutor, wait
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..files import FileWriteError
 from ..series import series_summary
@@ -31,6 +32,11 @@ from .common import (
     write_csv,
 )
 from .measure_job import MeasureJob, frames_lost, measure
+
+if TYPE_CHECKING:
+    from concurrent.futures import Future
+    from multiprocessing.context import BaseContext
+    from multiprocessing.managers import SyncManager
 
 # mean_area_std_m2: the uncertainty of the mean Af; frame_spread_m2: the frames' standard deviation (series.py)
 BATCH_COLUMNS = ("input", "frames", "measured", "mean_area_m2", "mean_area_std_m2", "frame_spread_m2", "warnings",
@@ -95,7 +101,7 @@ def _summary(source: str, csv_path: str, error: str = "") -> dict:
             "frame_spread_m2": "", "warnings": "", "not_measured": "", "csv": csv_path, "error": error}
 
 
-def _started_manager(context):
+def _started_manager(context: BaseContext) -> SyncManager:
     """The batch's manager process (the progress queue, the stop flag), begun as the workers are: Ctrl-C left to
     the main process, and ending with it."""
     from multiprocessing.managers import SyncManager
@@ -105,7 +111,7 @@ def _started_manager(context):
     return manager
 
 
-def _measure_one(job: MeasureJob, position: int, progress_queue, stopping) -> dict:
+def _measure_one(job: MeasureJob, position: int, progress_queue: queue.Queue, stopping: threading.Event) -> dict:
     """Input number `position` of a batch, in a worker process: its CSV and plot, and a one-line summary."""
     source, csv_path = job.inputs[0], job.csv
     try:
@@ -130,7 +136,7 @@ def input_summary(source: str, csv_path: str, code: int, rows: list[dict]) -> di
     return summary
 
 
-def _outcome(future, source: str, csv_path: str) -> dict:
+def _outcome(future: Future, source: str, csv_path: str) -> dict:
     """A worker's summary; a worker that never began or that crashed is a row that says so."""
     try:
         return future.result()

@@ -25,9 +25,15 @@ from .common import (
 )
 
 if TYPE_CHECKING:
-    from ..board import BoardSpec
+    from collections.abc import Iterable, Iterator
+
+    import numpy as np
+
+    from ..board import BoardSpec, Detection
     from ..calibration import CalibrationResult
-    from ..tone_evidence import ToneChoice
+    from ..frames import Frame
+    from ..guidance import ViewStats
+    from ..tone_evidence import BoardCase, ToneChoice
 
 VIEWS_PER_VIDEO = 60  # consecutive frames add little but time
 DETECT_WORKERS = 2  # board searches at once: the two cores of a lab PC (OpenCV runs them without the GIL)
@@ -126,7 +132,7 @@ def collect_views(files: list[Path], board: BoardSpec, step: int, say: Callable[
             say(f"[{seen}] {len(found.views)} views so far, {len(found.no_board)} frames without a board, "
                 f"{len(found.repeated)} repeats; {text.split('] ', 1)[-1]}")
 
-    def detect(frame):
+    def detect(frame: Frame) -> tuple[Detection | None, ViewStats | None]:
         """The board, and the numbers the guidance judges the view by (on the worker, beside the search)."""
         detection = None if frame.image is None else board.detect(frame.image)
         if detection is None:
@@ -184,7 +190,7 @@ def collect_views(files: list[Path], board: BoardSpec, step: int, say: Callable[
     return found
 
 
-def _board_and_files(args: argparse.Namespace, say: Callable[[str], None]):
+def _board_and_files(args: argparse.Namespace, say: Callable[[str], None]) -> tuple[BoardSpec, list[Path]]:
     from ..bags import BagError, bag_image_count
     from ..board import BoardSpec, BoardSpecError
     from ..frames import InputError, expand_inputs, is_bag
@@ -215,7 +221,7 @@ def _board_and_files(args: argparse.Namespace, say: Callable[[str], None]):
 HINT_FRAMES = 3  # frames a board spec's likely mistakes are tried on when it is found in none
 
 
-def _hint(board, files: list[Path], step: int, image_topic: str | None = None) -> str:
+def _hint(board: BoardSpec, files: list[Path], step: int, image_topic: str | None = None) -> str:
     """What board a few of the frames hold instead of `board`, said with the mistake, or ''."""
     from itertools import islice
 
@@ -363,7 +369,7 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, fit
         return choose_tone_curve(iter(()), board, camera)
     wanted = {case.name: case for case in cases}
 
-    def sources(names) -> set[str]:  # images, and videos' frames NAME#N
+    def sources(names: Iterable[str]) -> set[str]:  # images, and videos' frames NAME#N
         return set(names) | {name.rsplit("#", 1)[0] for name in names}
 
     judged = judged_first(cases)[1]
@@ -372,7 +378,7 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, fit
     # the judged views' files first: the others are then read under the curve taken only
     ordered = sorted((f for f in files if shown_name(f) in read), key=lambda f: shown_name(f) not in read_first)
 
-    def views():
+    def views() -> Iterator[tuple[BoardCase, np.ndarray]]:
         for frame in iter_frames(ordered, step, image_topic, grey=True, spread=spread, bag_step=step):
             if frame.name in wanted and frame.image is not None:
                 yield wanted.pop(frame.name), frame.image
@@ -380,7 +386,7 @@ def judge_tone_curve(found: BoardViews, files: list[Path], board: BoardSpec, fit
     return choose_tone_curve(views(), board, camera, judged)
 
 
-def _calibrate_port(args: argparse.Namespace, say) -> int:
+def _calibrate_port(args: argparse.Namespace, say: Callable[[str], None]) -> int:
     """`calibrate --port ... --lens air.yaml [underwater views]`: the port fitted from the views (or as measured)
     in front of the air calibration; written as the absorbed plumb_bob equivalent at --absorbed-distance with
     the lens and port in the file's veg_area_ros block."""

@@ -11,10 +11,17 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .batch import _summary, catch_stop_signals, check_batch, finish_batch, input_job, input_summary, restore_signals
 from .common import EXIT_FAILED, EXIT_OK, EXIT_USAGE, CliError, progress, write_csv
 from .measure_job import CSV_COLUMNS, MeasureJob, csv_row, frames_lost, measure, no_object_anywhere, plot_series
+
+if TYPE_CHECKING:
+    import socket
+    from collections.abc import Callable
+
+    from distributed import Client
 
 CONNECT_TIMEOUT_S = 6  # the whole refusal within 10 s, the interpreter and its imports included
 HANDSHAKE_S = 4.0  # a scheduler's handshake comes at once; a listener silent this long is something else
@@ -82,7 +89,7 @@ def scheduler_address(text: str) -> tuple[str, str, int]:
     return f"tcp://{host}:{port}", host, port
 
 
-def _check_speaks_dask(connection, address: str) -> None:
+def _check_speaks_dask(connection: socket.socket, address: str) -> None:
     """A Dask scheduler speaks first on a new connection: its handshake, led by its length in bytes as a
     little-endian 64-bit number (a few hundred; text such as SSH's or a web server's banner reads as trillions).
     Something else on that port (a silent listener, a web server, SSH) is refused within HANDSHAKE_S instead of
@@ -111,7 +118,7 @@ def _check_speaks_dask(connection, address: str) -> None:
                        "tcp://HOST:8786 by default); nothing was measured")
 
 
-def _connect(address: str):
+def _connect(address: str) -> Client:
     address, host, port = scheduler_address(address)
     import socket
 
@@ -133,7 +140,7 @@ def _connect(address: str):
         raise CliError(f"the Dask scheduler at {address} cannot be reached ({exc}); nothing was measured") from exc
 
 
-def _workers(client) -> int | None:
+def _workers(client: Client) -> int | None:
     """The scheduler's worker count, None when it does not answer within ASK_TIMEOUT_S."""
     try:
         identity = client.sync(client.scheduler.identity, n_workers=-1, callback_timeout=ASK_TIMEOUT_S)
@@ -142,7 +149,7 @@ def _workers(client) -> int | None:
     return len(identity.get("workers", {}))
 
 
-def _wait_for_a_worker(client, address: str, say) -> int:
+def _wait_for_a_worker(client: Client, address: str, say: Callable[[str], None]) -> int:
     """Workers at the start; CliError when none joins within WORKER_WAIT_S (nothing is submitted then)."""
     deadline = time.monotonic() + WORKER_WAIT_S
     said = False

@@ -41,7 +41,7 @@ def progress(quiet: bool) -> Callable[[str], None]:
     return say
 
 
-def _number(text: str, convert: Callable[[str], float], valid: Callable[[float], bool], wanted: str):
+def _number(text: str, convert: Callable[[str], float], valid: Callable[[float], bool], wanted: str) -> float:
     """`text` converted and checked, or argparse's error 'must be WANTED, got TEXT'."""
     try:
         value = convert(text)

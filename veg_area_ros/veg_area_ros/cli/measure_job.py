@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from datetime import UTC
 from pathlib import Path
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 from ..calib_io import metadata_for
 from ..settings import MeasurementSettings
@@ -27,6 +27,12 @@ from .common import (
     check_writable,
     progress,
 )
+
+if TYPE_CHECKING:
+    from ..area import AreaMeasurer
+    from ..calib_io import CalibrationFile
+    from ..camera_model import BrownCamera
+    from ..port_area import PortAreaMeasurer
 
 CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "area_mode",
                "subpixel_applied", "pixel_count", "count_area_m2", "threshold", "tone_curve", "scale_std_m2",
@@ -262,7 +268,8 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         for note in background_notes:
             say(f"--background {job.background}: {note}")
 
-    def new_measurer(camera, recorded_conditions: dict | None = None):
+    def new_measurer(camera: BrownCamera | None, recorded_conditions: dict | None = None
+                     ) -> AreaMeasurer | PortAreaMeasurer:
         try:  # the exact port model for frames of the port file's camera, not its plumb_bob stand-in
             return job.settings.measurer(camera, targets, port_camera if camera is file_camera else None,
                                          background, conditions if camera is file_camera else recorded_conditions)
@@ -296,7 +303,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
             said.add(note)
             say(note)
 
-    def bag_conditions(camera, text: str | None) -> dict | None:
+    def bag_conditions(camera: BrownCamera | None, text: str | None) -> dict | None:
         """The metadata recorded beside the bag's camera_info (camera_info/metadata) if it is that camera's."""
         if text is None:
             return None
@@ -540,7 +547,7 @@ def csv_row(row: dict) -> dict:
 
 
 
-def _other_camera(bag: Path, image_topic: str | None, calibration) -> str:
+def _other_camera(bag: Path, image_topic: str | None, calibration: CalibrationFile) -> str:
     """The warning for a bag measured with a calibration file of another camera than its recorded camera_info
     describes; '' where they agree or the bag has no calibrated camera_info."""
     from ..bags import bag_camera_info

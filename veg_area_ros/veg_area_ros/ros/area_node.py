@@ -21,6 +21,7 @@ import time
 from collections import deque
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -63,6 +64,11 @@ from .messages import (
 from .params import declare, read_start_file
 from .qos import ANY_INFO_QOS, IMAGE_QOS, LATCHED_QOS, PER_FRAME_INFO_QOS, RESULT_QOS
 from .run import run_nodes
+
+if TYPE_CHECKING:
+    from ..area import AreaMeasurer
+    from ..camera_model import BrownCamera
+    from ..port_area import PortAreaMeasurer
 
 TALLY_LOG_PERIOD_S = 10.0  # the skipped and lost frames' log lines, at most once in this long
 BUSY_GAP_NS = 1_000_000  # callbacks closer than 1 ms: the node never waited for messages in between
@@ -192,7 +198,8 @@ class AreaNode(Node):
             raise ValueError(f"{path}: {problem}")
         return image
 
-    def _build_or_log(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None):
+    def _build_or_log(self, settings: MeasurementSettings, camera: BrownCamera | None, targets: TargetsSpec | None
+                      ) -> AreaMeasurer | PortAreaMeasurer | None:
         """`_build` at start and for a calibration heard later: a background frame or given levels that do not
         fit these settings (e.g. area_mode auto counting whole pixels, as the calibration's metadata decides) are
         logged and left out (the levels parameter set back to [0.0], so later changes are judged without them),
@@ -222,8 +229,8 @@ class AreaNode(Node):
                                    tone_curve=value["tone_curve"],
                                    ).with_threshold(value["threshold_mode"], value["threshold"])
 
-    def _build(self, settings: MeasurementSettings, camera, targets: TargetsSpec | None,
-               background: np.ndarray | None):
+    def _build(self, settings: MeasurementSettings, camera: BrownCamera | None, targets: TargetsSpec | None,
+               background: np.ndarray | None) -> AreaMeasurer | PortAreaMeasurer | None:
         """A measurer for these settings (None without targets); raises ValueError with the reason."""
         if targets is None:
             return None
@@ -232,7 +239,7 @@ class AreaNode(Node):
                                  self.file_conditions if from_file else self._info_conditions(camera),
                                  self.measurer)  # its camera's maps, where it is the same camera
 
-    def _info_conditions(self, camera) -> dict | None:
+    def _info_conditions(self, camera: BrownCamera | None) -> dict | None:
         """The metadata heard on camera_info/metadata if it belongs to `camera` (a camera_info's), else None."""
         if camera is None or self.info_metadata is None:
             return None
@@ -273,7 +280,7 @@ class AreaNode(Node):
                                + (f"; tone curve {tone} (tone_curve auto reads it)" if tone else "")
                                + (f"; area mode {reading} (area_mode auto reads it)" if reading else ""))
 
-    def _check_parameters(self, parameters) -> SetParametersResult:
+    def _check_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """A run-time change is accepted only if it builds a measurer (nothing is changed here)."""
         changed = {p.name: p.value for p in parameters}
         if changed.get("uncalibrated_frames", "drop") not in ("drop", "measure"):
@@ -288,7 +295,7 @@ class AreaNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
-    def _apply_parameters(self, parameters) -> None:
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
         names = {p.name for p in parameters}
         if "uncalibrated_frames" in names:
             self.uncalibrated = self.get_parameter("uncalibrated_frames").value

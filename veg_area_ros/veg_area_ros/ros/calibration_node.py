@@ -9,6 +9,7 @@ import math
 import os
 import threading
 import time
+from typing import TYPE_CHECKING
 
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
@@ -52,6 +53,9 @@ from .messages import (
 from .params import declare, read_start_file
 from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
 from .run import run_nodes
+
+if TYPE_CHECKING:
+    import numpy as np
 
 HINT_AFTER_FRAMES = 30  # frames without a board before the spec's usual mistakes are tried (once)
 HINT_FRAMES = 3
@@ -203,7 +207,7 @@ class CalibrationNode(Node):
         if verdict is not None and verdict.kept and self.auto_calibrate and self.guide.enough():
             self._fit()
 
-    def _no_board_yet(self, image) -> None:
+    def _no_board_yet(self, image: np.ndarray) -> None:
         """Frames while no view was ever found: a few kept, and after HINT_AFTER_FRAMES the board spec's usual
         mistakes tried on them, once, the board found said on ~/progress (a wrong spec looked like an empty view)."""
         self.frames_without_board += 1
@@ -286,7 +290,7 @@ class CalibrationNode(Node):
             self.get_logger().warning(warning)
         return True, text
 
-    def _on_commit(self, request, response):
+    def _on_commit(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Serve and write the fit waiting for a decision (kept back, or from fewer than min_views)."""
         with self._state:
             if self.pending is None:
@@ -300,7 +304,7 @@ class CalibrationNode(Node):
         self._report(response.message)
         return response
 
-    def _on_discard(self, request, response):
+    def _on_discard(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self._state:
             had, self.pending = self.pending is not None, None
         response.success, response.message = had, "discarded the waiting fit" if had else "no fit is waiting"
@@ -321,7 +325,7 @@ class CalibrationNode(Node):
         publish_safely(self, self.info_pub, info)
         return failed
 
-    def _on_calibrate(self, request, response):
+    def _on_calibrate(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self._state:
             self.fitted = False  # a fit on request: also resumes collecting views afterwards
             response.success, response.message = self._fit()
@@ -334,7 +338,8 @@ class CalibrationNode(Node):
         self._looker.join(timeout=30)
         super().destroy_node()
 
-    def _on_set_camera_info(self, request, response):
+    def _on_set_camera_info(self, request: SetCameraInfo.Request, response: SetCameraInfo.Response
+                            ) -> SetCameraInfo.Response:
         try:
             camera = info_to_camera(request.camera_info)
         except ValueError as exc:

@@ -5,6 +5,7 @@ Frames go out pre-serialized (veg_area_ros.cdr): one copy from the camera's buff
 from __future__ import annotations
 
 import contextlib
+from typing import TYPE_CHECKING
 
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
@@ -19,6 +20,9 @@ from .messages import camera_to_info, image_bytes
 from .params import declare, read_start_file
 from .qos import IMAGE_QOS, LATCHED_QOS
 from .run import run_nodes
+
+if TYPE_CHECKING:
+    from rclpy.parameter import Parameter
 
 
 class CameraNode(Node):
@@ -65,7 +69,7 @@ class CameraNode(Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
         self.get_logger().info(f"publishing {source} on {self.image_pub.topic_name} at {rate:g} Hz")
 
-    def _apply_parameters(self, parameters) -> None:
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
         for parameter in parameters:  # rate_hz's range is checked by its descriptor
             if parameter.name == "rate_hz":
                 self.timer.cancel()

@@ -18,6 +18,7 @@ import subprocess
 import sys
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rcl_interfaces.srv import GetParameters, SetParametersAtomically
 from rclpy.node import Node
@@ -54,6 +55,12 @@ from .messages import (
 from .params import declare
 from .qos import IMAGE_QOS, LATCHED_QOS, RESULT_QOS
 from .run import lower_priority, run_nodes
+
+if TYPE_CHECKING:
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterValue
+    from rclpy.client import Client
+    from rclpy.task import Future
 
 SERVICE_WAIT_S = 1.0  # a node whose service is not there within this long is said to be missing
 FIT_TIMEOUT_S = 600.0  # a fit of many views with model auto takes minutes on a slow machine
@@ -215,7 +222,7 @@ class ConsoleNode(Node):
                 thinning.filtered, thinning.per_s = False, 0.0  # for good: no windows are made for 0 a second
                 self.get_logger().info(f"{subscription.topic_name} taken whole: no content filter here ({exc})")
 
-    def _got_parameters(self, future) -> None:
+    def _got_parameters(self, future: Future) -> None:
         self._parameters_asked_at = None
         response = future.result()
         if response is None:
@@ -244,7 +251,7 @@ class ConsoleNode(Node):
                             if thinning.filtered else None for stream, thinning in self.thinned.items()}}
 
     # --- what the page asks for (from the server's worker threads) --------------------------------------------
-    def _call(self, client, request, timeout: float, missing: str):
+    def _call(self, client: Client, request: object, timeout: float, missing: str) -> tuple[object | None, str]:
         if not client.wait_for_service(timeout_sec=SERVICE_WAIT_S):
             return None, missing
         done = threading.Event()
@@ -337,7 +344,7 @@ def result_summary(msg: ProjectedArea) -> dict:
             "frames_lost": counts["frames_lost"], "frames_received": counts["frames_received"]}
 
 
-def _named(name: str, value):
+def _named(name: str, value: ParameterValue) -> ParameterMsg:
     from rcl_interfaces.msg import Parameter as ParameterMsg
 
     return ParameterMsg(name=name, value=value)

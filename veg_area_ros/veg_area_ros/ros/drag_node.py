@@ -10,6 +10,7 @@ out and counted in `rejected_samples`)."""
 from __future__ import annotations
 
 import json
+from typing import TYPE_CHECKING
 
 from geometry_msgs.msg import TwistStamped, Vector3Stamped, WrenchStamped
 from rclpy.node import Node
@@ -23,8 +24,11 @@ from .params import declare
 from .qos import RESULT_QOS
 from .run import run_nodes
 
+if TYPE_CHECKING:
+    from builtin_interfaces.msg import Time
 
-def _seconds(stamp) -> float:
+
+def _seconds(stamp: Time) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 

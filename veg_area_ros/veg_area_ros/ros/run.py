@@ -9,11 +9,15 @@ import sys
 import traceback
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import rclpy
 from rclpy.node import Node
 
 from ..transport import Transport, buffer_warning, choose_transport
+
+if TYPE_CHECKING:
+    from types import FrameType
 
 
 def ensure_ros_environment() -> Transport:
@@ -50,7 +54,7 @@ class StopOnSignal:
         self.closing = False
         self._previous = {number: signal.signal(number, self._handle) for number in self.SIGNALS}
 
-    def _handle(self, number: int, frame) -> None:
+    def _handle(self, number: int, frame: FrameType | None) -> None:
         if self.closing:
             os.write(2, b"veg_area_ros: closing (files are being written)\n")
             return

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -16,8 +17,12 @@ from ..calibration import PARAM_NAMES, CalibrationResult, View, calibrate
 from ..camera_model import BrownCamera
 from .synthetic import BOARD, DISTANCE_M, ENDOSCOPE, VIEWS, FlatPort, board_views, render_board_views
 
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
-def _calibrate_synthetic(board: BoardSpec, port: FlatPort | None, seed: int, say) -> tuple[CalibrationResult, list]:
+
+def _calibrate_synthetic(board: BoardSpec, port: FlatPort | None, seed: int, say: Callable[[str], None]
+                         ) -> tuple[CalibrationResult, list]:
     rng = np.random.default_rng(seed)
     poses = board_views(ENDOSCOPE, board, VIEWS + 1, DISTANCE_M, rng, port=port)
     images = render_board_views(ENDOSCOPE, board, poses, port=port, rng=rng)

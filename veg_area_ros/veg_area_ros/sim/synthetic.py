@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -17,6 +18,9 @@ from ..board import BoardSpec
 from ..camera_model import BrownCamera
 from ..flat_port import FlatPort, air_rays_to, along, in_frame, rays_in_water
 from ..targets import TargetsSpec
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 # the synthetic set-up: camera, calibration board and object at the paper's 0.7 m, 15 calibration views
 DISTANCE_M = 0.7
@@ -115,7 +119,8 @@ def render_plane(
 
 
 def _render_fine(camera: BrownCamera, texture: np.ndarray, extent: tuple[float, float, float, float],
-                 rvec: np.ndarray, tvec: np.ndarray, port: FlatPort | None, background, supersample: int) -> np.ndarray:
+                 rvec: np.ndarray, tvec: np.ndarray, port: FlatPort | None, background: int | tuple[int, int, int],
+                 supersample: int) -> np.ndarray:
     """The plane's texture at every sub-pixel sample (supersampled image, before averaging to pixels)."""
     x0, y0, x1, y1 = extent
     scale_x = texture.shape[1] / (x1 - x0)
@@ -286,8 +291,9 @@ def _coverage_1d(n: int, start: float, stop: float) -> np.ndarray:
     return np.clip(np.minimum(edges[1:], stop) - np.maximum(edges[:-1], start), 0.0, 1.0)
 
 
-def _compose_scene(coverage_fn, pixels_per_metre: float, marker_size: float, background: int,
-                   object_level: int, markers: dict[int, tuple[float, float]] | None = None) -> Scene:
+def _compose_scene(coverage_fn: Callable[[int, int, float, float], np.ndarray], pixels_per_metre: float,
+                   marker_size: float, background: int, object_level: int,
+                   markers: dict[int, tuple[float, float]] | None = None) -> Scene:
     """A bright board with four ArUco markers (`markers`: id -> centre, default SCENE_MARKERS) and an object
     whose per-texel coverage (0..1) comes from `coverage_fn(width, height, x0, y0)`; the true area is the
     coverage sum, so it is exact for the texture."""
