@@ -445,6 +445,7 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         out["bad_roi"] = refusal("roi", [1.0, 2.0])
         out["far_roi"] = refusal("roi", [2000.0, 2000.0, 2100.0, 2000.0, 2100.0, 2100.0])
         out["bad_threshold_mode"] = refusal("threshold_mode", "median")
+        out["place_before_tuning"] = [infos[-1]["homography"], infos[-1]["weights_rebuilt"]]
         good = set_parameter("threshold", 60.0)  # the default mode is otsu, as on the command line: kept, said
         out["good_threshold"] = None if good is None else good.results[0].successful
         fixed = set_parameter("threshold_mode", "fixed")
@@ -454,6 +455,8 @@ def scenario_graph(options: dict, nodes: Nodes) -> dict:
         mark = len(infos)
         spin_until(lambda: len(calibrated(mark)) >= 6, 30)
         out["thresholds_after_change"] = sorted({i["threshold"] for i in calibrated(mark)[3:]})
+        out["places_after_tuning"] = [list(place) for place in
+                                      {(json.dumps(i["homography"]), i["weights_rebuilt"]) for i in calibrated(mark)}]
         out["area_modes_before"] = sorted({i["area_mode"] for i in calibrated(mark)[3:]})
         out["bad_area_mode"] = refusal("area_mode", "fractional")
         out["bad_levels"] = refusal("levels", [100.0, 101.0])

@@ -82,6 +82,11 @@ def test_parameters_are_validated_and_change_at_run_time(graph):
     assert graph["good_threshold"] is True and graph["fixed_threshold_mode"] is True
     assert len(graph["threshold_kept_lines"]) == 1 and "set threshold_mode:=fixed" in graph["threshold_kept_lines"][0]
     assert graph["thresholds_after_change"] == [60.0]
+    # the measurers rebuilt for the new threshold and its mode took over the markers' tracking and the weights:
+    # every frame after them is placed by the very plane fit of the last frame before (a steady camera's, kept
+    # while no marker moves; a fresh measurer finds the markers again in a frame of fresh noise) and builds none
+    homography, rebuilt = graph["place_before_tuning"]
+    assert graph["places_after_tuning"] == [[json.dumps(homography), rebuilt]]
     ok, reason = graph["bad_area_mode"]
     assert not ok and "subpixel, count" in reason
     ok, reason = graph["bad_levels"]

@@ -10,6 +10,7 @@ import sys
 from collections import Counter
 
 import numpy as np
+import pytest
 from helpers import SOURCE, recorded_conditions
 
 from veg_area_ros.area import AreaMeasurer
@@ -79,17 +80,50 @@ def test_a_measurer_rebuilt_for_its_conditions_carries_on_and_one_built_otherwis
     assert unheard.pop("warnings") != straight[0]["warnings"]
     assert unheard == {k: v for k, v in straight[0].items() if k != "warnings"}
     rebuilt = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), calibration_conditions=conditions)
-    assert rebuilt.carry_on_from(first) and rebuilt.carried is first.carried
+    assert rebuilt.carry_on_from(first) == "all" and rebuilt.carried is first.carried
     assert [rebuilt.measure(frame).summary() for frame in frames[1:]] == straight[1:]
     # what carrying changes: a measurer starting afresh at the second frame finds the markers again
     fresh = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), calibration_conditions=conditions)
     assert fresh.measure(frames[1]).summary() != straight[1]
-    # built otherwise (another threshold, other targets, another ROI): nothing carried over
-    for other in (AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=100)),
-                  AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)),
+    # built otherwise (other targets, another ROI, another tone curve to read the markers through): nothing
+    for other in (AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)),
                   AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120),
-                               roi=[[100, 100], [500, 100], [500, 400], [100, 400]])):
-        assert not other.carry_on_from(first) and other.carried is not first.carried
+                               roi=[[100, 100], [500, 100], [500, 400], [100, 400]]),
+                  AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120, tone_curve="srgb"))):
+        assert other.carry_on_from(first) == "" and other.carried is not first.carried
+        assert not other.carried.tracking.markers and other.carried.weights.weights is None
+
+
+@pytest.mark.parametrize("area_mode", ["subpixel", "count"])
+def test_a_threshold_tuned_live_keeps_the_targets_place_and_reads_the_light_again(monkeypatch, area_mode):
+    """A threshold tuned live (or the object, channel, area mode, levels, background) rebuilds the area node's
+    measurer: the markers' tracking and the pixel weights do not depend on it and are taken over (at 10 MP the
+    first frame then costs 0.06-0.09 s instead of 0.3 s), the light is found again. The next frame then searches
+    no marker, builds no weights, and reads Af at the new threshold as a fresh measurer does, within a fifth of
+    its std (the place carried from earlier frames against one found on this frame's noise)."""
+    from veg_area_ros import markers
+
+    frames = [render_scene(ENDOSCOPE, cube_scene(), 0.7, seed=seed, noise_sigma=3.0) for seed in range(3)]
+    targets = scene_targets()
+    first = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), area_mode=area_mode)
+    at_120 = [first.measure(frame) for frame in frames[:2]][-1]
+    tuned = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=90), area_mode=area_mode)
+    assert tuned.carry_on_from(first) == "place"
+    assert tuned.carried.tracking is first.carried.tracking and tuned.carried.weights is first.carried.weights
+    assert tuned.carried.light is not first.carried.light and tuned.carried.light.light is None
+    searched = []
+    detect = markers.detect_markers
+    monkeypatch.setattr(markers, "detect_markers", lambda image, *args: searched.append(image.shape) or
+                        detect(image, *args))
+    carried = tuned.measure(frames[2])
+    monkeypatch.undo()
+    assert searched == [] and tuned.rebuilds == 1
+    assert tuned.light_fits == (1 if area_mode == "subpixel" else 0)
+    fresh = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=90), area_mode=area_mode).measure(frames[2])
+    assert carried.threshold == fresh.threshold == 90
+    assert abs(carried.area_m2 - fresh.area_m2) < 0.2 * fresh.area_std_m2
+    if area_mode == "count":  # the new threshold is what was read: counted, the cube's edge pixels move
+        assert abs(carried.area_m2 - at_120.area_m2) > 0.5 * fresh.area_std_m2
 
 
 def _class_lines(path, name: str) -> int:

@@ -35,6 +35,7 @@ from std_msgs.msg import String
 
 from veg_area_msgs.msg import ProjectedArea
 
+from ..area import AreaMeasurer
 from ..bit_depth import StreamDepth
 from ..board import to_grey
 from ..board_hint import dictionary_hint
@@ -66,7 +67,6 @@ from .qos import ANY_INFO_QOS, IMAGE_QOS, LATCHED_QOS, PER_FRAME_INFO_QOS, RESUL
 from .run import run_nodes
 
 if TYPE_CHECKING:
-    from ..area import AreaMeasurer
     from ..camera_model import BrownCamera
     from ..port_area import PortAreaMeasurer
 
@@ -307,10 +307,13 @@ class AreaNode(Node):
             if "background_file" in names:
                 self.background = self._load_background(self.get_parameter("background_file").value)
             self.settings = self._settings({})
-            self.measurer = self._build(self.settings, self.camera, self.targets, self.background)
+            previous, self.measurer = self.measurer, self._build(self.settings, self.camera, self.targets,
+                                                                 self.background)
         except (ValueError, OSError) as exc:  # the file changed between the check and now
             self.get_logger().error(f"parameters set but not applied ({exc}); measuring as before")
             return
+        if isinstance(self.measurer, AreaMeasurer):  # a threshold tuned: the markers and footprints stay
+            self.measurer.carry_on_from(previous)
         if "threshold" in names and self.settings.threshold_mode == "otsu":
             self.get_logger().warning(f"threshold {self.get_parameter('threshold').value:g} kept for later: "
                                       "threshold_mode is otsu; set threshold_mode:=fixed to use it")
