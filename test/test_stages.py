@@ -85,10 +85,8 @@ def test_a_measurer_rebuilt_for_its_conditions_carries_on_and_one_built_otherwis
     # what carrying changes: a measurer starting afresh at the second frame finds the markers again
     fresh = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), calibration_conditions=conditions)
     assert fresh.measure(frames[1]).summary() != straight[1]
-    # built otherwise (other targets, another ROI, another tone curve to read the markers through): nothing
+    # built otherwise (other targets, another tone curve to read the markers through): nothing
     for other in (AreaMeasurer(ENDOSCOPE, scene_targets(), Classifier(threshold=120)),
-                  AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120),
-                               roi=[[100, 100], [500, 100], [500, 400], [100, 400]]),
                   AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120, tone_curve="srgb"))):
         assert other.carry_on_from(first) == "" and other.carried is not first.carried
         assert not other.carried.tracking.markers and other.carried.weights.weights is None
@@ -124,6 +122,36 @@ def test_a_threshold_tuned_live_keeps_the_targets_place_and_reads_the_light_agai
     assert abs(carried.area_m2 - fresh.area_m2) < 0.2 * fresh.area_std_m2
     if area_mode == "count":  # the new threshold is what was read: counted, the cube's edge pixels move
         assert abs(carried.area_m2 - at_120.area_m2) > 0.5 * fresh.area_std_m2
+
+
+def test_a_roi_drawn_live_keeps_the_tracked_markers_and_the_pixel_geometry_and_builds_its_own_weights(monkeypatch):
+    """A ROI drawn live (the console, `ros2 param set roi`) rebuilds the area node's measurer: the markers do not
+    depend on it and are taken over with the camera's pixel geometry; the weights and the light are the new ROI's
+    own. The next frame searches no marker and reads Af over the new ROI within a fifth of its std of a fresh
+    measurer's (one that found the markers on this frame's noise)."""
+    from veg_area_ros import markers
+
+    frames = [render_scene(ENDOSCOPE, cube_scene(), 0.7, seed=seed, noise_sigma=3.0) for seed in range(3)]
+    targets = scene_targets()
+    first = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120))
+    whole = [first.measure(frame) for frame in frames[:2]][-1]
+    roi = [[250, 180], [320, 180], [320, 300], [250, 300]]  # the cube's left half (it spans x 280-359)
+    drawn = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), roi=roi)
+    assert drawn.carry_on_from(first) == "markers"
+    assert drawn.carried.tracking is first.carried.tracking
+    assert drawn.carried.weights is not first.carried.weights and drawn.carried.weights.weights is None
+    assert drawn.carried.weights.geometry is first.carried.weights.geometry
+    assert drawn.carried.light is not first.carried.light and drawn.carried.light.light is None
+    searched = []
+    detect = markers.detect_markers
+    monkeypatch.setattr(markers, "detect_markers", lambda image, *args: searched.append(image.shape) or
+                        detect(image, *args))
+    carried = drawn.measure(frames[2])
+    monkeypatch.undo()
+    assert searched == [] and drawn.rebuilds == 1
+    fresh = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), roi=roi).measure(frames[2])
+    assert abs(carried.area_m2 - fresh.area_m2) < 0.2 * fresh.area_std_m2
+    assert 0.4 < carried.area_m2 / whole.area_m2 < 0.6  # the new ROI is what was measured: half the cube
 
 
 def _class_lines(path, name: str) -> int:

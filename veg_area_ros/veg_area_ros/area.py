@@ -90,16 +90,19 @@ class AreaMeasurer:
 
     def carry_on_from(self, previous: object) -> str:
         """Takes over what `previous` carried from frame to frame, as far as both were built alike (`carried_over`):
-        "all" of it (tracked markers, weights, light) or the targets' "place" only (tracked markers and weights,
-        where only what reads the light differs: the classifier, area mode, levels or background). A measurer
-        rebuilt for a calibration's conditions heard after the first frames (its warnings, an edge trend applied
-        frame by frame, the calibration's covariance in the std) then measures the next frame with what
+        "all" of it (tracked markers, weights, light), the targets' "place" (tracked markers and weights, where
+        only what reads the light differs: the classifier, area mode, levels or background) or the "markers"
+        alone with the camera's pixel geometry (where the ROI differs: its weights and light are its own). A
+        measurer rebuilt for a calibration's conditions heard after the first frames (its warnings, an edge trend
+        applied frame by frame, the calibration's covariance in the std) then measures the next frame with what
         `previous` carried, not as a first frame, so a live run and the same frames measured offline give the
         same numbers; one rebuilt for a threshold tuned live finds the light again but neither the markers nor
-        the footprints (its first frame at 10 MP 0.06-0.09 s instead of 0.3 s). Returns "all", "place" or ""
-        (nothing)."""
+        the footprints (its first frame at 10 MP 0.06-0.09 s instead of 0.3 s); one for a ROI drawn live
+        searches no marker. Returns "all", "place", "markers" or "" (nothing)."""
         how = carried_over(self, previous)
-        if how:
+        if how == "markers":
+            self.carried = Carried(previous.carried.tracking, WeightsMemory(geometry=previous.carried.weights.geometry))
+        elif how:
             self.carried = previous.carried if how == "all" else Carried(previous.carried.tracking,
                                                                            previous.carried.weights)
             weights = self.carried.weights.weights
@@ -197,16 +200,19 @@ class AreaMeasurer:
 def carried_over(measurer: AreaMeasurer, previous: object) -> str:
     """How much of what `previous` carries `measurer` can take over: "all" where both were built alike (the same
     camera, targets and background objects, equal classifier, ROI, area mode and levels), "place" (the tracked
-    markers and the weights) where only what reads the light differs, else ""."""
+    markers and the weights) where only what reads the light differs, "markers" (the tracked markers and the
+    camera's pixel geometry) where the ROI differs too, else ""."""
     if not isinstance(previous, AreaMeasurer):
         return ""
+    if not (previous.camera == measurer.camera and previous.targets is measurer.targets
+            and previous.classifier.tone_curve == measurer.classifier.tone_curve):  # the markers are read through it
+        return ""
     ours, others = measurer.region.user_polygon, previous.region.user_polygon
-    place = (previous.camera == measurer.camera and previous.targets is measurer.targets
-             and previous.classifier.tone_curve == measurer.classifier.tone_curve  # the markers are read through it
-             and (ours is None) == (others is None) and (ours is None or np.array_equal(ours, others)))
+    if (ours is None) != (others is None) or (ours is not None and not np.array_equal(ours, others)):
+        return "markers"
     mine, theirs = measurer.light_settings, previous.light_settings
     light = (previous.classifier == measurer.classifier and previous.area_mode == measurer.area_mode
              and previous.threshold_delta == measurer.threshold_delta
              and theirs.background_band is mine.background_band and theirs.even_light == mine.even_light
              and theirs.given_levels == mine.given_levels)
-    return ("all" if light else "place") if place else ""
+    return "all" if light else "place"

@@ -312,7 +312,7 @@ class AreaNode(Node):
         except (ValueError, OSError) as exc:  # the file changed between the check and now
             self.get_logger().error(f"parameters set but not applied ({exc}); measuring as before")
             return
-        if isinstance(self.measurer, AreaMeasurer):  # a threshold tuned: the markers and footprints stay
+        if isinstance(self.measurer, AreaMeasurer):  # a threshold or ROI tuned: the markers (and more) stay
             self.measurer.carry_on_from(previous)
         if "threshold" in names and self.settings.threshold_mode == "otsu":
             self.get_logger().warning(f"threshold {self.get_parameter('threshold').value:g} kept for later: "
