@@ -92,6 +92,19 @@ def test_a_measurer_rebuilt_for_its_conditions_carries_on_and_one_built_otherwis
         assert not other.carried.tracking.markers and other.carried.weights.weights is None
 
 
+def _measure_counting_marker_searches(monkeypatch, measurer: AreaMeasurer, frame: np.ndarray) -> tuple:
+    """The measurer's result for the frame and the shapes of the images markers were searched in meanwhile."""
+    from veg_area_ros import markers
+
+    searched = []
+    detect = markers.detect_markers
+    monkeypatch.setattr(markers, "detect_markers", lambda image, *args: searched.append(image.shape) or
+                        detect(image, *args))
+    result = measurer.measure(frame)
+    monkeypatch.undo()
+    return result, searched
+
+
 @pytest.mark.parametrize("area_mode", ["subpixel", "count"])
 def test_a_threshold_tuned_live_keeps_the_targets_place_and_reads_the_light_again(monkeypatch, area_mode):
     """A threshold tuned live (or the object, channel, area mode, levels, background) rebuilds the area node's
@@ -99,8 +112,6 @@ def test_a_threshold_tuned_live_keeps_the_targets_place_and_reads_the_light_agai
     first frame then costs 0.06-0.09 s instead of 0.3 s), the light is found again. The next frame then searches
     no marker, builds no weights, and reads Af at the new threshold as a fresh measurer does, within a fifth of
     its std (the place carried from earlier frames against one found on this frame's noise)."""
-    from veg_area_ros import markers
-
     frames = [render_scene(ENDOSCOPE, cube_scene(), 0.7, seed=seed, noise_sigma=3.0) for seed in range(3)]
     targets = scene_targets()
     first = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), area_mode=area_mode)
@@ -109,12 +120,7 @@ def test_a_threshold_tuned_live_keeps_the_targets_place_and_reads_the_light_agai
     assert tuned.carry_on_from(first) == "place"
     assert tuned.carried.tracking is first.carried.tracking and tuned.carried.weights is first.carried.weights
     assert tuned.carried.light is not first.carried.light and tuned.carried.light.light is None
-    searched = []
-    detect = markers.detect_markers
-    monkeypatch.setattr(markers, "detect_markers", lambda image, *args: searched.append(image.shape) or
-                        detect(image, *args))
-    carried = tuned.measure(frames[2])
-    monkeypatch.undo()
+    carried, searched = _measure_counting_marker_searches(monkeypatch, tuned, frames[2])
     assert searched == [] and tuned.rebuilds == 1
     assert tuned.light_fits == (1 if area_mode == "subpixel" else 0)
     fresh = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=90), area_mode=area_mode).measure(frames[2])
@@ -129,8 +135,6 @@ def test_a_roi_drawn_live_keeps_the_tracked_markers_and_the_pixel_geometry_and_b
     depend on it and are taken over with the camera's pixel geometry; the weights and the light are the new ROI's
     own. The next frame searches no marker and reads Af over the new ROI within a fifth of its std of a fresh
     measurer's (one that found the markers on this frame's noise)."""
-    from veg_area_ros import markers
-
     frames = [render_scene(ENDOSCOPE, cube_scene(), 0.7, seed=seed, noise_sigma=3.0) for seed in range(3)]
     targets = scene_targets()
     first = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120))
@@ -142,12 +146,7 @@ def test_a_roi_drawn_live_keeps_the_tracked_markers_and_the_pixel_geometry_and_b
     assert drawn.carried.weights is not first.carried.weights and drawn.carried.weights.weights is None
     assert drawn.carried.weights.geometry is first.carried.weights.geometry
     assert drawn.carried.light is not first.carried.light and drawn.carried.light.light is None
-    searched = []
-    detect = markers.detect_markers
-    monkeypatch.setattr(markers, "detect_markers", lambda image, *args: searched.append(image.shape) or
-                        detect(image, *args))
-    carried = drawn.measure(frames[2])
-    monkeypatch.undo()
+    carried, searched = _measure_counting_marker_searches(monkeypatch, drawn, frames[2])
     assert searched == [] and drawn.rebuilds == 1
     fresh = AreaMeasurer(ENDOSCOPE, targets, Classifier(threshold=120), roi=roi).measure(frames[2])
     assert abs(carried.area_m2 - fresh.area_m2) < 0.2 * fresh.area_std_m2
