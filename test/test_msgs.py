@@ -126,7 +126,8 @@ def test_a_frames_result_fills_every_field_and_rosbags_reads_the_bytes_alike(pre
     assert (msg.area_m2, msg.area_std_m2, msg.pixel_count) == (result.area_m2, result.area_std_m2,
                                                               result.pixel_count)
     terms = [msg.scale_std_m2, msg.threshold_std_m2, msg.discretisation_std_m2, msg.levels_std_m2,
-             msg.plane_offset_std_m2, msg.exposure_std_m2, msg.edge_trend_std_m2, msg.calibration_std_m2]
+             msg.plane_offset_std_m2, msg.exposure_std_m2, msg.glare_std_m2, msg.edge_trend_std_m2,
+             msg.calibration_std_m2]
     assert msg.area_std_m2 == pytest.approx(float(np.hypot.reduce(terms)), rel=1e-9)
     assert (msg.area_mode, msg.subpixel_applied, msg.threshold, msg.tone_curve) == (
         result.area_mode, result.subpixel_applied, result.threshold, result.tone_curve)
@@ -191,7 +192,7 @@ def test_a_bag_recorded_before_a_field_was_added_reads_with_its_own_definition(t
     old.register(get_types_from_msg(before, name))
     fields = {field: 0.0 for field in ("area_m2", "area_std_m2", "scale_std_m2", "threshold_std_m2",
                                        "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2",
-                                       "exposure_std_m2", "edge_trend_std_m2", "edge_trend_m2",
+                                       "exposure_std_m2", "glare_std_m2", "edge_trend_std_m2", "edge_trend_m2",
                                        "count_area_m2", "threshold")}
     fields.update(area_m2=0.0105, area_std_m2=1.5e-5, edge_trend_m2=2e-6, pixel_count=4321,
                   area_mode="subpixel", subpixel_applied=True, tone_curve="linear", calibrated=True,

@@ -51,6 +51,7 @@ class AreaResult:
     exposure: dict | None = None  # clipped highlights or crushed shadows near the object's edges, when there are
     exposure_std_m2: float = 0.0  # what clipping next to the edge may do to Af (in area_std_m2)
     glare: dict | None = None  # pixels brighter than the brighter class's level: a sheen or reflection (checks)
+    glare_std_m2: float = 0.0  # what a sheen's lift of the darker class may do to Af (in area_std_m2)
     edge_widths: dict | None = None  # the object's and the printed markers' edge width, px (blur)
     edge_trend: dict | None = None  # the edges moved back by the calibration's trend with exposure (edge_trend)
     edge_trend_std_m2: float = 0.0  # that trend's slope uncertainty at this frame's white level (in area_std_m2)
@@ -83,6 +84,7 @@ class AreaResult:
                 "evened_by": self.flat_field.source, "variation": self.flat_field.variation,
                 "misfit": self.flat_field.misfit},
             "exposure": self.exposure, "exposure_std_m2": self.exposure_std_m2, "glare": self.glare,
+            "glare_std_m2": self.glare_std_m2,
             "edge_widths": self.edge_widths,
             "edge_trend": self.edge_trend, "edge_trend_m2": self.edge_trend_m2,
             "edge_trend_std_m2": self.edge_trend_std_m2, "warnings": list(self.warnings),

@@ -57,6 +57,9 @@ DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than
 GLARE_CONTRAST, GLARE_SPREADS, GLARE_SHARE = 0.10, 4.0, 0.0025
 MARKER_PAPER = 2.0  # a marker's white paper reaches this many times its own size about its centre: not glare
 GLARE_WHOLE_PX, GLARE_ROW_STEP = 2_000_000, 4  # windows larger than this are read every fourth row for glare
+# under glare, pixels between the levels farther than this (or the markers' edge width) from the object's edges
+# are taken as lifted by it: a blurred edge's own pixels lie within it
+GLARE_EDGE_REACH_PX = 2
 
 # warnings about an object's edges, levels or extent: void where no object was found
 OBJECT_WARNINGS = ("counted whole pixels", "object touches the ROI's border", "object surrounds the rest",
@@ -97,6 +100,11 @@ def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, ban
         result.exposure_std_m2 = result.exposure["affected_area_m2"] * 0.5 / np.sqrt(3)
         result.area_std_m2 = float(np.hypot(result.area_std_m2, result.exposure_std_m2))
     result.edge_widths = _edge_widths(looked_at, mask, roi_count, weights, result.levels, markers)
+    if result.glare is not None and result.glare["matters"]:
+        reach = max(GLARE_EDGE_REACH_PX, math.ceil((result.edge_widths or {}).get("markers_px") or 0))
+        result.glare["lifted_read_m2"] = _lifted_read_as_brighter(band, mask, weights, factor, result, reach)
+        result.glare_std_m2 = result.glare["lifted_read_m2"]
+        result.area_std_m2 = float(np.hypot(result.area_std_m2, result.glare_std_m2))
     result.warnings = _warnings(result, mask, weights, located, settings)
     unlike = _given_levels_unlike_the_frame(result, estimator)
     if unlike:
@@ -240,6 +248,28 @@ def _glare(band: np.ndarray, weights: Weights, levels: Levels | None, classifier
             "reads": "low" if bright_is_background else "high"}
 
 
+def _lifted_read_as_brighter(band: np.ndarray, mask: np.ndarray, weights: Weights, factor: float,
+                             result: AreaResult, reach: int) -> float:
+    """What a sheen's lift of the darker class may have moved Af by (m²): the ROI's pixels between the two
+    levels' outer EDGE_ZONE farther than `reach` px from the object's edges (no edge's blur explains them),
+    each by the share of it read as the brighter class (sub-pixel) or wholly where it was read as that class
+    (counted). Were they the darker class lifted, that much of it is lost to the brighter one; were they
+    shading or texture, nothing is: a frame without glare is not read for them."""
+    levels = result.levels
+    low, high = sorted((levels.object, levels.background))
+    between = (np.abs(BAND_VALUES - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low)).astype(np.uint8) * 255
+    edges = cv2.morphologyEx(mask, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
+    near_edges = cv2.dilate(edges, np.ones((2 * reach + 1, 2 * reach + 1), np.uint8))
+    away = cv2.bitwise_and(cv2.LUT(band, between), cv2.bitwise_and(weights.roi, cv2.bitwise_not(near_edges)))
+    area_at = weights.histogram(band, away) @ weights.level_area * factor  # m² at each band value
+    if result.subpixel_applied:
+        fractions = levels.fractions()
+        brighter = fractions if levels.object > levels.background else 1 - fractions
+    else:
+        brighter = (result.threshold < BAND_VALUES).astype(float)
+    return float(area_at @ brighter)
+
+
 def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: Located, settings: CheckSettings
               ) -> list[str]:
     """Everything that makes this Af less trustworthy, one line each, said in the result itself."""
@@ -259,7 +289,9 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
         said.append(f"glare: {100 * glare['share']:.1f} % of the ROI is brighter than the {brighter}'s level "
                     f"(over {glare['above_dn']:.0f} DN), a sheen or specular reflection; where it lifts the "
                     f"{darker} too, its pixels read as {brighter} and Af reads {glare['reads']} (by 1-2.5 % on "
-                    "photos of a glossy print); light from the side or through a diffuser, or turn the camera")
+                    "photos of a glossy print); the std has "
+                    f"{100 * result.glare_std_m2 / max(result.area_m2, 1e-300):.1f} % for it; light from the side or "
+                    "through a diffuser, or turn the camera")
     if settings.area_mode == "subpixel" and not result.subpixel_applied:
         said.append("counted whole pixels: the object's and the background's levels could not be told apart "
                     "well enough for sub-pixel shares (uneven light or texture); the std is the count's")

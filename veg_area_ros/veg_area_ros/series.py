@@ -17,7 +17,7 @@ import math
 import statistics
 
 SHARED_TERMS = ("scale_std_m2", "plane_offset_std_m2", "threshold_std_m2", "levels_std_m2", "exposure_std_m2",
-                "edge_trend_std_m2", "discretisation_std_m2", "calibration_std_m2")
+                "glare_std_m2", "edge_trend_std_m2", "discretisation_std_m2", "calibration_std_m2")
 
 
 def _warnings(row: dict) -> list[str]:

@@ -37,8 +37,9 @@ if TYPE_CHECKING:
 CSV_COLUMNS = ("frame", "time_s", "stamp_sec", "stamp_nanosec", "area_m2", "area_std_m2", "area_mode",
                "subpixel_applied", "pixel_count", "count_area_m2", "threshold", "tone_curve", "scale_std_m2",
                "threshold_std_m2", "discretisation_std_m2", "levels_std_m2", "plane_offset_std_m2",
-               "calibration_std_m2", "object_plane_offset_m", "exposure_std_m2", "edge_trend_std_m2", "edge_trend_m2",
-               "scale_m_per_px", "scale_kind", "marker_std_px", "calibrated", "missing_targets", "warnings", "error")
+               "calibration_std_m2", "object_plane_offset_m", "exposure_std_m2", "glare_std_m2", "edge_trend_std_m2",
+               "edge_trend_m2", "scale_m_per_px", "scale_kind", "marker_std_px", "calibrated", "missing_targets",
+               "warnings", "error")
 
 SEGMENT_FRAMES = 1000
 

@@ -64,7 +64,7 @@ def projected_area(result: AreaResult, stamp: Time, frame_id: str, calibration_s
     msg.scale_std_m2, msg.threshold_std_m2 = float(result.scale_std_m2), float(result.threshold_std_m2)
     msg.discretisation_std_m2, msg.levels_std_m2 = float(result.discretisation_std_m2), float(result.levels_std_m2)
     msg.plane_offset_std_m2, msg.exposure_std_m2 = float(result.plane_offset_std_m2), float(result.exposure_std_m2)
-    msg.edge_trend_std_m2 = float(result.edge_trend_std_m2)
+    msg.glare_std_m2, msg.edge_trend_std_m2 = float(result.glare_std_m2), float(result.edge_trend_std_m2)
     msg.calibration_std_m2 = float(result.calibration_std_m2)
     msg.edge_trend_m2 = result.edge_trend_m2
     msg.pixel_count, msg.count_area_m2 = int(result.pixel_count), float(result.count_area_m2)
