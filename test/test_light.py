@@ -17,8 +17,8 @@ from helpers import OPENCV_LEFT, SOURCE, calibrated_camera, fitted_conditions, r
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
 from veg_area_ros.calibration import View, calibrate
-from veg_area_ros.checks import GLARE_SHARE
 from veg_area_ros.classify import Classifier, ClassifyError
+from veg_area_ros.glare import GLARE_SHARE
 from veg_area_ros.light import EVEN_SHARE, LightError, fit_background_surface, flat_field
 from veg_area_ros.light_levels import interior_levels, levels_inside
 from veg_area_ros.sim.synthetic import (
@@ -287,7 +287,7 @@ def test_a_large_windows_glare_is_read_every_fourth_row_as_the_whole_reads_it(mo
     way."""
     from types import SimpleNamespace
 
-    import veg_area_ros.checks as checks
+    import veg_area_ros.glare as glare
     from veg_area_ros.classify import Levels
     from veg_area_ros.markers import DetectedMarker
 
@@ -301,12 +301,12 @@ def test_a_large_windows_glare_is_read_every_fourth_row_as_the_whole_reads_it(mo
     weights = SimpleNamespace(roi=np.full(band.shape, 255, np.uint8), window=(slice(0, 2592), slice(0, 3872)))
     markers = {0: DetectedMarker(corners.mean(axis=0), corners)}
     levels = Levels(40.0, 200.0, 2.0, 3.0)
-    sampled = checks._glare(band, weights, levels, Classifier(), markers)
-    monkeypatch.setattr(checks, "GLARE_WHOLE_PX", band.size)
-    whole = checks._glare(band, weights, levels, Classifier(), markers)
+    sampled = glare.glare_in(band, weights, levels, Classifier(), markers)
+    monkeypatch.setattr(glare, "GLARE_WHOLE_PX", band.size)
+    whole = glare.glare_in(band, weights, levels, Classifier(), markers)
     assert whole["matters"] and sampled["matters"]
     assert sampled["share"] == pytest.approx(whole["share"], rel=0.05)
-    without_marker = checks._glare(band, weights, levels, Classifier(), {})
+    without_marker = glare.glare_in(band, weights, levels, Classifier(), {})
     assert without_marker["share"] > whole["share"] + 0.005  # the paper, 90,000 px, would count
 
 

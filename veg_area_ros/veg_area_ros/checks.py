@@ -21,7 +21,8 @@ import cv2
 import numpy as np
 
 from .area_result import AreaResult
-from .classify import BAND_VALUES, Classifier, LevelEstimator, Levels
+from .classify import BAND_VALUES, EDGE_ZONE, Classifier, LevelEstimator, Levels
+from .glare import GLARE_EDGE_REACH_PX, glare_in, lifted_read_as_brighter
 from .idealize import IdealView
 from .light_levels import INTERIOR_PX
 from .locate import Located
@@ -44,22 +45,12 @@ CLIP_REACH_PX = 2  # blooming and the lens's blur carry a clipped pixel's light 
 CLIP_EDGE_SHARE = 0.10  # clipping next to this share of the object's edge pixels matters (real photos: 17 %, Af -1.2 %)
 BORDER_TOUCH_SHARE = 0.01  # object pixels on the ROI's border, as a share of the object's: the area is cut
 SWEEP_UNSETTLED = 0.02  # Af moving this much (relative) per sweep step around the threshold: no stable edge
-EDGE_ZONE = 0.15  # an edge's pixels: between the two levels' outer 15 % (noise stays out at any contrast)
 BLUR_RATIO = 2.0  # the object's edges this much (and a pixel) wider than the markers': blurred on its own
 # the markers' measured localisation (target_error) alone making Af this uncertain (relative): said, beside the
 # std that holds it. Rendered: the endoscope's markers at 0.6 m at the 0.1 px floor 0.045 %, dim, noisy and
 # blurred ones (0.22 px) 0.10 %; a DSLR's blurred by 7 px at 0.7 m (0.9-1.5 px) 0.08-0.13 %
 LOOSE_MARKERS_SHARE = 0.0025
 DISTANCE_TOLERANCE = 0.15  # targets this much (relative) nearer or farther than the calibration: said
-# glare: pixels brighter than the brighter class's level by this share of the contrast (or this many of its
-# spreads, where noise is larger), over this share of the ROI. Real photos: a glossy print's sheen 0.6-1.1 % of
-# the ROI (Af -1 to -2.5 %), sheen-free ones up to 0.08 %
-GLARE_CONTRAST, GLARE_SPREADS, GLARE_SHARE = 0.10, 4.0, 0.0025
-MARKER_PAPER = 2.0  # a marker's white paper reaches this many times its own size about its centre: not glare
-GLARE_WHOLE_PX, GLARE_ROW_STEP = 2_000_000, 4  # windows larger than this are read every fourth row for glare
-# under glare, pixels between the levels farther than this (or the markers' edge width) from the object's edges
-# are taken as lifted by it: a blurred edge's own pixels lie within it
-GLARE_EDGE_REACH_PX = 2
 
 # warnings about an object's edges, levels or extent: void where no object was found
 OBJECT_WARNINGS = ("counted whole pixels", "object touches the ROI's border", "object surrounds the rest",
@@ -93,7 +84,7 @@ def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, ban
     where no object was found, Af becomes 0 with its reason. `band`: the band the levels were read from (its
     light evened). Returns the object mask over the weights' window."""
     result.exposure = _exposure(raw_band, mask, weights, factor, settings.classifier)
-    result.glare = _glare(band, weights, result.levels, settings.classifier, markers)
+    result.glare = glare_in(band, weights, result.levels, settings.classifier, markers)
     if result.exposure is not None and result.exposure["affected_area_m2"] > 0:
         # each edge pixel next to the clipping may be off by up to half a pixel, all the same way; in the std
         # from the first such pixel (a step at the warning's share would jump with the model's last decimals)
@@ -102,7 +93,7 @@ def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, ban
     result.edge_widths = _edge_widths(looked_at, mask, roi_count, weights, result.levels, markers)
     if result.glare is not None and result.glare["matters"]:
         reach = max(GLARE_EDGE_REACH_PX, math.ceil((result.edge_widths or {}).get("markers_px") or 0))
-        result.glare["lifted_read_m2"] = _lifted_read_as_brighter(band, mask, weights, factor, result, reach)
+        result.glare["lifted_read_m2"] = lifted_read_as_brighter(band, mask, weights, factor, result, reach)
         result.glare_std_m2 = result.glare["lifted_read_m2"]
         result.area_std_m2 = float(np.hypot(result.area_std_m2, result.glare_std_m2))
     result.warnings = _warnings(result, mask, weights, located, settings)
@@ -210,64 +201,6 @@ def _exposure(raw_band: np.ndarray, mask: np.ndarray, weights: Weights, factor: 
         found["affected_area_m2"] += area
         found["matters"] = found["matters"] or matters
     return found if len(found) > 2 else None
-
-
-def _glare(band: np.ndarray, weights: Weights, levels: Levels | None, classifier: Classifier,
-           markers: dict[int, DetectedMarker]) -> dict | None:
-    """A sheen or specular reflection in the ROI: pixels brighter than the brighter class's level by more than
-    GLARE_CONTRAST of the contrast (and GLARE_SPREADS of that level's spread). No pure surface sends more
-    light than its level, so these are reflections; one that lifts the darker class (a glossy print's black, a
-    wet leaf) turns part of it into the brighter one. Read in the evened band, so shading is not taken for it;
-    the markers' white paper, which may well be whiter than the background, is left out. None where nothing is
-    that bright, or the object is no grey level (an excess-green index)."""
-    if levels is None or classifier.object == "green":
-        return None
-    bright_is_background = levels.background >= levels.object
-    bright = max(levels.background, levels.object)
-    spread = levels.background_spread if bright_is_background else levels.object_spread
-    above = bright + max(GLARE_CONTRAST * abs(levels.background - levels.object), GLARE_SPREADS * spread)
-    if cv2.minMaxLoc(band, weights.roi)[1] <= above:  # one pass where nothing is that bright (most frames)
-        return None
-    # every GLARE_ROW_STEP-th row of a large window (a sheen spans many rows): a 10 MP frame's check costs a
-    # quarter; a small window is read whole
-    step = GLARE_ROW_STEP if band.size > GLARE_WHOLE_PX else 1
-    looked = weights.roi[::step]
-    if markers:
-        looked = looked.copy()
-        offset = np.array([weights.window[1].start, weights.window[0].start], float)
-        for marker in markers.values():
-            paper = (marker.centre + MARKER_PAPER * (marker.corners - marker.centre) - offset) / [1.0, step]
-            cv2.fillConvexPoly(looked, np.round(paper).astype(np.int32), 0)
-    roi_pixels = cv2.countNonZero(looked)
-    # the band is whole DN: over `above` is over its floor (cv2.compare would round the scalar)
-    over = cv2.countNonZero(cv2.bitwise_and(cv2.compare(band[::step], math.floor(above), cv2.CMP_GT), looked))
-    if not over or not roi_pixels:
-        return None
-    share = over / roi_pixels
-    return {"share": float(share), "above_dn": float(above), "matters": share >= GLARE_SHARE,
-            "reads": "low" if bright_is_background else "high"}
-
-
-def _lifted_read_as_brighter(band: np.ndarray, mask: np.ndarray, weights: Weights, factor: float,
-                             result: AreaResult, reach: int) -> float:
-    """What a sheen's lift of the darker class may have moved Af by (m²): the ROI's pixels between the two
-    levels' outer EDGE_ZONE farther than `reach` px from the object's edges (no edge's blur explains them),
-    each by the share of it read as the brighter class (sub-pixel) or wholly where it was read as that class
-    (counted). Were they the darker class lifted, that much of it is lost to the brighter one; were they
-    shading or texture, nothing is: a frame without glare is not read for them."""
-    levels = result.levels
-    low, high = sorted((levels.object, levels.background))
-    between = (np.abs(BAND_VALUES - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low)).astype(np.uint8) * 255
-    edges = cv2.morphologyEx(mask, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
-    near_edges = cv2.dilate(edges, np.ones((2 * reach + 1, 2 * reach + 1), np.uint8))
-    away = cv2.bitwise_and(cv2.LUT(band, between), cv2.bitwise_and(weights.roi, cv2.bitwise_not(near_edges)))
-    area_at = weights.histogram(band, away) @ weights.level_area * factor  # m² at each band value
-    if result.subpixel_applied:
-        fractions = levels.fractions()
-        brighter = fractions if levels.object > levels.background else 1 - fractions
-    else:
-        brighter = (result.threshold < BAND_VALUES).astype(float)
-    return float(area_at @ brighter)
 
 
 def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: Located, settings: CheckSettings

@@ -33,6 +33,7 @@ MAX_MORPHOLOGY_PX = 100  # an opening or closing radius; specks and pin-holes ar
 PURE_ZONE_SPREADS = 4.0  # band values within this many spreads of a level are taken as pure, not mixed
 MIN_SPREAD_DN = 0.5  # the spread of a level is at least the band's quantisation
 BAND_VALUES = np.arange(256, dtype=float)
+EDGE_ZONE = 0.15  # an edge's pixels: between the two levels' outer 15 % (noise stays out at any contrast)
 BAND_POWERS = BAND_VALUES[None, :] ** np.arange(3)[:, None]  # 1, v, v² for the levels' moments
 MAX_PURE_ZONES = 0.5  # both pure zones together may cover at most this share of the contrast
 MIN_PURE_PIXELS = 50  # a class's interior must hold this many pixels to give its level
