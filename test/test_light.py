@@ -18,7 +18,7 @@ from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
 from veg_area_ros.calibration import View, calibrate
 from veg_area_ros.classify import Classifier, ClassifyError
-from veg_area_ros.glare import GLARE_SHARE
+from veg_area_ros.glare import GLARE_OBJECT_SHARE, GLARE_SHARE
 from veg_area_ros.light import EVEN_SHARE, LightError, fit_background_surface, flat_field
 from veg_area_ros.light_levels import interior_levels, levels_inside
 from veg_area_ros.sim.synthetic import (
@@ -251,7 +251,9 @@ def test_a_sheen_across_the_object_is_said_as_glare_its_std_holds_it_and_a_frame
     result says glare; its std holds the error, by the pixels the sheen left between the levels away from every
     edge, each by the share of it read as background (without that term -6.5 % lay 5 std out); the same frame
     without it, 30 % light gradient and all, says nothing and has no such term (the markers' white paper,
-    whiter than the background, is not taken for glare)."""
+    whiter than the background, is not taken for glare). A small strong spot (90 DN, 10 px wide: 0.08 % of the
+    ROI, 0.9 % of the object's pixels) is said too, the object being small in its ROI; it lifts the black wholly
+    into the background's level, past what the std's term reads between the levels (Af -2.8 %, std 0.95 %)."""
     scene = cube_scene()
     camera, conditions = calibrated_camera("endoscope", "water"), fitted_conditions("endoscope", "water")
 
@@ -279,12 +281,18 @@ def test_a_sheen_across_the_object_is_said_as_glare_its_std_holds_it_and_a_frame
         without = np.sqrt(sheened.area_std_m2**2 - sheened.glare_std_m2**2)
         uncovered.append(abs(error) * scene.true_area_m2 > 3 * without)
     assert uncovered == [False, True]  # the stronger sheen is held by the glare term alone
+    spot = 90 * np.exp(-((xx - cols.max() + 10) ** 2 + (yy - rows.min() - 10) ** 2) / (2 * 10.0**2))
+    spotted = measured(np.clip(frame + spot[..., None], 0, 255).astype(np.uint8))
+    assert spotted.area_m2 / scene.true_area_m2 - 1 < -0.02
+    assert spotted.glare["share"] < GLARE_SHARE <= GLARE_OBJECT_SHARE <= spotted.glare["object_share"]
+    (warning,) = [w for w in spotted.warnings if w.startswith("glare")]
+    assert "Af reads low" in warning and spotted.glare_std_m2 > 0
 
 
 def test_a_large_windows_glare_is_read_every_fourth_row_as_the_whole_reads_it(monkeypatch):
-    """A 10 MP window is read for glare on every fourth row (a quarter of the cost): a sheen's share comes out
-    as the whole window gives it, and a marker's white paper, whiter than the background, is left out either
-    way."""
+    """A 10 MP window is read for glare on every fourth row (a quarter of the cost): a sheen's share of the ROI
+    and of the object's pixels near it come out as the whole window gives them (the sheen's far flank left out
+    of the second), and a marker's white paper, whiter than the background, is left out either way."""
     from types import SimpleNamespace
 
     import veg_area_ros.glare as glare
@@ -301,11 +309,16 @@ def test_a_large_windows_glare_is_read_every_fourth_row_as_the_whole_reads_it(mo
     weights = SimpleNamespace(roi=np.full(band.shape, 255, np.uint8), window=(slice(0, 2592), slice(0, 3872)))
     markers = {0: DetectedMarker(corners.mean(axis=0), corners)}
     levels = Levels(40.0, 200.0, 2.0, 3.0)
-    sampled = glare.glare_in(band, weights, levels, Classifier(), markers)
+    mask = np.zeros(band.shape, np.uint8)
+    mask[1000:1200, 1000:1300] = 255
+    sampled = glare.glare_in(band, weights, levels, Classifier(), markers, mask)
     monkeypatch.setattr(glare, "GLARE_WHOLE_PX", band.size)
-    whole = glare.glare_in(band, weights, levels, Classifier(), markers)
+    whole = glare.glare_in(band, weights, levels, Classifier(), markers, mask)
     assert whole["matters"] and sampled["matters"]
     assert sampled["share"] == pytest.approx(whole["share"], rel=0.05)
+    # near the object only (its box grown by a quarter of its size): the sheen's far flank is left out
+    assert 0 < sampled["object_share"] == pytest.approx(whole["object_share"], rel=0.05)
+    assert whole["object_share"] < whole["share"] * band.size / 60_000 * 0.9
     without_marker = glare.glare_in(band, weights, levels, Classifier(), {})
     assert without_marker["share"] > whole["share"] + 0.005  # the paper, 90,000 px, would count
 

@@ -84,7 +84,7 @@ def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, ban
     where no object was found, Af becomes 0 with its reason. `band`: the band the levels were read from (its
     light evened). Returns the object mask over the weights' window."""
     result.exposure = _exposure(raw_band, mask, weights, factor, settings.classifier)
-    result.glare = glare_in(band, weights, result.levels, settings.classifier, markers)
+    result.glare = glare_in(band, weights, result.levels, settings.classifier, markers, mask)
     if result.exposure is not None and result.exposure["affected_area_m2"] > 0:
         # each edge pixel next to the clipping may be off by up to half a pixel, all the same way; in the std
         # from the first such pixel (a step at the warning's share would jump with the model's last decimals)
@@ -219,7 +219,8 @@ def _warnings(result: AreaResult, mask: np.ndarray, weights: Weights, located: L
     glare = result.glare
     if glare and glare["matters"]:
         darker, brighter = (("object", "background") if glare["reads"] == "low" else ("background", "object"))
-        said.append(f"glare: {100 * glare['share']:.1f} % of the ROI is brighter than the {brighter}'s level "
+        said.append(f"glare: {100 * glare['share']:.1f} % of the ROI ({100 * glare['object_share']:.1f} % of the "
+                    f"object's pixels) is brighter than the {brighter}'s level "
                     f"(over {glare['above_dn']:.0f} DN), a sheen or specular reflection; where it lifts the "
                     f"{darker} too, its pixels read as {brighter} and Af reads {glare['reads']} (by 1-2.5 % on "
                     "photos of a glossy print); the std has "

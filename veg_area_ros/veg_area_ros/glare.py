@@ -25,9 +25,12 @@ if TYPE_CHECKING:
     from .area_result import AreaResult
 
 # glare: pixels brighter than the brighter class's level by this share of the contrast (or this many of its
-# spreads, where noise is larger), over this share of the ROI. Real photos: a glossy print's sheen 0.6-1.1 % of
-# the ROI (Af -1 to -2.5 %), sheen-free ones up to 0.08 %
-GLARE_CONTRAST, GLARE_SPREADS, GLARE_SHARE = 0.10, 4.0, 0.0025
+# spreads, where noise is larger), over this share of the ROI (real photos: a glossy print's sheen 0.6-1.1 % of
+# the ROI, Af -1 to -2.5 %; sheen-free ones up to 0.08 %), or, near the object, over this share of its own pixels,
+# so a small object in a large ROI is not let off (real photos: sheens 1.2-2.3 %, sheen-free ones up to 0.17 %;
+# a rendered 90 DN spot 10 px wide on the cube, 0.08 % of the ROI, 0.9 % of the object, Af -2.8 %)
+GLARE_CONTRAST, GLARE_SPREADS, GLARE_SHARE, GLARE_OBJECT_SHARE = 0.10, 4.0, 0.0025, 0.005
+GLARE_NEAR = 0.25  # of the square root of the object's pixels: a marker's paper afar is not the object's sheen
 MARKER_PAPER = 2.0  # a marker's white paper reaches this many times its own size about its centre: not glare
 GLARE_WHOLE_PX, GLARE_ROW_STEP = 2_000_000, 4  # windows larger than this are read every fourth row for glare
 # under glare, pixels between the levels farther than this (or the markers' edge width) from the object's edges
@@ -36,13 +39,14 @@ GLARE_EDGE_REACH_PX = 2
 
 
 def glare_in(band: np.ndarray, weights: Weights, levels: Levels | None, classifier: Classifier,
-             markers: dict[int, DetectedMarker]) -> dict | None:
+             markers: dict[int, DetectedMarker], mask: np.ndarray | None = None) -> dict | None:
     """A sheen or specular reflection in the ROI: pixels brighter than the brighter class's level by more than
-    GLARE_CONTRAST of the contrast (and GLARE_SPREADS of that level's spread). No pure surface sends more
-    light than its level, so these are reflections; one that lifts the darker class (a glossy print's black, a
-    wet leaf) turns part of it into the brighter one. Read in the evened band, so shading is not taken for it;
-    the markers' white paper, which may well be whiter than the background, is left out. None where nothing is
-    that bright, or the object is no grey level (an excess-green index)."""
+    GLARE_CONTRAST of the contrast (and GLARE_SPREADS of that level's spread); it matters over GLARE_SHARE of
+    the ROI, or near the object (`mask`, over the window) over GLARE_OBJECT_SHARE of the object's pixels. No
+    pure surface sends more light than its level, so these are reflections; one that lifts the darker class (a
+    glossy print's black, a wet leaf) turns part of it into the brighter one. Read in the evened band, so
+    shading is not taken for it; the markers' white paper, which may well be whiter than the background, is
+    left out. None where nothing is that bright, or the object is no grey level (an excess-green index)."""
     if levels is None or classifier.object == "green":
         return None
     bright_is_background = levels.background >= levels.object
@@ -63,11 +67,20 @@ def glare_in(band: np.ndarray, weights: Weights, levels: Levels | None, classifi
             cv2.fillConvexPoly(looked, np.round(paper).astype(np.int32), 0)
     roi_pixels = cv2.countNonZero(looked)
     # the band is whole DN: over `above` is over its floor (cv2.compare would round the scalar)
-    over = cv2.countNonZero(cv2.bitwise_and(cv2.compare(band[::step], math.floor(above), cv2.CMP_GT), looked))
+    bright_pixels = cv2.bitwise_and(cv2.compare(band[::step], math.floor(above), cv2.CMP_GT), looked)
+    over = cv2.countNonZero(bright_pixels)
     if not over or not roi_pixels:
         return None
     share = over / roi_pixels
-    return {"share": float(share), "above_dn": float(above), "matters": share >= GLARE_SHARE,
+    object_pixels = 0 if mask is None else cv2.countNonZero(mask)
+    of_object = 0.0
+    if object_pixels:  # in the object's bounding box grown by GLARE_NEAR of its size (rows read as above)
+        reach = round(GLARE_NEAR * math.sqrt(object_pixels))
+        x, y, w, h = cv2.boundingRect(mask)
+        rows = slice(-(-max(0, y - reach) // step), -(-(y + h + reach) // step))
+        of_object = cv2.countNonZero(bright_pixels[rows, max(0, x - reach):x + w + reach]) * step / object_pixels
+    return {"share": float(share), "object_share": float(of_object), "above_dn": float(above),
+            "matters": share >= GLARE_SHARE or of_object >= GLARE_OBJECT_SHARE,
             "reads": "low" if bright_is_background else "high"}
 
 
