@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from .area_result import AreaResult
-from .classify import BAND_VALUES, EDGE_ZONE, Classifier, LevelEstimator, Levels
+from .classify import BAND_VALUES, Classifier, LevelEstimator, Levels, in_edge_zone
 from .glare import GLARE_EDGE_REACH_PX, glare_in, lifted_read_as_brighter
 from .idealize import IdealView
 from .light_levels import INTERIOR_PX
@@ -159,7 +159,7 @@ def _marker_edge_width(frame: np.ndarray, markers: Iterable[DetectedMarker]) -> 
         if high - low < 20:
             continue
         outline = _outline((grey <= (low + high) / 2).astype(np.uint8))
-        mixed = np.count_nonzero(np.abs(grey - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low))
+        mixed = np.count_nonzero(in_edge_zone(grey, low, high))
         if outline:
             widths.append(mixed / outline)
     return float(np.median(widths)) if widths else None
@@ -301,7 +301,7 @@ def _edge_widths(frame: np.ndarray, mask: np.ndarray, counts: np.ndarray, weight
     low, high = sorted((levels.object, levels.background))
     if high - low < 20:
         return None
-    inside = np.abs(BAND_VALUES - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low)
+    inside = in_edge_zone(BAND_VALUES, low, high)
     outline = _outline(mask)
     if outline == 0:
         return None

@@ -55,6 +55,11 @@ class SharesOnlyError(ClassifyError):
         self.option = option
 
 
+def in_edge_zone(values: np.ndarray, low: float, high: float) -> np.ndarray:
+    """Which values lie between two levels' outer EDGE_ZONE: an edge's pixels, noise kept out at any contrast."""
+    return np.abs(values - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low)
+
+
 def to_light(values: ArrayLike, tone_curve: str) -> np.ndarray:
     """Band values (0..255, float allowed) as light on the same 0..255 scale, through the tone curve."""
     values = np.asarray(values, float)

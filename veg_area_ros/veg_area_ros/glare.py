@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from .classify import BAND_VALUES, EDGE_ZONE, Classifier, Levels
+from .classify import BAND_VALUES, Classifier, Levels, in_edge_zone
 from .markers import DetectedMarker
 from .weights import Weights
 
@@ -93,7 +93,7 @@ def lifted_read_as_brighter(band: np.ndarray, mask: np.ndarray, weights: Weights
     shading or texture, nothing is: a frame without glare is not read for them."""
     levels = result.levels
     low, high = sorted((levels.object, levels.background))
-    between = (np.abs(BAND_VALUES - (low + high) / 2) < (0.5 - EDGE_ZONE) * (high - low)).astype(np.uint8) * 255
+    between = in_edge_zone(BAND_VALUES, low, high).astype(np.uint8) * 255
     edges = cv2.morphologyEx(mask, cv2.MORPH_GRADIENT, np.ones((3, 3), np.uint8))
     near_edges = cv2.dilate(edges, np.ones((2 * reach + 1, 2 * reach + 1), np.uint8))
     away = cv2.bitwise_and(cv2.LUT(band, between), cv2.bitwise_and(weights.roi, cv2.bitwise_not(near_edges)))
