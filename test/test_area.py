@@ -7,6 +7,7 @@ from helpers import calibrated_endoscope
 
 from veg_area_ros.area import AreaMeasurer
 from veg_area_ros.board import BoardSpec
+from veg_area_ros.calib_io import CalibrationFileError, read_calibration, write_calibration
 from veg_area_ros.classify import Classifier, ClassifyError, polygon_roi
 from veg_area_ros.idealize import FrameSizeError, Idealizer
 from veg_area_ros.markers import detect_markers, marker_centre
@@ -165,6 +166,34 @@ def test_targets_file_as_the_issue_writes_it_and_duplicate_ids(tmp_path):
     path.write_text("dictionary: DICT_4X4_50\nmarkers:\n  0: [-0.22, -0.16]\n  0: [0.22, -0.16]\n")
     with pytest.raises(TargetsError, match=r"targets.yaml: duplicate key 0 at line 4"):
         TargetsSpec.load(path)
+
+
+def test_a_mistyped_key_or_a_calibration_given_as_targets_is_refused_naming_it(tmp_path):
+    """A key the targets file does not have was passed over: `object_plane_ofset_m` measured the object in the
+    targets' plane, exit 0. Refused with the key it is most like; a calibration given in the targets' place
+    (and the reverse, and an image) is named as what it is."""
+    content = "dictionary: DICT_4X4_50\nmarkers:\n  0: [-0.22, -0.16]\n  1: [0.22, -0.16]\n  2: [0.22, 0.16]\n"
+    path = tmp_path / "targets.yaml"
+    path.write_text(content + "  3: [-0.22, 0.16]\nobject_plane_ofset_m: 0.03\n")
+    with pytest.raises(TargetsError, match=r"no key 'object_plane_ofset_m' \(did you mean 'object_plane_offset_m'"):
+        TargetsSpec.load(path)
+    with pytest.raises(TargetsError, match=r"point 0 has no key 'std'; its keys are pixel, plane"):
+        TargetsSpec.from_dict({"points": [{"pixel": [1, 2], "plane": [0, 0], "std": 0.2},
+                                          {"pixel": [9, 2], "plane": [0.1, 0]}]})
+    calibration = tmp_path / "camera.yaml"
+    write_calibration(calibration, ENDOSCOPE)
+    with pytest.raises(TargetsError, match=r"a camera calibration .* not a targets file: were the calibration and "
+                                           r"the targets swapped"):
+        TargetsSpec.load(calibration)
+    path.write_text(content)
+    with pytest.raises(CalibrationFileError, match=r"lists targets .* given where the calibration belongs"):
+        read_calibration(path)
+    image = tmp_path / "frame.png"
+    cv2.imwrite(str(image), np.zeros((20, 20), np.uint8))
+    with pytest.raises(TargetsError, match=r"frame\.png: is a PNG image, not a text file"):
+        TargetsSpec.load(image)
+    with pytest.raises(CalibrationFileError, match=r"frame\.png: is a PNG image, not a text file"):
+        read_calibration(image)
 
 
 def test_pixel_area_of_a_homography_matches_finite_differences():

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 from helpers import run_cli
+from scipy import stats
 
 from veg_area_ros.drag import WATER_DENSITY, DragAligner, DragError, drag_coefficient, vogel_fit
 
@@ -112,6 +113,30 @@ def test_vogel_command_on_an_experiment_table(tmp_path):
     table.write_text("velocity_m_s,force_n\n0.1,1\n")
     bad = run_cli("vogel", str(table))
     assert bad.returncode == 1 and "needs columns" in bad.stderr
+
+
+def test_runs_exactly_on_the_line_give_a_zero_width_interval_and_json_that_parses(tmp_path):
+    """A made-up table whose runs lie exactly on F ∝ U² (Cd·Af the same in every run): the interval and R² were
+    NaN, and the --json output held NaN, which strict JSON readers (JavaScript, jq) refuse. The interval is
+    now the exponent itself, R² is null in JSON and said to be undefined in the text; a column named twice in
+    the header (the reader kept the last one, and the runs were blamed on their units) is refused."""
+    scattered = vogel_fit([0.1, 0.2, 0.3, 0.4], [1.0, 0.52, 0.33, 0.26])
+    reference = stats.linregress(np.log([0.1, 0.2, 0.3, 0.4]), np.log([1.0, 0.52, 0.33, 0.26]))
+    assert scattered.exponent == pytest.approx(reference.slope)
+    half = stats.t.ppf(0.975, 2) * reference.stderr
+    assert scattered.interval == pytest.approx((reference.slope - half, reference.slope + half))
+    assert scattered.r_squared == pytest.approx(reference.rvalue**2)
+    table = tmp_path / "runs.csv"
+    table.write_text("velocity_m_s,force_n,area_m2\n0.1,0.05,0.01\n0.2,0.2,0.01\n0.3,0.45,0.01\n0.4,0.8,0.01\n")
+    done = run_cli("vogel", str(table), "--json")
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout, parse_constant=lambda name: pytest.fail(f"{name} in the JSON output"))
+    assert result["exponent"] == pytest.approx(0.0, abs=1e-9) and result["r_squared"] is None
+    assert result["interval"] == pytest.approx([0.0, 0.0], abs=1e-9)
+    assert "R² undefined: Cd·Af is the same in every run" in run_cli("vogel", str(table)).stdout
+    table.write_text("velocity_m_s,force_n,area_m2,force_n\n0.1,0.05,0.01,9\n0.2,0.2,0.01,9\n0.3,0.45,0.01,9\n")
+    done = run_cli("vogel", str(table))
+    assert done.returncode == 1 and "runs.csv: the column 'force_n' appears twice in the header" in done.stderr
 
 
 def test_vogel_on_a_table_refuses_what_only_bags_read_and_a_density_no_row_takes(tmp_path):

@@ -734,3 +734,39 @@ def test_a_scientific_cameras_16_bit_files_are_read_at_the_depth_their_values_us
     colour, _ = read_image(tmp_path / "depth12.tif")
     grey, _ = read_image(tmp_path / "depth12.tif", grey=True)
     assert np.array_equal(grey, cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY)) and np.array_equal(colour, frame)
+
+
+def test_a_tiff_stacks_pages_are_measured_as_a_series(tmp_path):
+    """A multi-page TIFF (a stack as ImageJ and Fiji save one, a scientific camera's burst) was measured as its
+    first page alone, without a word. Each page is now a frame, named STACK#page, each as the same image alone
+    reads (16-bit pages at the depth their values use), and the run is a time series with its CSV and plot,
+    as a video's (equal to the pages' rows as files in a folder); the camera node plays the pages in turn."""
+    from veg_area_ros.sources import open_source
+
+    write_calibration(tmp_path / "camera.yaml", ENDOSCOPE, "endoscope", {"medium": "air"})
+    (tmp_path / "targets.yaml").write_text(yaml.safe_dump(scene_targets_content()))
+    pages = [render_scene(ENDOSCOPE, cube_scene(), distance, noise_sigma=2, seed=k)
+             for k, distance in enumerate((0.65, 0.7, 0.75))]
+    assert cv2.imwritemulti(str(tmp_path / "stack.tif"), pages)
+    assert cv2.imwritemulti(str(tmp_path / "stack12.tif"), [page.astype(np.uint16) << 4 for page in pages])
+    (tmp_path / "pages").mkdir()
+    for k, page in enumerate(pages):
+        cv2.imwrite(str(tmp_path / "pages" / f"page{k}.png"), page)
+    done = run_cli("measure", "pages", "--calibration", "camera.yaml", "--targets", "targets.yaml", "--json",
+                   "--csv", "pages.csv", cwd=tmp_path)
+    folder = [json.loads(line)["area_m2"] for line in done.stdout.splitlines() if line.startswith("{")]
+    assert len(set(folder)) == 3  # three distances: three areas in the image, one Af each
+    for stack, depth_said in (("stack.tif", False), ("stack12.tif", True)):
+        done = run_cli("measure", stack, "--calibration", "camera.yaml", "--targets", "targets.yaml", "--json",
+                       cwd=tmp_path)
+        assert done.returncode == 0, done.stderr
+        rows = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+        assert [row["frame"] for row in rows] == [f"{stack}#{k}" for k in range(3)]
+        assert [row["area_m2"] for row in rows] == folder  # as the same pages in a folder, each its own file
+        assert all(("16-bit image read as 12-bit data" in " ".join(row["warnings"])) == depth_said for row in rows)
+        assert "[3/3]" in done.stderr, done.stderr
+        series = tmp_path / f"{Path(stack).stem}_area.csv"
+        assert len(list(csv.DictReader(series.open()))) == 3 and series.with_suffix(".png").stat().st_size > 1000
+    source = open_source(str(tmp_path / "stack.tif"))
+    played = [source.read() for _ in range(3)]
+    assert all(np.array_equal(image, page) for image, page in zip(played, pages, strict=True))

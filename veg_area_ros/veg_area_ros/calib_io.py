@@ -159,6 +159,9 @@ def _numbers(path: Path, content: dict, key: str, rows: int, cols: int | None) -
 def from_camera_info_dict(content: Any, path: Path) -> CalibrationFile:
     if not isinstance(content, dict):
         raise CalibrationFileError(f"{path}: not a camera_info calibration (expected a YAML mapping)")
+    if ("markers" in content or "points" in content) and "camera_matrix" not in content:
+        raise CalibrationFileError(f"{path}: lists targets (markers, points), not a camera: a targets file, given "
+                                   "where the calibration belongs (swapped?)")
     for key in ("image_width", "image_height"):
         value = content.get(key)
         if not isinstance(value, int) or isinstance(value, bool) or value <= 0:

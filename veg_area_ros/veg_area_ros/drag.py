@@ -181,10 +181,19 @@ def vogel_fit(velocity: ArrayLike, cd_area: ArrayLike, confidence: float = 0.95)
     x, z = np.log(u), np.log(y)
     if np.ptp(x) == 0:
         raise DragError("all runs have the same velocity: no exponent can be fitted")
-    fit = stats.linregress(x, z)
-    half = stats.t.ppf(0.5 + confidence / 2, len(u) - 2) * fit.stderr
-    return VogelFit(float(fit.slope), (float(fit.slope - half), float(fit.slope + half)), confidence,
-                    float(np.exp(fit.intercept)), float(fit.rvalue**2), len(u))
+    # by hand, not scipy's linregress: runs that lie exactly on a line (a table made up to try the command)
+    # gave a NaN interval and R², and NaN in the --json output, which is no JSON
+    dx, dz = x - x.mean(), z - z.mean()
+    slope = float(dx @ dz / (dx @ dx))
+    residual = float(np.sum((dz - slope * dx) ** 2))
+    stderr = math.sqrt(residual / (len(u) - 2) / (dx @ dx))
+    half = float(stats.t.ppf(0.5 + confidence / 2, len(u) - 2)) * stderr
+    spread = float(dz @ dz)
+    # R² is undefined where Cd·Af is the same in every run (to its last digits): NaN, said so by the command
+    flat = spread <= (1e-12 * max(1.0, float(np.abs(z).max()))) ** 2 * len(z)
+    r_squared = math.nan if flat else 1 - residual / spread
+    return VogelFit(slope, (slope - half, slope + half), confidence, float(np.exp(z.mean() - slope * x.mean())),
+                    r_squared, len(u))
 
 
 def read_runs(path: str | Path, density: float = WATER_DENSITY) -> tuple[np.ndarray, np.ndarray]:
@@ -206,7 +215,10 @@ def read_table(path: str | Path) -> list[dict]:
         raise DragError(f"{path}: cannot read ({exc.strerror})") from exc
     except UnicodeDecodeError as exc:  # a spreadsheet's "CSV" in a legacy code page
         raise DragError(f"{path}: not UTF-8 text (byte {exc.start}); save it as 'CSV UTF-8'") from exc
-    rows = _table_rows(text)
+    try:
+        rows = _table_rows(text)
+    except DragError as exc:
+        raise DragError(f"{path}: {exc}") from exc
     needed = {"velocity_m_s", "force_n", "area_m2"}
     if not rows or not needed <= set(rows[0]):
         has = f"it has {', '.join(repr(c) for c in rows[0] if c is not None)}" if rows else "it has no data row"
@@ -222,7 +234,13 @@ def _table_rows(text: str) -> list[dict]:
     ';' (or tabs), with numbers such as 0,25."""
     header = text.splitlines()[0] if text.strip() else ""
     delimiter = max((",", ";", "\t"), key=header.count)
-    rows = list(csv.DictReader(io.StringIO(text, newline=""), delimiter=delimiter))
+    reader = csv.DictReader(io.StringIO(text, newline=""), delimiter=delimiter)
+    named = [name.strip() for name in reader.fieldnames or [] if name.strip()]
+    twice = sorted({name for name in named if named.count(name) > 1})
+    if twice:  # a reader keeps the last of two equal columns without a word (a pasted column read as the force)
+        raise DragError(f"the column{'s' if len(twice) > 1 else ''} {', '.join(map(repr, twice))} "
+                        f"appear{'' if len(twice) > 1 else 's'} twice in the header; keep one")
+    rows = list(reader)
     if delimiter != ",":
         rows = [{key: (value.replace(",", ".") if isinstance(value, str) and DECIMAL_COMMA.fullmatch(value.strip())
                        else value) for key, value in row.items()} for row in rows]

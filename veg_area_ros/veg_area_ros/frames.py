@@ -162,20 +162,7 @@ def decode_image_file(data: bytes, grey: bool = False, notes: list[str] | None =
         return as_stored(image, orientation) if image is not None and is_tiff(data) else image
 
     if data[:2] != JPEG_START:
-        image = at_any_depth(mode)
-        if image is None:
-            return None, "is not an image OpenCV can decode"
-        if image.dtype == np.uint8:
-            return image, ""
-        if image.dtype != np.uint16:
-            kind = "floating point" if image.dtype.kind == "f" else f"{8 * image.dtype.itemsize}-bit integers"
-            return None, f"is a {image.dtype} image ({kind}); save it with 8 or 16 bits per channel"
-        if grey:  # the depth judged on the colours, as a colour reading of the same file judges it
-            image = at_any_depth(cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
-        image, note = to_8_bit(image)
-        if note and notes is not None:
-            notes.append(note)
-        return (cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if grey else image), ""
+        return _at_its_depth(at_any_depth, grey, notes)
     # the image ends at its first end-of-image marker: a phone's motion photo appends its video after it, a
     # camera's MPF its preview (judging by the file's last bytes refused every motion photo as truncated)
     problem = jpeg_structure_problem(data)
@@ -188,6 +175,50 @@ def decode_image_file(data: bytes, grey: bool = False, notes: list[str] | None =
     if warning:
         return None, f"is a corrupt JPEG (the decoder warned: {warning})"
     return image, ""
+
+
+def _at_its_depth(load: Callable[[int], np.ndarray | None], grey: bool, notes: list[str] | None
+                  ) -> tuple[np.ndarray | None, str]:
+    """An image that is no JPEG, `load`ed with the given flags at any depth: 8 bits as they are, 16 bits at the
+    depth their values use (`to_8_bit`), anything else refused."""
+    mode = (cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR) | cv2.IMREAD_IGNORE_ORIENTATION
+    image = load(mode)
+    if image is None:
+        return None, "is not an image OpenCV can decode"
+    if image.dtype == np.uint8:
+        return image, ""
+    if image.dtype != np.uint16:
+        kind = "floating point" if image.dtype.kind == "f" else f"{8 * image.dtype.itemsize}-bit integers"
+        return None, f"is a {image.dtype} image ({kind}); save it with 8 or 16 bits per channel"
+    if grey:  # the depth judged on the colours, as a colour reading of the same file judges it
+        image = load(cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)
+    image, note = to_8_bit(image)
+    if note and notes is not None:
+        notes.append(note)
+    return (cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if grey else image), ""
+
+
+def tiff_pages(path: Path) -> int:
+    """How many images a TIFF file holds: a stack (ImageJ's and Fiji's, a scientific camera's burst) holds one
+    a page; 1 for any other file, 0 where OpenCV cannot read it."""
+    if path.suffix.lower() not in (".tif", ".tiff") or special_file(path):  # a pipe is said by `read_photo`
+        return 1
+    return int(cv2.imcount(opencv_path(path), cv2.IMREAD_UNCHANGED))
+
+
+def iter_stack(path: Path, pages: int, grey: bool = False) -> Iterator[Frame]:
+    """Every page of a multi-page TIFF as a frame, named STACK#page (from 0, as a video's frames), each read
+    from the file alone (a stack may be far larger than memory) at the depth its values use."""
+    name = shown_name(path)
+    for page in range(pages):
+        notes: list[str] = []
+
+        def load(flags: int, page: int = page) -> np.ndarray | None:
+            done, images = cv2.imreadmulti(opencv_path(path), page, 1, None, flags | cv2.IMREAD_ANYDEPTH)
+            return images[0] if done and images else None
+
+        image, problem = _at_its_depth(load, grey, notes)
+        yield Frame(f"{name}#{page}", image, problem, position=page, notes=tuple(notes))
 
 
 JPEG_START = b"\xff\xd8"
@@ -526,7 +557,9 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
         elif suffix in VIDEO_SUFFIXES:
             yield from _greyed(iter_video(path, video_step, start, stop, spread, encoded), grey)
         elif suffix in IMAGE_SUFFIXES:
-            yield read_photo(path, grey)
+            pages = tiff_pages(path)
+            # a stack's pages are its frames (only its first was measured, without a word)
+            yield from iter_stack(path, pages, grey) if pages > 1 else [read_photo(path, grey)]
         else:
             # unknown extension: try as an image, then as a video, before giving up
             photo = read_photo(path, grey)

@@ -61,9 +61,24 @@ def read_bytes(path: Path) -> bytes:
     return path.read_bytes()
 
 
+# what a file given where a text file belongs most often is instead: an image (the frame and the calibration
+# swapped on a command line)
+_BINARY_KINDS = ((b"\x89PNG\r\n\x1a\n", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"),
+                 (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"), (b"%PDF", "a PDF document"),
+                 (b"PK\x03\x04", "a zip archive"))
+
+
 def decode_text(data: bytes) -> str:
-    """A file's bytes as UTF-8 text, its line ends as Python's text files give them (UnicodeDecodeError if not)."""
-    return data.decode("utf-8").replace("\r\n", "\n").replace("\r", "\n")
+    """A file's bytes as UTF-8 text, its line ends as Python's text files give them (UnicodeDecodeError if not;
+    StrictYamlError naming what it is for an image, a PDF or a zip archive)."""
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        kind = next((name for magic, name in _BINARY_KINDS if data.startswith(magic)), None)
+        if kind:
+            raise StrictYamlError(f"is {kind}, not a text file") from None
+        raise
+    return text.replace("\r\n", "\n").replace("\r", "\n")
 
 
 def read_text(path: Path) -> str:

@@ -17,6 +17,7 @@ No ROS here.
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,6 +31,12 @@ from .strict_yaml import StrictYamlError, load_text, read_text
 # range the coordinates are in the wrong unit (millimetres as metres gave Af of 1e24 m²)
 MIN_TARGET_SPAN_M = 0.002
 MAX_TARGET_SPAN_M = 50.0
+# every key a targets file may hold: any other is a typo that would be passed over (an `object_plane_ofset_m`
+# measured the object in the targets' plane without a word)
+TARGETS_KEYS = ("dictionary", "markers", "points", "distance_std_m", "pixel_std", "object_plane_offset_m",
+                "object_plane_offset_std_m", "marker_side_m")
+POINT_KEYS = ("pixel", "plane")
+CALIBRATION_KEYS = ("camera_matrix", "image_width", "image_height", "distortion_coefficients")
 
 
 class TargetsError(ValueError):
@@ -86,6 +93,7 @@ class TargetsSpec:
     def from_dict(cls, content: object) -> TargetsSpec:
         if not isinstance(content, dict):
             raise TargetsError("expected a mapping with 'markers' and/or 'points'")
+        _known_keys(content, TARGETS_KEYS, "a targets file")
         spec = cls(dictionary=str(content.get("dictionary", "")).upper())
         if spec.dictionary and not spec.dictionary.startswith("DICT_"):  # '4X4_50', as OpenCV's docs name them
             spec.dictionary = f"DICT_{spec.dictionary}"
@@ -101,6 +109,7 @@ class TargetsSpec:
         for k, entry in enumerate(content.get("points") or []):
             if not isinstance(entry, dict) or "pixel" not in entry or "plane" not in entry:
                 raise TargetsError(f"point {k} needs 'pixel' and 'plane'")
+            _known_keys(entry, POINT_KEYS, f"point {k}")
             spec.points.append((_pair(entry["pixel"], f"point {k} pixel"), _pair(entry["plane"], f"point {k} plane")))
         if "marker_side_m" in content:
             side = content["marker_side_m"]
@@ -139,6 +148,22 @@ class TargetsSpec:
     def all_planes(self) -> np.ndarray:
         """Plane positions of every listed target, markers then points (N, 2)."""
         return np.array([*self.markers.values(), *(plane for _, plane in self.points)], float).reshape(-1, 2)
+
+
+def _known_keys(content: dict, known: tuple[str, ...], what: str) -> None:
+    """Refuse keys `what` does not have, each with the known one it is most like; a calibration given in its
+    place is named as such."""
+    unknown = [key for key in content if key not in known]
+    if not unknown:
+        return
+    if what == "a targets file" and any(key in content for key in CALIBRATION_KEYS):
+        raise TargetsError("this is a camera calibration (it has camera_matrix, image_width ...), not a targets "
+                           "file: were the calibration and the targets swapped?")
+    said = []
+    for key in unknown:
+        like = difflib.get_close_matches(str(key), known, n=1, cutoff=0.8)
+        said.append(f"{key!r}" + (f" (did you mean {like[0]!r}?)" if like else ""))
+    raise TargetsError(f"{what} has no key {', '.join(said)}; its keys are {', '.join(known)}")
 
 
 def _is_number(value: object) -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -88,15 +89,17 @@ def cmd_vogel(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from exc
     plot.parent.mkdir(parents=True, exist_ok=True)
     plot_vogel(velocity, cd_area, fit, plot, [r["cd_area_std_m2"] for r in table])
+    r_squared = fit.r_squared if math.isfinite(fit.r_squared) else None  # JSON has no NaN
     result = {"exponent": fit.exponent, "interval": list(fit.interval), "confidence": fit.confidence,
-              "coefficient_m2": fit.coefficient, "r_squared": fit.r_squared, "runs": fit.runs, "plot": str(plot),
+              "coefficient_m2": fit.coefficient, "r_squared": r_squared, "runs": fit.runs, "plot": str(plot),
               "density_kg_m3": density, "per_run": table}
     if args.json:
-        print(json.dumps(result))
+        print(json.dumps(result, allow_nan=False))
     else:
         low, high = fit.interval
         print(format_run_table(table))
+        fitted = f"R² {r_squared:.4f}" if r_squared is not None else "R² undefined: Cd·Af is the same in every run"
         print(f"Vogel exponent psi = {fit.exponent:.4f}, {fit.confidence:.0%} interval [{low:.4f}, {high:.4f}] "
-              f"({fit.runs} runs, R² {fit.r_squared:.4f}); Cd·Af = {fit.coefficient:.4g} m² x U^psi")
+              f"({fit.runs} runs, {fitted}); Cd·Af = {fit.coefficient:.4g} m² x U^psi")
         print(f"plot: {plot}")
     return 0

@@ -165,6 +165,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         expand_inputs,
         is_bag,
         iter_frames,
+        tiff_pages,
         video_frame_count,
     )
     from ..idealize import FrameSizeError
@@ -193,6 +194,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError(str(exc)) from exc
     videos = [f for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
     bags = [f for f in files if is_bag(f)]
+    stacks = {f: pages for f in files if (pages := tiff_pages(f)) > 1}  # a TIFF stack's pages are a series
     trimmed = math.isfinite(job.start_time.seconds) or math.isfinite(job.end_time.seconds)
     if trimmed and not bags:
         raise CliError("--start-time and --end-time pick bag frames by their header stamp; the inputs hold no bag",
@@ -213,11 +215,11 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
             b.name: problem for b in bags if (problem := _other_camera(b, job.image_topic, calibration))}
     except BagError as exc:
         raise CliError(str(exc)) from exc
-    total = (sum(video_frame_count(v) // job.video_step for v in videos) + bag_frames
-             + len(files) - len(videos) - len(bags))
-    series = videos + bags
+    total = (sum(video_frame_count(v) // job.video_step for v in videos) + bag_frames + sum(stacks.values())
+             + len(files) - len(videos) - len(bags) - len(stacks))
+    series = videos + list(stacks) + bags
     if job.frame_range is not None:
-        if len(files) != 1 or not series:
+        if len(files) != 1 or not (videos or bags):
             raise CliError("a frame range applies to one video or bag", EXIT_USAGE)
         total = len(range(job.frame_range[0], job.frame_range[1], job.video_step if videos else 1))
     csv_path = None if part else Path(job.csv) if job.csv else (Path(f"{series[0].stem}_area.csv") if series
