@@ -239,6 +239,29 @@ def test_a_folders_frames_are_taken_in_the_order_a_file_browser_shows(workspace,
     assert frames == ["frame_1.png", "frame_2.png", "frame_9.png", "frame_10.png"]
 
 
+def test_a_macs_hidden_files_beside_the_photos_are_passed_over_and_said(workspace, tmp_path):
+    """Photos copied by a Mac onto a stick leave `._frame_1.png` (its AppleDouble metadata) beside each: they
+    were measured as unreadable frames and the run ended with exit 1. Hidden files are passed over, as a file
+    browser and the shell's * pass them over, and the run says how many; a folder of hidden files alone says
+    so in its refusal."""
+    folder = tmp_path / "from_a_mac"
+    folder.mkdir()
+    for k in (1, 2):
+        (folder / f"frame_{k}.png").write_bytes((workspace / "cube.png").read_bytes())
+        (folder / f"._frame_{k}.png").write_bytes(b"\x00\x05\x16\x07\x00\x02\x00\x00Mac OS X        ")
+    (folder / ".DS_Store").write_bytes(b"\x00\x00\x00\x01Bud1")
+    args = ["--calibration", str(workspace / "water.yaml"), "--targets", str(workspace / "targets.yaml"), "--json"]
+    done = run_cli("measure", str(folder), *args, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert [json.loads(line)["frame"] for line in done.stdout.splitlines()] == ["frame_1.png", "frame_2.png"]
+    assert "2 hidden files not read (._frame_1.png, ._frame_2.png; `._` files are a Mac's metadata" in done.stderr
+    for k in (1, 2):
+        (folder / f"frame_{k}.png").unlink()
+    done = run_cli("measure", str(folder), *args, cwd=tmp_path)
+    assert done.returncode == 1 and "folder holds no image or video files but hidden ones" in done.stderr, \
+        done.stderr
+
+
 def test_targets_not_found(workspace):
     cv2.imwrite(str(workspace / "blank.png"), np.full((480, 640, 3), 180, np.uint8))
     done = measure(workspace, image="blank.png")

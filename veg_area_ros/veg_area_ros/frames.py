@@ -288,6 +288,14 @@ def _decode_jpeg(data: bytes, mode: int = cv2.IMREAD_COLOR) -> tuple[np.ndarray 
     return image, " ".join(warning.split())
 
 
+def hidden_example(files: list[Path]) -> str:
+    """A few hidden files' names, and what the `._` ones are."""
+    names = [p.name for p in in_name_order(files)]
+    shown = ", ".join(names[:3]) + (" ..." if len(names) > 3 else "")
+    return shown + ("; `._` files are a Mac's metadata beside each file" if any(n.startswith("._") for n in names)
+                    else "")
+
+
 def _kinds(files: list[Path]) -> str:
     return ", ".join(sorted({f.suffix for f in files}))
 
@@ -314,11 +322,19 @@ def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None, a
             files.append(path)
         elif path.is_dir():
             entries = [p for p in path.iterdir() if p.is_file()]
+            # hidden files, as a file browser and the shell's * pass them over: a Mac's copies leave `._NAME.jpg`
+            # beside each photo (its AppleDouble metadata), which were measured as unreadable frames, exit 1
+            hidden = [p for p in entries if p.name.startswith(".") and p.suffix.lower() in IMAGE_SUFFIXES
+                      | VIDEO_SUFFIXES]
+            entries = [p for p in entries if not p.name.startswith(".")]
+            if hidden and notes is not None:
+                notes.append(f"{path}: {len(hidden)} hidden files not read ({hidden_example(hidden)})")
             inside = in_name_order(p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES)
             unread = [p for p in entries if p.suffix.lower() in UNREAD_PHOTO_SUFFIXES]
             if not inside:
                 raise InputError(f"{path}: folder holds no image or video files" + (
-                    f" OpenCV reads: {len(unread)} photos are {_kinds(unread)} ({EXPORT_ADVICE})" if unread else ""))
+                    f" OpenCV reads: {len(unread)} photos are {_kinds(unread)} ({EXPORT_ADVICE})" if unread else "")
+                    + (f" but hidden ones ({hidden_example(hidden)})" if hidden else ""))
             if unread and notes is not None:
                 notes.append(f"{path}: {len(unread)} photos not read ({_kinds(unread)}: {EXPORT_ADVICE}); "
                              f"{len(inside)} other files read")
