@@ -168,6 +168,14 @@ def test_non_image_file(tmp_path):
     assert "notes.txt: skipped, is neither an image nor a video" in result.stderr
 
 
+def test_a_video_without_frames_is_said_as_such(tmp_path):
+    """An empty video (a recording stopped at once) said "no readable image among the inputs (0 unreadable)"."""
+    writer = cv2.VideoWriter(str(tmp_path / "empty.avi"), cv2.VideoWriter_fourcc(*"MJPG"), 10, (640, 480))
+    writer.release()
+    result = run_cli("calibrate", str(tmp_path / "empty.avi"), "--board", BOARD, "-o", str(tmp_path / "c.yaml"))
+    assert_clean_failure(result, 1, "the inputs hold no frame (an empty video or bag?)")
+
+
 def test_images_without_a_board(tmp_path):
     for i in range(3):
         cv2.imwrite(str(tmp_path / f"grey{i}.png"), (i * 40 + 50) * __import__("numpy").ones((480, 640), "uint8"))

@@ -302,7 +302,8 @@ def cmd_calibrate(args: argparse.Namespace) -> int:
             "a calibration holds only in the medium it was made in)")
     if not found.views:
         if found.image_size is None:
-            raise CliError(f"no readable image among the inputs ({len(found.unreadable)} unreadable)")
+            raise CliError(f"no readable image among the inputs ({len(found.unreadable)} unreadable)"
+                           if found.unreadable else "the inputs hold no frame (an empty video or bag?)")
         hint = _hint(board, files, step, args.image_topic)
         raise CliError(f"no {board} board found in any of {found.seen} images{hint}; "
                        "supported boards: chessboard, charuco, circles (asymmetric, or :symmetric)")
