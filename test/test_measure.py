@@ -262,6 +262,35 @@ def test_a_macs_hidden_files_beside_the_photos_are_passed_over_and_said(workspac
         done.stderr
 
 
+def test_a_second_run_given_a_csv_being_written_is_refused_and_the_first_keeps_its_rows(workspace, tmp_path):
+    """Two runs given one --csv (a second terminal, a script started twice): the second emptied the file and
+    both wrote into it, exit 0, the longer run's rows lost. A table written row by row is locked while it is
+    open: a run given it then is refused before any work, and a second writer in the same moment is refused
+    at its first row; once the first is closed the file is free."""
+    from veg_area_ros.cli.common import RowLog
+    from veg_area_ros.files import FileWriteError, being_written
+
+    table = tmp_path / "series.csv"
+    first = RowLog(table, ["frame", "area_m2"], lambda row: True)
+    first.add({"frame": "a.png", "area_m2": 0.01})
+    assert being_written(table)
+    done = run_cli("measure", str(workspace / "cube.png"), "--calibration", str(workspace / "water.yaml"),
+                   "--targets", str(workspace / "targets.yaml"), "--csv", str(table), cwd=tmp_path)
+    assert done.returncode == 2, done.stderr
+    assert "is being written by another run now" in done.stderr and "nothing was measured" in done.stderr
+    second = RowLog(table, ["frame", "area_m2"], lambda row: True)
+    with pytest.raises(FileWriteError, match="another run is writing it now"):
+        second.add({"frame": "b.png", "area_m2": 0.02})
+    first.add({"frame": "c.png", "area_m2": 0.03})
+    first.close()
+    assert [row["frame"] for row in csv.DictReader(table.open())] == ["a.png", "c.png"]
+    assert not being_written(table)
+    done = run_cli("measure", str(workspace / "cube.png"), "--calibration", str(workspace / "water.yaml"),
+                   "--targets", str(workspace / "targets.yaml"), "--csv", str(table), cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert [row["frame"] for row in csv.DictReader(table.open())] == ["cube.png"]
+
+
 def test_targets_not_found(workspace):
     cv2.imwrite(str(workspace / "blank.png"), np.full((480, 640, 3), 180, np.uint8))
     done = measure(workspace, image="blank.png")

@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fcntl
 import glob
+import io
 import os
 import re
 import stat
@@ -65,6 +67,38 @@ def special_file(path: str | os.PathLike, writing: bool = False) -> str | None:
                "the device itself" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "no file can be written there")
         return f"is {kind}, not a file ({why})"
     return f"is {kind}, not a file (reading it would never end or would wait for a writer)"
+
+
+def being_written(path: str | os.PathLike) -> bool:
+    """Whether another process is writing `path` as a table row by row now (`open_rows` holds its lock)."""
+    try:
+        handle = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:
+        return False
+    finally:
+        os.close(handle)  # and with it the shared lock taken to look
+    return False
+
+
+def open_rows(path: str | os.PathLike) -> io.TextIOWrapper:
+    """`path` emptied and opened to write a table into row by row, locked against a second writer for as long as
+    it is open: two runs given one CSV each truncated it and wrote over the other's rows (both exit 0, the
+    longer run's rows lost). FileWriteError where another process holds it."""
+    handle = os.open(path, os.O_WRONLY | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(handle)
+        raise FileWriteError(errno.EAGAIN, f"{path} could not be written (another run is writing it now)",
+                             str(path)) from None
+    os.ftruncate(handle, 0)
+    return open(handle, "w", newline="", encoding="utf-8")
 
 
 def _umask() -> int:

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..files import FileWriteError, special_file, write_atomic
+from ..files import FileWriteError, being_written, open_rows, special_file, write_atomic
 
 EXIT_OK = 0
 EXIT_FAILED = 1  # with a one-line reason on stderr
@@ -105,6 +105,8 @@ def unwritable(path: Path, folder: bool) -> str | None:
     special = None if folder else special_file(path, writing=True)
     if special:
         return special
+    if not folder and being_written(path):
+        return "is being written by another run now (both would write over each other's rows)"
     where = path if folder and path.exists() else path.parent
     while not where.exists():
         where = where.parent
@@ -217,7 +219,7 @@ class RowLog:
                 self.held.append(row)
                 return
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._handle = open(self.path, "w", newline="", encoding="utf-8")  # noqa: SIM115 (closed by close())
+            self._handle = open_rows(self.path)  # locked: a second run given the same CSV is refused
             self._writer = csv.DictWriter(self._handle, self.columns, extrasaction="ignore")
             self._writer.writeheader()
             self._writer.writerows(self.held)
