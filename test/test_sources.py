@@ -128,3 +128,16 @@ def test_a_folder_of_a_scientific_cameras_16_bit_files_says_the_depth_once(tmp_p
     source = open_source(str(tmp_path))
     assert all(np.array_equal(source.read(), frame) for _ in range(3))
     assert len(source.notes) == 1 and source.notes[0].startswith("f0.png: 16-bit image read as 12-bit data")
+    assert source.notes[0].endswith("(the published frames are 8-bit)")
+
+
+def test_files_a_folder_source_passes_over_are_said_as_they_are(tmp_path):
+    """A Mac's `._` files beside the frames are passed over and said; the note was logged with "(the published
+    frames are 8-bit)", which is about a 16-bit file's depth alone."""
+    frame = np.random.default_rng(0).integers(0, 256, (48, 64, 3)).astype(np.uint8)
+    cv2.imwrite(str(tmp_path / "f0.png"), frame)
+    (tmp_path / "._f0.png").write_bytes(b"\x00\x05\x16\x07\x00\x02\x00\x00Mac OS X        ")
+    source = open_source(str(tmp_path))
+    assert np.array_equal(source.read(), frame) and source.read() is None
+    assert source.notes == [f"{tmp_path}: 1 hidden file not read (._f0.png; `._` files are a Mac's metadata beside "
+                            "each file)"]

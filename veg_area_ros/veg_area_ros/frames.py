@@ -328,7 +328,8 @@ def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None, a
                       | VIDEO_SUFFIXES]
             entries = [p for p in entries if not p.name.startswith(".")]
             if hidden and notes is not None:
-                notes.append(f"{path}: {len(hidden)} hidden files not read ({hidden_example(hidden)})")
+                notes.append(f"{path}: {len(hidden)} hidden file{'s' if len(hidden) > 1 else ''} not read "
+                             f"({hidden_example(hidden)})")
             inside = in_name_order(p for p in entries if p.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES)
             unread = [p for p in entries if p.suffix.lower() in UNREAD_PHOTO_SUFFIXES]
             if not inside:

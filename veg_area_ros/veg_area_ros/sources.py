@@ -122,7 +122,7 @@ class FileSource:
     is decoded once. An unreadable frame raises SourceError naming it."""
 
     def __init__(self, paths: list[Path], loop: bool = False):
-        self.notes: list[str] = []  # what reading assumed (a 16-bit file's depth), each kind once, for the node
+        self.notes: list[str] = []  # what reading assumed or passed over, each kind once, for the node to say
         try:
             self.files = expand_inputs(paths, self.notes, archives=True)  # and photos passed over (raw, HEIC)
         except InputError as exc:
@@ -164,7 +164,9 @@ class FileSource:
             kind = note.split(":", 1)[0]
             if kind not in self._note_kinds:
                 self._note_kinds.add(kind)
-                self.notes.append(f"{frame.name}: {note}")
+                # a depth note is about what is published; files passed over and an EXIF turn are not
+                published = " (the published frames are 8-bit)" if note.startswith("16-bit image read as") else ""
+                self.notes.append(f"{frame.name}: {note}{published}")
         if self._first_pass is not None:
             self._first_pass.append(item)
             if len(self._first_pass) > LOOP_CACHE_FRAMES:

@@ -84,8 +84,8 @@ class CameraNode(Node):
                 with contextlib.suppress(SourceError):  # still gone: the next tick retries
                     self.source.reopen()
             return
-        for note in getattr(self.source, "notes", ())[self.notes_said:]:  # a 16-bit file's assumed depth
-            self.get_logger().warning(f"{note} (the published frames are 8-bit)")
+        for note in getattr(self.source, "notes", ())[self.notes_said:]:  # a 16-bit file's depth, files passed over
+            self.get_logger().warning(note)
             self.notes_said += 1
         if image is None:
             self.get_logger().info(f"end of {self.source_name} after {self.frames_published} frames; stopping")
