@@ -26,6 +26,7 @@ from .bit_depth import to_8_bit
 from .exif import capture_time, is_tiff
 from .files import in_name_order, special_file, too_many_pixels
 from .orientation import as_stored, orientation_note, stored_orientation, video_rotation_note
+from .tiff_stack import stack_pages
 from .video_container import hdr_note
 
 if TYPE_CHECKING:
@@ -198,19 +199,19 @@ def _at_its_depth(load: Callable[[int], np.ndarray | None], grey: bool, notes: l
     return (cv2.cvtColor(image, cv2.COLOR_BGR2GRAY) if grey else image), ""
 
 
-def tiff_pages(path: Path) -> int:
-    """How many images a TIFF file holds: a stack (ImageJ's and Fiji's, a scientific camera's burst) holds one
-    a page; 1 for any other file, 0 where OpenCV cannot read it."""
+def tiff_pages(path: Path) -> list[int]:
+    """The pages of a TIFF stack (ImageJ's and Fiji's, a scientific camera's burst) that are its frames
+    (`tiff_stack.stack_pages`: the first page's size, no previews); [] for any other file."""
     if path.suffix.lower() not in (".tif", ".tiff") or special_file(path):  # a pipe is said by `read_photo`
-        return 1
-    return int(cv2.imcount(opencv_path(path), cv2.IMREAD_UNCHANGED))
+        return []
+    return stack_pages(path)
 
 
-def iter_stack(path: Path, pages: int, grey: bool = False) -> Iterator[Frame]:
-    """Every page of a multi-page TIFF as a frame, named STACK#page (from 0, as a video's frames), each read
-    from the file alone (a stack may be far larger than memory) at the depth its values use."""
+def iter_stack(path: Path, pages: list[int], grey: bool = False) -> Iterator[Frame]:
+    """A TIFF stack's frames (`pages`), named STACK#frame (from 0, as a video's frames), each read from the
+    file alone (a stack may be far larger than memory) at the depth its values use."""
     name = shown_name(path)
-    for page in range(pages):
+    for frame, page in enumerate(pages):
         notes: list[str] = []
 
         def load(flags: int, page: int = page) -> np.ndarray | None:
@@ -218,7 +219,7 @@ def iter_stack(path: Path, pages: int, grey: bool = False) -> Iterator[Frame]:
             return images[0] if done and images else None
 
         image, problem = _at_its_depth(load, grey, notes)
-        yield Frame(f"{name}#{page}", image, problem, position=page, notes=tuple(notes))
+        yield Frame(f"{name}#{frame}", image, problem, position=frame, notes=tuple(notes))
 
 
 JPEG_START = b"\xff\xd8"
@@ -576,7 +577,7 @@ def iter_frames(paths: Sequence[str | Path], video_step: int = 1, image_topic: s
         elif suffix in IMAGE_SUFFIXES:
             pages = tiff_pages(path)
             # a stack's pages are its frames (only its first was measured, without a word)
-            yield from iter_stack(path, pages, grey) if pages > 1 else [read_photo(path, grey)]
+            yield from iter_stack(path, pages, grey) if pages else [read_photo(path, grey)]
         else:
             # unknown extension: try as an image, then as a video, before giving up
             photo = read_photo(path, grey)

@@ -194,7 +194,7 @@ def measure(job: MeasureJob, on_frame: Callable[[int, int], None] | None = None,
         raise CliError(str(exc)) from exc
     videos = [f for f in files if f.suffix.lower() in VIDEO_SUFFIXES]
     bags = [f for f in files if is_bag(f)]
-    stacks = {f: pages for f in files if (pages := tiff_pages(f)) > 1}  # a TIFF stack's pages are a series
+    stacks = {f: len(pages) for f in files if (pages := tiff_pages(f))}  # a TIFF stack's pages are a series
     trimmed = math.isfinite(job.start_time.seconds) or math.isfinite(job.end_time.seconds)
     if trimmed and not bags:
         raise CliError("--start-time and --end-time pick bag frames by their header stamp; the inputs hold no bag",

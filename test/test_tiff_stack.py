@@ -1,0 +1,63 @@
+"""Which pages of a TIFF are a stack's frames: read from the directories (classic TIFF and BigTIFF), previews
+and pages of another size left out, and a stack with a thumbnail measured as its frames alone."""
+
+from __future__ import annotations
+
+import struct
+
+import cv2
+import numpy as np
+import pytest
+
+from veg_area_ros.frames import iter_frames
+from veg_area_ros.tiff_stack import stack_pages
+
+
+def _tiff(pages: list[tuple[int, int, int]], big: bool = False, order: str = "<", loop: bool = False) -> bytes:
+    """A TIFF's directories alone (no pixels: the page reader looks at no more), each page (width, height,
+    NewSubfileType) with the three tags written as LONG (classic) or LONG8 (BigTIFF)."""
+    count_format, entry_size, offset_format, kind = ("Q", 20, "Q", 16) if big else ("H", 12, "I", 4)
+    header = (b"II" if order == "<" else b"MM") + (struct.pack(order + "HHHQ", 43, 8, 0, 16) if big
+                                                  else struct.pack(order + "HI", 42, 8))
+    entry_count, offset_size = struct.calcsize(count_format), struct.calcsize(offset_format)
+    directory_size = entry_count + 3 * entry_size + offset_size
+    data, start = b"", len(header)
+    for k, (width, height, subfile) in enumerate(pages):
+        following = start + (k + 1) * directory_size if k + 1 < len(pages) else (start if loop else 0)
+        entries = b"".join(struct.pack(order + "HH", tag, kind) + struct.pack(order + offset_format, 1)
+                           + struct.pack(order + offset_format, value)
+                           for tag, value in ((254, subfile), (256, width), (257, height)))
+        data += struct.pack(order + count_format, 3) + entries + struct.pack(order + offset_format, following)
+    return header + data
+
+
+@pytest.mark.parametrize("big", [False, True])
+@pytest.mark.parametrize("order", ["<", ">"])
+def test_the_pages_of_the_first_pages_size_and_no_preview_are_the_frames(tmp_path, big, order):
+    path = tmp_path / "stack.tif"
+    for pages, frames in (([(640, 480, 2)] * 4, [0, 1, 2, 3]),
+                          ([(640, 480, 0), (160, 120, 1)], []),  # one photo and its thumbnail
+                          ([(640, 480, 2), (160, 120, 0), (640, 480, 2), (640, 480, 2)], [0, 2, 3]),
+                          ([(640, 480, 2), (640, 480, 1), (640, 480, 2)], [0, 2]),  # a full-size preview
+                          ([(1024, 1024, 0), (512, 512, 0), (256, 256, 0)], []),  # a pyramid
+                          ([(640, 480, 0)], [])):
+        path.write_bytes(_tiff(pages, big, order))
+        assert stack_pages(path) == frames, pages
+    path.write_bytes(_tiff([(640, 480, 2)] * 3, big, order, loop=True))  # a chain that loops ends
+    assert stack_pages(path) == [0, 1, 2]
+    path.write_bytes(_tiff([(640, 480, 2)] * 3, big, order)[:-10])  # cut short: read as one image, as before
+    assert stack_pages(path) == []
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(40))
+    assert stack_pages(path) == []
+
+
+def test_a_stack_with_a_thumbnail_is_read_as_its_frames_and_a_photo_with_one_as_one_image(tmp_path):
+    """A camera's TIFF with a preview page was one image, and stays one; a stack's preview is no frame."""
+    rng = np.random.default_rng(2)
+    frames = [rng.integers(0, 256, (120, 160, 3)).astype(np.uint8) for _ in range(3)]
+    thumbnail = cv2.resize(frames[0], (40, 30))
+    assert cv2.imwritemulti(str(tmp_path / "stack.tif"), [*frames, thumbnail])
+    assert cv2.imwritemulti(str(tmp_path / "photo.tif"), [frames[0], thumbnail])
+    read = list(iter_frames([tmp_path / "stack.tif", tmp_path / "photo.tif"]))
+    assert [frame.name for frame in read] == ["stack.tif#0", "stack.tif#1", "stack.tif#2", "photo.tif"]
+    assert all(np.array_equal(frame.image, image) for frame, image in zip(read, [*frames, frames[0]], strict=True))
