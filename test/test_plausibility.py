@@ -41,6 +41,9 @@ def test_an_empty_scene_gives_af_0_and_says_no_object(light, threshold):
             render(empty_scene(cube_scene()), light, seed))
         assert result.area_m2 == 0 and result.pixel_count == 0
         assert result.warnings[0].startswith("no object found")
+        # every term of the std is the std's: 0 (the threshold's term read up to 0.05 m² beside Af 0)
+        assert all(value == 0 for key, value in result.summary().items() if key.endswith("_std_m2")), \
+            result.summary()
         assert not any(w.startswith(("counted whole pixels", "threshold sweep")) for w in result.warnings)
 
 

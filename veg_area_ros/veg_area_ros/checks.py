@@ -14,7 +14,7 @@ No ROS here.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import TYPE_CHECKING
 
 import cv2
@@ -104,6 +104,9 @@ def check(result: AreaResult, settings: CheckSettings, raw_band: np.ndarray, ban
     if absent is not None:  # never a large number from the background's noise or texture
         mask = np.zeros_like(mask)
         result.area_m2 = result.count_area_m2 = result.area_std_m2 = 0.0
+        for term in fields(result):  # each term of the std with it (a threshold term of 0.05 m² stood beside 0)
+            if term.name.endswith("_std_m2"):
+                setattr(result, term.name, 0.0)
         result.pixel_count, result.subpixel_applied = 0, False
         result.warnings = [f"no object found: {absent}; Af is 0"] + [
             w for w in result.warnings if w.split(":", 1)[0] not in OBJECT_WARNINGS]
