@@ -262,6 +262,23 @@ def test_a_macs_hidden_files_beside_the_photos_are_passed_over_and_said(workspac
         done.stderr
 
 
+def test_a_quoted_glob_is_expanded_as_the_shell_would(workspace, tmp_path):
+    """`veg-area measure "frames/*.png"` (quoted, or a folder of more frames than one command line holds:
+    "Argument list too long") said "no such file or folder", though the camera node's source takes a glob. It is
+    expanded as the shell expands it (hidden files left out, in a file browser's order); one matching nothing
+    is said as such."""
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for name in ("frame_10.png", "frame_2.png", "._frame_2.png", "notes.txt"):
+        (folder / name).write_bytes((workspace / "cube.png").read_bytes())
+    args = ["--calibration", str(workspace / "water.yaml"), "--targets", str(workspace / "targets.yaml"), "--json"]
+    done = run_cli("measure", "frames/frame_*.png", *args, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert [json.loads(line)["frame"] for line in done.stdout.splitlines()] == ["frame_2.png", "frame_10.png"]
+    done = run_cli("measure", "frames/*.jpg", *args, cwd=tmp_path)
+    assert done.returncode == 1 and "frames/*.jpg: matches no file" in done.stderr, done.stderr
+
+
 def test_a_second_run_given_a_csv_being_written_is_refused_and_the_first_keeps_its_rows(workspace, tmp_path):
     """Two runs given one --csv (a second terminal, a script started twice): the second emptied the file and
     both wrote into it, exit 0, the longer run's rows lost. A table written row by row is locked while it is

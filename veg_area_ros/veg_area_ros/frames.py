@@ -6,6 +6,7 @@ No ROS here.
 
 from __future__ import annotations
 
+import glob
 import itertools
 import math
 import os
@@ -349,6 +350,13 @@ def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None, a
             raise InputError(f"{path}: not a regular file or folder (a pipe, socket or device)")
         elif path.is_symlink():
             raise InputError(f"{path}: a symlink to {os.readlink(path)}, which does not exist")
+        elif glob.has_magic(str(raw)):
+            # a pattern the shell left alone (quoted, or too many files for one command line: "Argument list
+            # too long"), expanded as the shell would, as the camera node's source is
+            matches = [p for p in map(Path, glob.glob(str(raw))) if p.is_file()]
+            if not matches:
+                raise InputError(f"{raw}: matches no file")
+            files.extend(expand_inputs(in_name_order(matches), notes, archives))
         else:
             raise InputError(f"{path}: no such file or folder")
     return files
