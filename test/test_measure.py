@@ -266,7 +266,7 @@ def test_a_quoted_glob_is_expanded_as_the_shell_would(workspace, tmp_path):
     """`veg-area measure "frames/*.png"` (quoted, or a folder of more frames than one command line holds:
     "Argument list too long") said "no such file or folder", though the camera node's source takes a glob. It is
     expanded as the shell expands it (hidden files left out, in a file browser's order); one matching nothing
-    is said as such."""
+    is said as such, and its folder is kept from outputs as a folder given whole is."""
     folder = tmp_path / "frames"
     folder.mkdir()
     for name in ("frame_10.png", "frame_2.png", "._frame_2.png", "notes.txt"):
@@ -277,6 +277,10 @@ def test_a_quoted_glob_is_expanded_as_the_shell_would(workspace, tmp_path):
     assert [json.loads(line)["frame"] for line in done.stdout.splitlines()] == ["frame_2.png", "frame_10.png"]
     done = run_cli("measure", "frames/*.jpg", *args, cwd=tmp_path)
     assert done.returncode == 1 and "frames/*.jpg: matches no file" in done.stderr, done.stderr
+    # its folder is an input folder: a plot written there would be the next run's frame
+    done = run_cli("measure", "frames/frame_*.png", *args, "--csv", "frames/series.csv", cwd=tmp_path)
+    assert done.returncode == 2 and "--csv frames/series.csv lies inside the input folder frames" in done.stderr
+    assert not (tmp_path / "frames" / "series.png").exists()
 
 
 def test_a_second_run_given_a_csv_being_written_is_refused_and_the_first_keeps_its_rows(workspace, tmp_path):

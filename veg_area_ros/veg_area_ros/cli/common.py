@@ -7,6 +7,7 @@ import argparse
 import contextlib
 import csv
 import errno
+import glob
 import io
 import math
 import os
@@ -141,7 +142,7 @@ def overwrites_input(output: Path, inputs: Sequence[str | Path], writes_images: 
     except (OSError, RuntimeError):  # a symlink loop (RuntimeError in Python 3.11): written over as a link
         return None
     media = writes_images or output.suffix.lower() in IMAGE_SUFFIXES | VIDEO_SUFFIXES
-    for given in inputs:
+    for given in _with_glob_matches(inputs):
         source = Path(given)
         try:
             if output.exists() and source.exists() and output.samefile(source):
@@ -151,6 +152,21 @@ def overwrites_input(output: Path, inputs: Sequence[str | Path], writes_images: 
         except OSError:
             continue
     return None
+
+
+def _with_glob_matches(inputs: Sequence[str | Path]) -> list[str | Path]:
+    """The inputs, and for a quoted glob (`frames/*.png`, which the command expands as the shell would) the
+    files it matches and the folders it reads from: an image written there would be read by the next run."""
+    found: list[str | Path] = []
+    for given in inputs:
+        found.append(given)
+        text = str(given)
+        if glob.has_magic(text) and not Path(text).exists():
+            matches = [Path(p) for p in glob.glob(text)]
+            parent = Path(text).parent
+            folders = {p.parent for p in matches} | (set() if glob.has_magic(str(parent)) else {parent})
+            found += [*matches, *(str(folder) for folder in sorted(folders))]
+    return found
 
 
 def check_outputs(outputs: Sequence[tuple[str, str | None, bool]], inputs: Sequence[str | Path], what: str,
