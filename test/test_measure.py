@@ -312,6 +312,24 @@ def test_a_second_run_given_a_csv_being_written_is_refused_and_the_first_keeps_i
     assert [row["frame"] for row in csv.DictReader(table.open())] == ["cube.png"]
 
 
+def test_a_table_on_a_file_system_without_locks_is_written_unlocked(tmp_path, monkeypatch):
+    """Some network shares refuse locks (ENOLCK): the table is written as before, not refused."""
+    import errno
+
+    from veg_area_ros import files
+    from veg_area_ros.cli.common import RowLog
+
+    def no_locks(handle: int, operation: int) -> None:
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(files.fcntl, "flock", no_locks)
+    log = RowLog(tmp_path / "series.csv", ["frame", "area_m2"], lambda row: True)
+    log.add({"frame": "a.png", "area_m2": 0.01})
+    log.close()
+    assert (tmp_path / "series.csv").read_text().splitlines() == ["frame,area_m2", "a.png,0.01"]
+    assert not files.being_written(tmp_path / "series.csv")
+
+
 def test_targets_not_found(workspace):
     cv2.imwrite(str(workspace / "blank.png"), np.full((480, 640, 3), 180, np.uint8))
     done = measure(workspace, image="blank.png")

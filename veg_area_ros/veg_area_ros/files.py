@@ -97,6 +97,8 @@ def open_rows(path: str | os.PathLike) -> io.TextIOWrapper:
         os.close(handle)
         raise FileWriteError(errno.EAGAIN, f"{path} could not be written (another run is writing it now)",
                              str(path)) from None
+    except OSError:  # a file system without locks (some network shares): written unlocked, as before
+        pass
     os.ftruncate(handle, 0)
     return open(handle, "w", newline="", encoding="utf-8")
 
