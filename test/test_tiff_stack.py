@@ -61,3 +61,42 @@ def test_a_stack_with_a_thumbnail_is_read_as_its_frames_and_a_photo_with_one_as_
     read = list(iter_frames([tmp_path / "stack.tif", tmp_path / "photo.tif"]))
     assert [frame.name for frame in read] == ["stack.tif#0", "stack.tif#1", "stack.tif#2", "photo.tif"]
     assert all(np.array_equal(frame.image, image) for frame, image in zip(read, [*frames, frames[0]], strict=True))
+
+
+def _with_description(data: bytes, text: str) -> bytes:
+    """A little-endian TIFF with `text` as its first page's ImageDescription (the page's directory copied to the
+    end with the tag added, in tag order, and the header pointed at it)."""
+    first = struct.unpack("<I", data[4:8])[0]
+    (count,) = struct.unpack("<H", data[first:first + 2])
+    entries = [data[first + 2 + 12 * k:first + 14 + 12 * k] for k in range(count)]
+    following = data[first + 2 + 12 * count:first + 6 + 12 * count]
+    body = data + b"\0" * (len(data) % 2)
+    description = text.encode() + b"\0"
+    entries.append(struct.pack("<HHII", 270, 2, len(description), len(body)))
+    entries.sort(key=lambda entry: struct.unpack("<H", entry[:2])[0])
+    body += description + b"\0" * (len(description) % 2)
+    directory = struct.pack("<H", len(entries)) + b"".join(entries) + following
+    return data[:4] + struct.pack("<I", len(body)) + body[8:] + directory
+
+
+def test_an_imagej_timelapse_stack_is_timed_by_its_frame_interval(tmp_path):
+    """A timelapse saved by ImageJ or Fiji records its frame interval (`finterval=`, in `tunit`) in its first
+    page's description: its frames are a time series in seconds, as a video's; without one, frame numbers."""
+    from veg_area_ros.tiff_stack import frame_interval
+
+    rng = np.random.default_rng(4)
+    frames = [rng.integers(0, 256, (120, 160, 3)).astype(np.uint8) for _ in range(3)]
+    assert cv2.imwritemulti(str(tmp_path / "plain.tif"), frames)
+    plain = (tmp_path / "plain.tif").read_bytes()
+    assert plain[:2] == b"II"
+    for name, description, interval in (
+            ("half.tif", "ImageJ=1.54f\nimages=3\nframes=3\nfinterval=0.5\nloop=false\n", 0.5),
+            ("minutes.tif", "ImageJ=1.54f\nimages=3\nframes=3\nfinterval=2\ntunit=min\n", 120.0),
+            ("unset.tif", "ImageJ=1.54f\nimages=3\nframes=3\n", None),
+            ("other.tif", "finterval=0.5\n", None)):  # not ImageJ's: its keys are not read
+        (tmp_path / name).write_bytes(_with_description(plain, description))
+        assert frame_interval(tmp_path / name) == interval, name
+        read = list(iter_frames([tmp_path / name]))
+        assert [frame.time_s for frame in read] == ([None] * 3 if interval is None else [0, interval, 2 * interval])
+        assert all(np.array_equal(frame.image, image) for frame, image in zip(read, frames, strict=True))
+    assert frame_interval(tmp_path / "plain.tif") is None

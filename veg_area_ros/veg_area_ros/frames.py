@@ -27,7 +27,7 @@ from .bit_depth import to_8_bit
 from .exif import capture_time, is_tiff
 from .files import in_name_order, special_file, too_many_pixels
 from .orientation import as_stored, orientation_note, stored_orientation, video_rotation_note
-from .tiff_stack import stack_pages
+from .tiff_stack import frame_interval, stack_pages
 from .video_container import hdr_note
 
 if TYPE_CHECKING:
@@ -210,8 +210,10 @@ def tiff_pages(path: Path) -> list[int]:
 
 def iter_stack(path: Path, pages: list[int], grey: bool = False) -> Iterator[Frame]:
     """A TIFF stack's frames (`pages`), named STACK#frame (from 0, as a video's frames), each read from the
-    file alone (a stack may be far larger than memory) at the depth its values use."""
+    file alone (a stack may be far larger than memory) at the depth its values use, timed by ImageJ's frame
+    interval where the stack records one."""
     name = shown_name(path)
+    interval = frame_interval(path)
     for frame, page in enumerate(pages):
         notes: list[str] = []
 
@@ -220,7 +222,8 @@ def iter_stack(path: Path, pages: list[int], grey: bool = False) -> Iterator[Fra
             return images[0] if done and images else None
 
         image, problem = _at_its_depth(load, grey, notes)
-        yield Frame(f"{name}#{frame}", image, problem, position=frame, notes=tuple(notes))
+        yield Frame(f"{name}#{frame}", image, problem, time_s=None if interval is None else frame * interval,
+                    position=frame, notes=tuple(notes))
 
 
 JPEG_START = b"\xff\xd8"

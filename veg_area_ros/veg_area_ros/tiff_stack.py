@@ -12,7 +12,11 @@ from __future__ import annotations
 import os
 import struct
 
-NEW_SUBFILE_TYPE, IMAGE_WIDTH, IMAGE_LENGTH = 254, 256, 257
+NEW_SUBFILE_TYPE, IMAGE_WIDTH, IMAGE_LENGTH, IMAGE_DESCRIPTION = 254, 256, 257, 270
+# ImageJ's time units for a stack's frame interval (its Image > Properties), in seconds
+TIME_UNITS = {"sec": 1.0, "s": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3, "min": 60.0,
+              "minute": 60.0, "minutes": 60.0, "hour": 3600.0, "hours": 3600.0, "h": 3600.0}
+MAX_DESCRIPTION = 65536
 REDUCED_RESOLUTION = 1  # NewSubfileType bit 0: a preview of another page
 MAX_PAGES = 1_000_000  # a chain longer than this is damaged (or loops)
 _TYPE_FORMATS = {3: "H", 4: "I", 16: "Q"}  # SHORT, LONG, LONG8: the types a size or a subfile type takes
@@ -35,18 +39,71 @@ def stack_pages(path: str | os.PathLike) -> list[int]:
     return pages if len(pages) > 1 else []
 
 
-def _page_sizes(handle) -> list[tuple[int, int, int]]:  # noqa: ANN001 (a binary file)
-    """(width, height, NewSubfileType) of each directory in the main chain."""
+def frame_interval(path: str | os.PathLike) -> float | None:
+    """Seconds between a stack's frames as ImageJ and Fiji record them (`finterval=` in the first page's
+    ImageDescription, in its `tunit`, seconds by default), or None: a timelapse saved as a stack is then a
+    time series in seconds, as a video is."""
+    try:
+        with open(path, "rb") as handle:
+            description = _first_description(handle)
+    except (OSError, struct.error, ValueError):
+        return None
+    if not description.startswith("ImageJ="):
+        return None
+    fields = dict(line.split("=", 1) for line in description.splitlines() if "=" in line)
+    try:
+        interval = float(fields.get("finterval", "nan"))
+    except ValueError:
+        return None
+    unit = TIME_UNITS.get(fields.get("tunit", "sec").strip().lower())
+    return interval * unit if unit and 0 < interval < float("inf") else None
+
+
+def _first_description(handle) -> str:  # noqa: ANN001 (a binary file)
+    """The first page's ImageDescription (ASCII), or ''."""
+    order, count_format, entry_size, offset_format, offset = _header(handle)
+    if order is None:
+        return ""
+    offset_size = struct.calcsize(offset_format)
+    handle.seek(offset)
+    (entries,) = struct.unpack(order + count_format, handle.read(struct.calcsize(count_format)))
+    block = handle.read(entries * entry_size)
+    for k in range(entries):
+        entry = block[k * entry_size:(k + 1) * entry_size]
+        tag, kind = struct.unpack(order + "HH", entry[:4])
+        if tag != IMAGE_DESCRIPTION or kind != 2:
+            continue
+        (count,) = struct.unpack(order + offset_format, entry[4:4 + offset_size])
+        if count <= offset_size:
+            text = entry[4 + offset_size:4 + offset_size + count]
+        elif count <= MAX_DESCRIPTION:
+            handle.seek(struct.unpack(order + offset_format, entry[4 + offset_size:])[0])
+            text = handle.read(count)
+        else:
+            return ""
+        return text.split(b"\0", 1)[0].decode("latin-1")
+    return ""
+
+
+def _header(handle) -> tuple[str | None, str, int, str, int]:  # noqa: ANN001 (a binary file)
+    """(byte order, directory count format, entry size, offset format, first directory's offset); order None
+    for a file that is no TIFF."""
     header = handle.read(16)
     order = {b"II": "<", b"MM": ">"}.get(header[:2])
     if order is None:
-        return []
+        return None, "", 0, "", 0
     version = struct.unpack(order + "H", header[2:4])[0]
     if version == 42:
-        count_format, entry_size, offset_format, offset = "H", 12, "I", struct.unpack(order + "I", header[4:8])[0]
-    elif version == 43:  # BigTIFF
-        count_format, entry_size, offset_format, offset = "Q", 20, "Q", struct.unpack(order + "Q", header[8:16])[0]
-    else:
+        return order, "H", 12, "I", struct.unpack(order + "I", header[4:8])[0]
+    if version == 43:  # BigTIFF
+        return order, "Q", 20, "Q", struct.unpack(order + "Q", header[8:16])[0]
+    return None, "", 0, "", 0
+
+
+def _page_sizes(handle) -> list[tuple[int, int, int]]:  # noqa: ANN001 (a binary file)
+    """(width, height, NewSubfileType) of each directory in the main chain."""
+    order, count_format, entry_size, offset_format, offset = _header(handle)
+    if order is None:
         return []
     count_size, offset_size = struct.calcsize(count_format), struct.calcsize(offset_format)
     sizes: list[tuple[int, int, int]] = []
