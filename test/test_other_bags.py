@@ -176,6 +176,31 @@ def test_compressed_images_give_the_jpeg_files_af(workspace, scenes, storage):
     assert abs(from_bag[0]["area_m2"] / cube_scene().true_area_m2 - 1) < 0.005
 
 
+def test_a_corrupt_jpeg_in_a_compressed_topic_is_refused_not_measured(workspace, scenes):
+    """A compressed frame whose JPEG scan is scrambled (a damaged bag, a lossy link) decoded into a grey smear
+    with a warning on stderr only and was measured (its Af off by tens of percent), although the same JPEG as a
+    file is refused. Its row now says why, the other frames are measured as before."""
+    from veg_area_ros.frames import decode_image_file
+
+    jpegs = [cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, 85])[1].tobytes() for frame in scenes["left"]]
+    damaged = bytearray(jpegs[1])
+    middle = len(damaged) // 2
+    damaged[middle:middle + 300] = np.random.default_rng(1).integers(0, 256, 300, dtype=np.uint8).tobytes()
+    assert cv2.imdecode(np.frombuffer(bytes(damaged), np.uint8), cv2.IMREAD_COLOR) is not None  # decodes, wrong
+    assert decode_image_file(bytes(damaged))[1].startswith("is a ")  # refused as a file (truncated or corrupt)
+    jpegs[1] = bytes(damaged)
+    bag = workspace / "damaged"
+    write_bag(bag, "mcap", [
+        ("/left/camera_info", "sensor_msgs/msg/CameraInfo", [_info(ENDOSCOPE, k, "left") for k in range(FRAMES)]),
+        ("/left/image_raw/compressed", "sensor_msgs/msg/CompressedImage",
+         [_compressed(jpeg, k, "left") for k, jpeg in enumerate(jpegs)])])
+    rows, done = _measure(workspace, bag, "--calibration", "bag")
+    assert len(rows) == FRAMES, done.stderr
+    assert "is a corrupt JPEG" in rows[1]["error"] and rows[1].get("area_m2") in (None, ""), rows[1]
+    assert all(not row.get("error") and abs(row["area_m2"] / cube_scene().true_area_m2 - 1) < 0.005
+               for k, row in enumerate(rows) if k != 1), rows
+
+
 def _zstd(frame: np.ndarray, k: int, frame_id: str):
     """image_transport's zstd plugin's message: its header (height, width, is_bigendian, step, encoding) and the
     zstd frame of the bgr8 rows."""

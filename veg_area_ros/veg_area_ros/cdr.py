@@ -21,6 +21,7 @@ import numpy as np
 
 from .bit_depth import StreamDepth, to_8_bit
 from .files import MAX_IMAGE_PIXELS
+from .jpeg import JPEG_START, jpeg_structure_problem
 
 # a serialized message or an image's bytes, as they arrive: bytes, a view, rclpy's array, rosbags' numpy array
 Buffer = bytes | bytearray | memoryview | array | np.ndarray
@@ -287,6 +288,11 @@ class CompressedImageFields:
             raise ImageMessageError(f"a depth image (format {self.format!r}) holds no grey levels to measure")
         if kind.strip() == "zstd":
             return zstd_image(self.header, self.data).pixels(depth, notes)
+        if self.data[:2] == JPEG_START:  # a scrambled scan decodes into a grey smear with a warning on stderr only
+            problem = jpeg_structure_problem(self.data)
+            if problem:
+                raise ImageMessageError(f"the compressed image (format {self.format!r}) is a corrupt JPEG "
+                                        f"({problem})")
         image = cv2.imdecode(np.frombuffer(self.data, np.uint8), cv2.IMREAD_UNCHANGED)
         if image is None:
             raise ImageMessageError(f"the compressed image (format {self.format!r}, {len(self.data)} bytes) cannot "
