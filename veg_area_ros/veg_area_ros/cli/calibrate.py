@@ -47,7 +47,8 @@ PROGRESS_EVERY_S = 2.0
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     cal = sub.add_parser("calibrate", help="self-calibrating bundle adjustment from board images or videos")
-    cal.add_argument("inputs", nargs="*", help="images, folders of images, videos (underwater views with --port)")
+    cal.add_argument("inputs", nargs="*", help="images, folders of images, TIFF stacks, videos, bags (underwater "
+                                               "views with --port); a quoted glob is expanded as the shell would")
     cal.add_argument("--board",
                      help="chessboard:COLSxROWS:SQUARE_M | charuco:SXxSY:SQUARE_M:MARKER_M:DICT (add :legacy "
                           "for OpenCV's layout before 4.6 and calib.io's) | circles:COLSxROWS:SPACING_M "

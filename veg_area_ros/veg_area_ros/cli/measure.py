@@ -55,7 +55,8 @@ def _roi(text: str) -> tuple[float, ...]:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     mea = sub.add_parser("measure", help="projected area Af of an object in images, folders or videos")
     mea.add_argument("inputs", nargs="+",
-                     help="images, folders of images, videos, rosbag2 bags (folders), ROS 1 .bag files")
+                     help="images, folders of images, TIFF stacks, videos, rosbag2 bags (folders), ROS 1 .bag "
+                          "files; a quoted glob ('frames/*.png') is expanded as the shell would")
     mea.add_argument("--calibration", required=True,
                      help="camera_info YAML from 'veg-area calibrate', 'none' to measure the raw image, or 'bag' "
                           "for the camera_info recorded in the bag (as the live area node used it)")
