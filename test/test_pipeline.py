@@ -114,6 +114,26 @@ def test_a_10_megapixel_video_decoded_on_two_threads_gives_the_plain_loops_rows(
     assert apart < 0.5, apart  # the issue allows less than the std; here 0.1 (0.02 over a 90-frame video)
 
 
+def test_a_motion_jpeg_frame_whose_scan_is_scrambled_is_said_not_measured():
+    """A large Motion-JPEG video's frame damaged in its scan (a bad card, a cut copy) decoded into a grey smear
+    without an error and was measured; its packet is now looked at first, as a JPEG file is, and its row says
+    the video is damaged there. The frames around it decode as before."""
+    rng = np.random.default_rng(7)
+    image = rng.integers(0, 256, (96, 128, 3), dtype=np.uint8)
+    good = cv2.imencode(".jpg", image)[1]
+    damaged = good.copy()
+    middle = len(damaged) // 2
+    damaged[middle:middle + 300] = rng.integers(0, 256, 300, dtype=np.uint8)
+    assert cv2.imdecode(damaged, cv2.IMREAD_COLOR) is not None  # OpenCV alone decodes it, wrong
+    frames = list(decoded(iter([Packet("v#0", good, 0.0, 0), Packet("v#1", damaged, 0.1, 1),
+                                Packet("v#2", good, 0.2, 2)])))
+    assert [f.position for f in frames] == [0, 1, 2]
+    assert frames[1].image is None and frames[1].problem.startswith("this frame's JPEG is corrupt (")
+    assert "the video is damaged here" in frames[1].problem
+    assert np.array_equal(frames[0].image, cv2.imdecode(good, cv2.IMREAD_COLOR))
+    assert np.array_equal(frames[2].image, frames[0].image)
+
+
 def test_only_motion_jpeg_comes_as_packets(tmp_path):
     video = tmp_path / "other.avi"
     writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"XVID"), 30, (64, 48))
