@@ -99,8 +99,12 @@ def open_rows(path: str | os.PathLike) -> io.TextIOWrapper:
                              str(path)) from None
     except OSError:  # a file system without locks (some network shares): written unlocked, as before
         pass
-    os.ftruncate(handle, 0)
-    return open(handle, "w", newline="", encoding="utf-8")
+    try:
+        os.ftruncate(handle, 0)
+        return open(handle, "w", newline="", encoding="utf-8")
+    except OSError:
+        os.close(handle)
+        raise
 
 
 def _umask() -> int:
