@@ -61,67 +61,74 @@ def frame_interval(path: str | os.PathLike) -> float | None:
 
 def _first_description(handle) -> str:  # noqa: ANN001 (a binary file)
     """The first page's ImageDescription (ASCII), or ''."""
-    order, count_format, entry_size, offset_format, offset = _header(handle)
-    if order is None:
+    layout = _header(handle)
+    if layout is None:
         return ""
-    offset_size = struct.calcsize(offset_format)
-    handle.seek(offset)
-    (entries,) = struct.unpack(order + count_format, handle.read(struct.calcsize(count_format)))
-    block = handle.read(entries * entry_size)
-    for k in range(entries):
-        entry = block[k * entry_size:(k + 1) * entry_size]
-        tag, kind = struct.unpack(order + "HH", entry[:4])
-        if tag != IMAGE_DESCRIPTION or kind != 2:
-            continue
-        (count,) = struct.unpack(order + offset_format, entry[4:4 + offset_size])
-        if count <= offset_size:
-            text = entry[4 + offset_size:4 + offset_size + count]
-        elif count <= MAX_DESCRIPTION:
-            handle.seek(struct.unpack(order + offset_format, entry[4 + offset_size:])[0])
-            text = handle.read(count)
-        else:
-            return ""
-        return text.split(b"\0", 1)[0].decode("latin-1")
-    return ""
+    entries, _ = _directory(handle, layout, layout[3])
+    if IMAGE_DESCRIPTION not in entries:
+        return ""
+    kind, count, value = entries[IMAGE_DESCRIPTION]
+    order, offset_format = layout[0], layout[2]
+    if kind != 2 or count > MAX_DESCRIPTION:
+        return ""
+    if count <= len(value):  # held in the entry itself
+        text = value[:count]
+    else:
+        handle.seek(struct.unpack(order + offset_format, value)[0])
+        text = handle.read(count)
+    return text.split(b"\0", 1)[0].decode("latin-1")
 
 
-def _header(handle) -> tuple[str | None, str, int, str, int]:  # noqa: ANN001 (a binary file)
-    """(byte order, directory count format, entry size, offset format, first directory's offset); order None
-    for a file that is no TIFF."""
+def _header(handle) -> tuple[str, str, str, int] | None:  # noqa: ANN001 (a binary file)
+    """(byte order, directory count format, offset format, first directory's offset) of a classic TIFF or a
+    BigTIFF; None for a file that is neither."""
     header = handle.read(16)
     order = {b"II": "<", b"MM": ">"}.get(header[:2])
     if order is None:
-        return None, "", 0, "", 0
+        return None
     version = struct.unpack(order + "H", header[2:4])[0]
     if version == 42:
-        return order, "H", 12, "I", struct.unpack(order + "I", header[4:8])[0]
+        return order, "H", "I", struct.unpack(order + "I", header[4:8])[0]
     if version == 43:  # BigTIFF
-        return order, "Q", 20, "Q", struct.unpack(order + "Q", header[8:16])[0]
-    return None, "", 0, "", 0
+        return order, "Q", "Q", struct.unpack(order + "Q", header[8:16])[0]
+    return None
+
+
+def _directory(handle, layout: tuple[str, str, str, int], offset: int  # noqa: ANN001 (a binary file)
+               ) -> tuple[dict[int, tuple[int, int, bytes]], int]:
+    """A directory's entries, tag -> (type, count, value field: the value itself, left-justified, or where it
+    lies), and the next directory's offset (0: the last). ValueError where it runs past the file."""
+    order, count_format, offset_format, _ = layout
+    count_size, offset_size = struct.calcsize(count_format), struct.calcsize(offset_format)
+    entry_size = 4 + 2 * offset_size  # tag, type, count, value field
+    handle.seek(offset)
+    (count,) = struct.unpack(order + count_format, handle.read(count_size))
+    block = handle.read(count * entry_size + offset_size)
+    if len(block) < count * entry_size + offset_size:
+        raise ValueError("a directory runs past the file")
+    entries = {}
+    for k in range(count):
+        entry = block[k * entry_size:(k + 1) * entry_size]
+        tag, kind = struct.unpack(order + "HH", entry[:4])
+        (values,) = struct.unpack(order + offset_format, entry[4:4 + offset_size])
+        entries[tag] = (kind, values, entry[4 + offset_size:])
+    (following,) = struct.unpack(order + offset_format, block[count * entry_size:])
+    return entries, following
 
 
 def _page_sizes(handle) -> list[tuple[int, int, int]]:  # noqa: ANN001 (a binary file)
     """(width, height, NewSubfileType) of each directory in the main chain."""
-    order, count_format, entry_size, offset_format, offset = _header(handle)
-    if order is None:
+    layout = _header(handle)
+    if layout is None:
         return []
-    count_size, offset_size = struct.calcsize(count_format), struct.calcsize(offset_format)
+    order, offset = layout[0], layout[3]
     sizes: list[tuple[int, int, int]] = []
     seen: set[int] = set()
     while offset and offset not in seen and len(sizes) < MAX_PAGES:
         seen.add(offset)
-        handle.seek(offset)
-        (entries,) = struct.unpack(order + count_format, handle.read(count_size))
-        block = handle.read(entries * entry_size + offset_size)
-        if len(block) < entries * entry_size + offset_size:
-            raise ValueError("a directory runs past the file")
-        tags = {}
-        for k in range(entries):
-            entry = block[k * entry_size:(k + 1) * entry_size]
-            tag, kind = struct.unpack(order + "HH", entry[:4])
-            if tag in (NEW_SUBFILE_TYPE, IMAGE_WIDTH, IMAGE_LENGTH) and kind in _TYPE_FORMATS:
-                value = entry[4 + offset_size:]  # after the count: the value itself, left-justified
-                tags[tag] = struct.unpack_from(order + _TYPE_FORMATS[kind], value)[0]
+        entries, offset = _directory(handle, layout, offset)
+        tags = {tag: struct.unpack_from(order + _TYPE_FORMATS[kind], value)[0]
+                for tag, (kind, _, value) in entries.items()
+                if tag in (NEW_SUBFILE_TYPE, IMAGE_WIDTH, IMAGE_LENGTH) and kind in _TYPE_FORMATS}
         sizes.append((tags.get(IMAGE_WIDTH, 0), tags.get(IMAGE_LENGTH, 0), tags.get(NEW_SUBFILE_TYPE, 0)))
-        (offset,) = struct.unpack(order + offset_format, block[entries * entry_size:])
     return sizes
