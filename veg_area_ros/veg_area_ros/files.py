@@ -49,6 +49,15 @@ def in_name_order(paths: Iterable[PathType]) -> list[PathType]:
 
     return sorted(paths, key=key)
 
+def glob_matches(pattern: str) -> list[Path] | None:
+    """The files a glob pattern the shell left alone (quoted, or too many for one command line) matches, as the
+    shell would match them (hidden files left out), in a file browser's order; None where `pattern` is no glob
+    or names a file of its own."""
+    if not glob.has_magic(pattern) or os.path.lexists(pattern):
+        return None
+    return in_name_order(p for p in map(Path, glob.glob(pattern)) if p.is_file())
+
+
 def special_file(path: str | os.PathLike, writing: bool = False) -> str | None:
     """Why `path` cannot be read (or, `writing`, written) as a file, or None: a device (/dev/zero never ends: 3 GB
     read before a MemoryError; an atomic write would replace /dev/null itself), a pipe (the read waits for a

@@ -6,7 +6,6 @@ No ROS here.
 
 from __future__ import annotations
 
-import glob
 import itertools
 import math
 import os
@@ -24,7 +23,7 @@ import numpy as np
 from .archive import ArchiveError, is_archive, read_views, view_names
 from .bit_depth import to_8_bit
 from .exif import capture_time, is_tiff
-from .files import in_name_order, special_file, too_many_pixels
+from .files import glob_matches, in_name_order, special_file, too_many_pixels
 from .jpeg import JPEG_STANDALONE_MARKERS, JPEG_START, jpeg_structure_problem
 from .orientation import as_stored, orientation_note, stored_orientation, video_rotation_note
 from .tiff_stack import frame_interval, stack_pages
@@ -303,13 +302,12 @@ def expand_inputs(paths: Sequence[str | Path], notes: list[str] | None = None, a
             raise InputError(f"{path}: not a regular file or folder (a pipe, socket or device)")
         elif path.is_symlink():
             raise InputError(f"{path}: a symlink to {os.readlink(path)}, which does not exist")
-        elif glob.has_magic(str(raw)):
+        elif (matches := glob_matches(str(raw))) is not None:
             # a pattern the shell left alone (quoted, or too many files for one command line: "Argument list
             # too long"), expanded as the shell would, as the camera node's source is
-            matches = [p for p in map(Path, glob.glob(str(raw))) if p.is_file()]
             if not matches:
                 raise InputError(f"{raw}: matches no file")
-            files.extend(expand_inputs(in_name_order(matches), notes, archives))
+            files.extend(expand_inputs(matches, notes, archives))
         else:
             raise InputError(f"{path}: no such file or folder")
     return files

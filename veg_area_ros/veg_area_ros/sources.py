@@ -8,14 +8,14 @@ could not be had (unreadable file, device not delivering): the caller logs it an
 
 from __future__ import annotations
 
-import glob
 from pathlib import Path
 
 import cv2
 import numpy as np
 
 from .board import BoardSpec
-from .frames import IMAGE_SUFFIXES, InputError, expand_inputs, in_name_order, iter_frames
+from .files import glob_matches
+from .frames import IMAGE_SUFFIXES, InputError, expand_inputs, iter_frames
 from .sim.synthetic import (
     BOARD,
     DISTANCE_M,
@@ -232,7 +232,7 @@ def open_source(source: str, loop: bool = False, width: int = 0, height: int = 0
     path = Path(source)
     if path.exists():  # a folder, an image, a video (or a file OpenCV may still open as one), a bag
         return FileSource([path], loop)
-    matches = in_name_order(Path(p) for p in glob.glob(source) if Path(p).suffix.lower() in IMAGE_SUFFIXES)
+    matches = [p for p in glob_matches(source) or [] if p.suffix.lower() in IMAGE_SUFFIXES]
     if matches:
         return FileSource(matches, loop)
     raise SourceError(f"source {source!r} is not 'synthetic', a device, a video, an image folder, a bag or a "

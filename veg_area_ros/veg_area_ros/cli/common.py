@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from ..files import FileWriteError, being_written, open_rows, special_file, write_atomic
+from ..files import FileWriteError, being_written, glob_matches, open_rows, special_file, write_atomic
 
 EXIT_OK = 0
 EXIT_FAILED = 1  # with a one-line reason on stderr
@@ -160,10 +160,9 @@ def _with_glob_matches(inputs: Sequence[str | Path]) -> list[str | Path]:
     found: list[str | Path] = []
     for given in inputs:
         found.append(given)
-        text = str(given)
-        if glob.has_magic(text) and not Path(text).exists():
-            matches = [Path(p) for p in glob.glob(text)]
-            parent = Path(text).parent
+        matches = glob_matches(str(given))
+        if matches is not None:
+            parent = Path(given).parent
             folders = {p.parent for p in matches} | (set() if glob.has_magic(str(parent)) else {parent})
             found += [*matches, *(str(folder) for folder in sorted(folders))]
     return found
