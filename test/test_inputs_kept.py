@@ -229,9 +229,12 @@ def test_a_damaged_video_says_how_many_frames_were_read_and_exits_1(workspace):
     assert "Traceback" not in done.stderr
     read = int(done.stderr.split(" of 40 frames read")[0].rsplit("(", 1)[1])
     assert 10 <= read < 40
-    assert f"{40 - read} of 40 frames could not be read" in done.stderr and "damaged or cut short" in done.stderr
+    # the last frame read is cut inside its JPEG: refused with the decoder's words (it was measured with a grey
+    # bottom before), and counted with the frames that could not be decoded
+    assert f"{40 - read + 1} of 40 frames could not be read" in done.stderr and "damaged or cut short" in done.stderr
     rows = list(csv.DictReader((workspace / "cut.csv").open()))
-    assert len(rows) == read + 1 and all(r["area_m2"] for r in rows[:-1])  # every frame read is kept
+    assert len(rows) == read + 1 and all(r["area_m2"] for r in rows[:-2])  # every whole frame read is kept
+    assert "this frame is corrupt (the decoder reported: mjpeg: " in rows[-2]["error"] and not rows[-2]["area_m2"]
     assert rows[-1]["frame"] == f"cut.avi#{read}" and "could not be decoded" in rows[-1]["error"]
 
 

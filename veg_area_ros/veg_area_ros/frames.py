@@ -10,24 +10,25 @@ import itertools
 import math
 import os
 import struct
-import sys
 import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
 
 from .archive import ArchiveError, is_archive, read_views, view_names
 from .bit_depth import to_8_bit
+from .decoder_messages import FFMPEG_MESSAGE, with_decoder_messages
 from .exif import capture_time, is_tiff
 from .files import glob_matches, in_name_order, special_file, too_many_pixels
 from .jpeg import JPEG_STANDALONE_MARKERS, JPEG_START, jpeg_structure_problem
 from .orientation import as_stored, orientation_note, stored_orientation, video_rotation_note
 from .tiff_stack import frame_interval, stack_pages
 from .video_container import hdr_note
+from .video_damage import VideoDamage, decoder_words, video_keyframes
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -225,21 +226,9 @@ def iter_stack(path: Path, pages: list[int], grey: bool = False) -> Iterator[Fra
 
 
 def _decode_jpeg(data: bytes, mode: int = cv2.IMREAD_COLOR) -> tuple[np.ndarray | None, str]:
-    """Decode a JPEG and catch what libjpeg prints to stderr (at most one warning per image): OpenCV decodes a
-    corrupt scan without an error, so its warning is the only sign. The capture swaps file descriptor 2 for
-    the few milliseconds of the decode."""
-    sys.stderr.flush()
-    with tempfile.TemporaryFile() as capture:
-        saved = os.dup(2)
-        try:
-            os.dup2(capture.fileno(), 2)
-            image = cv2.imdecode(np.frombuffer(data, np.uint8), mode)
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-        capture.seek(0)
-        warning = capture.read(4096).decode("utf-8", "replace").strip()
-    return image, " ".join(warning.split())
+    """Decode a JPEG, with libjpeg's warning (at most one per image) where it printed one: OpenCV decodes a
+    corrupt scan without an error, so the warning is the only sign (`decoder_messages`)."""
+    return with_decoder_messages(lambda: cv2.imdecode(np.frombuffer(data, np.uint8), mode))
 
 
 def hidden_example(files: list[Path]) -> str:
@@ -420,7 +409,10 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
     capture = _motion_jpeg_capture(path) if encoded else None
     packets = capture is not None
     if capture is None:
-        capture = cv2.VideoCapture(opencv_path(path))
+        # one decoding thread: FFmpeg's words about a damaged frame are then printed while that frame is read
+        capture = cv2.VideoCapture(opencv_path(path), cv2.CAP_ANY, [cv2.CAP_PROP_N_THREADS, 1])
+        if not capture.isOpened():  # a backend that takes no thread count
+            capture = cv2.VideoCapture(opencv_path(path))
         capture.set(cv2.CAP_PROP_ORIENTATION_AUTO, 0)  # the sensor's grid, as images are read (`orientation`)
     if not capture.isOpened():
         yield Frame(shown_name(path), None, "is not a video OpenCV can open")
@@ -436,16 +428,30 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
         if start and not (capture.set(cv2.CAP_PROP_POS_FRAMES, start)
                           and int(capture.get(cv2.CAP_PROP_POS_FRAMES)) == start):
             index = declared  # cannot be sought to: said below as frames that could not be read
+        damage = VideoDamage(None if packets else video_keyframes(path, capture))
+
+        def watched(call: Callable[[], Any]) -> tuple[Any, str]:  # a packet is checked where it is decoded
+            return (call(), "") if packets else with_decoder_messages(call, FFMPEG_MESSAGE.match)
+
         while index < declared or stop is None:
             if index % step == (spread_offset(index // step, step) if spread else 0):
-                ok, image = capture.read()
+                (ok, image), said = watched(capture.read)
                 if not ok or (packets and not _whole_jpeg(image)):  # a cut JPEG: the video ends here, as FFmpeg's
                     break
                 name, time_s = f"{shown_name(path)}#{index}", presented_time(capture, index, fps)
+                damaged = damage.note(index, said)
+                if said and damage.intra_only:  # as a corrupt Motion-JPEG packet: its blocks are garbage, not guesses
+                    yield Frame(name, None, f"this frame is corrupt (the decoder reported: {decoder_words(said)}; the "
+                                "video is damaged here)", time_s=time_s, position=index)
+                    index += 1
+                    continue
                 yield (Packet(name, image.reshape(-1), time_s, index, notes) if packets else
-                       Frame(name, image, time_s=time_s, position=index, notes=notes))
-            elif not capture.grab():
-                break
+                       Frame(name, image, time_s=time_s, position=index, notes=notes + damaged))
+            else:
+                ok, said = watched(capture.grab)
+                if not ok:
+                    break
+                damage.note(index, said)
             index += 1
     finally:
         capture.release()

@@ -1,4 +1,4 @@
-"""What a video's container says of how its levels encode light. No ROS here.
+"""What a video's container says of how its levels encode light, and where its keyframes are. No ROS here.
 
 Phones film HDR video by default (iPhones since 2020 in HLG, many Android phones in PQ, HDR10). OpenCV
 decodes such a stream to 8 bits, and its grey levels then encode light by neither `linear` nor `srgb` (the
@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 HDR_TRANSFERS = {16: "PQ (SMPTE ST 2084, HDR10)", 18: "HLG (ARIB STD-B67)"}  # H.273 transfer characteristics
@@ -71,34 +72,66 @@ def movie_header(path: Path) -> bytes | None:
 def transfer_characteristics(path: Path) -> int | None:
     """The H.273 transfer code point the first video track's colour box names, or None where it names none."""
     moov = movie_header(path)
-    if moov is None:
-        return None
-    for kind, start, end in boxes(moov):
-        if kind == b"trak":
-            found = _track_transfer(moov, start, end)
-            if found is not None:
-                return found
+    for table in _video_sample_tables(moov) if moov is not None else ():
+        stsd = table.get(b"stsd")
+        if stsd is None:
+            continue
+        for _, entry_start, entry_end in boxes(moov, stsd[0] + STSD_FIELDS, stsd[1]):
+            for kind, s, e in boxes(moov, entry_start + VISUAL_ENTRY_FIELDS, entry_end):
+                if kind == b"colr" and e - s >= 10 and moov[s:s + 4] in (b"nclx", b"nclc"):
+                    return struct.unpack_from(">H", moov, s + 6)[0]
     return None
 
 
-def _track_transfer(data: bytes, start: int, end: int) -> int | None:
-    inside = {kind: (s, e) for kind, s, e in boxes(data, start, end)}
-    if b"mdia" not in inside:
-        return None
-    media = {kind: (s, e) for kind, s, e in boxes(data, *inside[b"mdia"])}
-    handler = media.get(b"hdlr")
-    if handler is None or data[handler[0] + 8:handler[0] + 12] != b"vide" or b"minf" not in media:
-        return None
-    level = media[b"minf"]
-    for name in (b"stbl", b"stsd"):
-        level = next(((s, e) for kind, s, e in boxes(data, *level) if kind == name), None)
-        if level is None:
+@dataclass(frozen=True)
+class Keyframes:
+    """The first video track's keyframes (sync samples, from 0, in decoding order); `reordered`: its frames are
+    shown in another order than decoded (B-frames, a composition offset table)."""
+
+    frames: tuple[int, ...] | None  # None: every frame is one (the table is absent)
+    reordered: bool
+
+    def next_after(self, frame: int) -> int | None:
+        """The first keyframe after `frame`, None where there is none."""
+        if self.frames is None:
+            return frame + 1
+        return next((key for key in self.frames if key > frame), None)
+
+
+def keyframes(path: Path) -> Keyframes | None:
+    """An MP4 or QuickTime file's keyframes (its sync sample table, `stss`); None where the file lists none
+    (another container, a damaged header)."""
+    moov = movie_header(path)
+    for table in _video_sample_tables(moov) if moov is not None else ():
+        reordered = b"ctts" in table
+        if b"stss" not in table:
+            return Keyframes(None, reordered)
+        start, end = table[b"stss"]
+        if end - start < 8:
             return None
-    for _, entry_start, entry_end in boxes(data, level[0] + STSD_FIELDS, level[1]):
-        for kind, s, e in boxes(data, entry_start + VISUAL_ENTRY_FIELDS, entry_end):
-            if kind == b"colr" and e - s >= 10 and data[s:s + 4] in (b"nclx", b"nclc"):
-                return struct.unpack_from(">H", data, s + 6)[0]
+        (count,) = struct.unpack_from(">I", moov, start + 4)
+        if count > (end - start - 8) // 4:
+            return None
+        numbers = struct.unpack_from(f">{count}I", moov, start + 8)
+        return Keyframes(tuple(sorted(number - 1 for number in numbers)), reordered)
     return None
+
+
+def _video_sample_tables(moov: bytes) -> Iterator[dict[bytes, tuple[int, int]]]:
+    """Each video track's sample table boxes (`stbl`'s children: stsd, stss, ctts ...) by type."""
+    for kind, start, end in boxes(moov):
+        if kind != b"trak":
+            continue
+        inside = {kind: (s, e) for kind, s, e in boxes(moov, start, end)}
+        if b"mdia" not in inside:
+            continue
+        media = {kind: (s, e) for kind, s, e in boxes(moov, *inside[b"mdia"])}
+        handler = media.get(b"hdlr")
+        if handler is None or moov[handler[0] + 8:handler[0] + 12] != b"vide" or b"minf" not in media:
+            continue
+        table = next(((s, e) for kind, s, e in boxes(moov, *media[b"minf"]) if kind == b"stbl"), None)
+        if table is not None:
+            yield {kind: (s, e) for kind, s, e in boxes(moov, *table)}
 
 
 def hdr_note(path: Path) -> str:

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from .. import __version__
+from ..decoder_messages import hold_stderr_during_captures
 from ..files import FileWriteError
 from . import bags, calibrate, demos, doctor, flume, measure
 from .common import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, CliError
@@ -92,6 +93,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(AttributeError, ValueError):
             stream.reconfigure(errors="veg_area_shown")
+    hold_stderr_during_captures()  # a frame read in another thread may have stderr for its decoder's words
     args = build_parser().parse_args(joined_negative_values(sys.argv[1:] if argv is None else argv))
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, _terminate_as_interrupt)
