@@ -16,6 +16,7 @@ import yaml
 from helpers import run_cli
 
 from veg_area_ros.calib_io import write_calibration
+from veg_area_ros.frames import iter_frames
 from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene, scene_targets_content
 from veg_area_ros.video_container import Keyframes, boxes, keyframes, movie_header
 from veg_area_ros.video_damage import VideoDamage
@@ -100,6 +101,15 @@ def test_the_frames_a_damaged_one_reaches_say_so_and_no_other(videos, damaged_fr
     assert f"error at frame {damaged_frame} (mpeg4: " in words and f"frames {damaged_frame} to {runs_to}" in words
 
 
+def test_a_segment_that_begins_after_the_damage_in_its_gop_says_it(videos):
+    """A split run (`--jobs`, a cluster) seeks to its first frame by decoding from the keyframe before it."""
+    _, _, damaged = videos
+    frames = list(iter_frames([damaged[15]], frame_range=(18, FRAMES)))
+    said = {frame.position: [n for n in frame.notes if n.startswith("video damaged")] for frame in frames}
+    assert [k for k, notes in said.items() if notes] == list(range(18, 24))
+    assert "error while seeking to frame 18 (mpeg4: " in said[18][0] and "frames 18 to 23" in said[18][0]
+
+
 def test_damage_reaches_every_later_frame_where_no_keyframe_is_known():
     damage = VideoDamage(None)
     assert damage.note(3, "") == ()
@@ -114,6 +124,7 @@ def test_damage_in_a_reordered_stream_reaches_past_the_keyframe_by_the_reorderin
     assert damage.note(33, "") and not damage.note(34, "")
     intra_only = VideoDamage(Keyframes(None, reordered=False))
     assert intra_only.note(5, "[mjpeg @ 0x1] overread 8") and not intra_only.note(6, "")
+    assert not intra_only.note(9, "[mjpeg @ 0x1] overread 8", seeking=True)  # a frame before 9 alone
 
 
 def test_a_small_motion_jpeg_videos_corrupt_frame_is_refused_as_a_large_ones(videos):

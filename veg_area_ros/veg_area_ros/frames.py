@@ -425,14 +425,16 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
         declared = min(declared, stop)
     index = start
     try:
-        if start and not (capture.set(cv2.CAP_PROP_POS_FRAMES, start)
-                          and int(capture.get(cv2.CAP_PROP_POS_FRAMES)) == start):
-            index = declared  # cannot be sought to: said below as frames that could not be read
         damage = VideoDamage(None if packets else video_keyframes(path, capture))
 
         def watched(call: Callable[[], Any]) -> tuple[Any, str]:  # a packet is checked where it is decoded
             return (call(), "") if packets else with_decoder_messages(call, FFMPEG_MESSAGE.match)
 
+        if start:  # a seek decodes from the keyframe before `start`: damage there reaches the frames from `start`
+            sought, said = watched(lambda: capture.set(cv2.CAP_PROP_POS_FRAMES, start))
+            if not (sought and int(capture.get(cv2.CAP_PROP_POS_FRAMES)) == start):
+                index = declared  # cannot be sought to: said below as frames that could not be read
+            damage.note(start, said, seeking=True)
         while index < declared or stop is None:
             if index % step == (spread_offset(index // step, step) if spread else 0):
                 (ok, image), said = watched(capture.read)

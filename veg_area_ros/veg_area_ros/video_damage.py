@@ -43,12 +43,17 @@ class VideoDamage:
         self.keys = keys
         self.said = ""
         self.since = 0
+        self.where = ""
         self.until: int | None = 0  # the first frame clear of it (None: none is known to be)
 
-    def note(self, frame: int, said: str) -> tuple[str, ...]:
-        """The note for `frame`, given what the decoder printed while reading it; () where none applies."""
+    def note(self, frame: int, said: str, seeking: bool = False) -> tuple[str, ...]:
+        """The note for `frame`, given what the decoder printed while reading it (`seeking`: while decoding the
+        frames before it to seek there); () where none applies."""
+        if said and seeking and self.intra_only:
+            return ()  # a frame before this one, which nothing after it refers to
         if said:
             self.said, self.since = said, frame
+            self.where = f"while seeking to frame {frame}" if seeking else f"at frame {frame}"
             key = self.keys.next_after(frame) if self.keys is not None else None
             self.until = None if key is None else key + (REORDER_MARGIN if self.keys.reordered else 0)
         if not self.said or (self.until is not None and frame >= self.until):
@@ -56,7 +61,7 @@ class VideoDamage:
         reach = ("it and every later frame of this video carry the guess (its container lists no keyframes)"
                  if self.until is None else f"frames {self.since} to {self.until - 1} carry the guess (up to the next "
                  "keyframe)")
-        return (f"video damaged: the decoder reported an error at frame {self.since} ({decoder_words(self.said)}) "
+        return (f"video damaged: the decoder reported an error {self.where} ({decoder_words(self.said)}) "
                 f"and filled the damaged blocks with guesses from other frames; {reach}, so Af may be off: look at "
                 "the overlay",)
 
