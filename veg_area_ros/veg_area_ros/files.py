@@ -49,6 +49,7 @@ def in_name_order(paths: Iterable[PathType]) -> list[PathType]:
 
     return sorted(paths, key=key)
 
+
 def glob_matches(pattern: str) -> list[Path] | None:
     """The files a glob pattern the shell left alone (quoted, or too many for one command line) matches, as the
     shell would match them (hidden files left out), in a file browser's order; None where `pattern` is no glob

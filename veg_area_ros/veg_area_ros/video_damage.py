@@ -73,8 +73,10 @@ class VideoDamage:
 
 def decoder_words(said: str) -> str:
     """FFmpeg's first message without the component's address: 'h264: error while decoding MB 3 7'."""
-    first = FFMPEG_MESSAGE.split(said.strip())
-    match = FFMPEG_MESSAGE.match(said.strip())
-    component = match.group(0).strip("[] ").split(" @ ")[0] if match else "FFmpeg"
-    words = next((part.strip() for part in first if part.strip()), said.strip())
-    return f"{component}: {words[:120]}"
+    text = said.strip()
+    match = FFMPEG_MESSAGE.match(text)
+    if match is None:
+        return f"FFmpeg: {text[:120]}"
+    following = FFMPEG_MESSAGE.search(text, match.end())
+    words = text[match.end():following.start() if following else None].strip()
+    return f"{match.group(0)[1:].split(' @ ')[0]}: {words[:120]}"
