@@ -100,3 +100,52 @@ def test_an_imagej_timelapse_stack_is_timed_by_its_frame_interval(tmp_path):
         assert [frame.time_s for frame in read] == ([None] * 3 if interval is None else [0, interval, 2 * interval])
         assert all(np.array_equal(frame.image, image) for frame, image in zip(read, frames, strict=True))
     assert frame_interval(tmp_path / "plain.tif") is None
+
+
+def _set_orientations(data: bytes, orientations: list[int]) -> bytes:
+    """A little-endian classic TIFF whose pages (in their chain) each carry an Orientation entry, with those
+    entries' values set to `orientations`, page by page."""
+    data, offset = bytearray(data), struct.unpack("<I", data[4:8])[0]
+    for orientation in orientations:
+        (count,) = struct.unpack("<H", data[offset:offset + 2])
+        entries = [offset + 2 + 12 * k for k in range(count)]
+        (at,) = [entry for entry in entries if struct.unpack("<H", data[entry:entry + 2])[0] == 274]
+        assert struct.unpack("<HI", data[at + 2:at + 8]) == (3, 1)  # SHORT, one value, held in the entry
+        data[at + 8:at + 10] = struct.pack("<H", orientation)
+        offset = struct.unpack("<I", data[offset + 2 + 12 * count:offset + 6 + 12 * count])[0]
+    assert offset == 0
+    return bytes(data)
+
+
+def test_a_stacks_pages_stay_in_their_stored_grid_and_say_their_orientation(tmp_path):
+    """OpenCV turns a stack's page by its Orientation tag whatever the flags (a 160x120 page came out 120x160,
+    nothing said): each page is read as stored, the sensor's grid the calibration holds for, as a lone TIFF or
+    JPEG is, and one whose tag would have turned it says so."""
+    from PIL import Image
+
+    from veg_area_ros.tiff_stack import page_orientations
+
+    rng = np.random.default_rng(6)
+    frames = [rng.integers(0, 256, (120, 160, 3)).astype(np.uint8) for _ in range(3)]
+    tags = Image.Exif()
+    tags[274] = 6
+    pages = [Image.fromarray(frame[:, :, ::-1]) for frame in frames]
+    pages[0].save(tmp_path / "written.tif", save_all=True, append_images=pages[1:], exif=tags)
+    written = (tmp_path / "written.tif").read_bytes()
+    assert written[:2] == b"II"
+    path = tmp_path / "stack.tif"
+    path.write_bytes(_set_orientations(written, [6, 1, 3]))
+    assert page_orientations(path) == [6, 1, 3] and stack_pages(path) == [0, 1, 2]
+    turned = cv2.imreadmulti(str(path), 0, 1, None, cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION)[1][0]
+    assert turned.shape == (160, 120, 3)  # what OpenCV gives: the page turned for showing
+    read = list(iter_frames([path]))
+    assert [frame.name for frame in read] == ["stack.tif#0", "stack.tif#1", "stack.tif#2"]
+    assert all(np.array_equal(frame.image, image) for frame, image in zip(read, frames, strict=True))
+    assert ["EXIF orientation 6 not applied" in " ".join(frame.notes) for frame in read] == [True, False, False]
+    assert "EXIF orientation 3 not applied" in " ".join(read[2].notes)
+    grey = list(iter_frames([path], grey=True))
+    assert all(np.abs(frame.image.astype(int) - cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)).max() <= 1
+               for frame, image in zip(grey, frames, strict=True))  # OpenCV's grey reading rounds its own way
+    path.write_bytes(_set_orientations(written, [1, 1, 1]))
+    assert page_orientations(path) == [1, 1, 1]
+    assert not any(frame.notes for frame in iter_frames([path]))

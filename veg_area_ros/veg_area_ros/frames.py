@@ -26,7 +26,7 @@ from .exif import capture_time, is_tiff
 from .files import glob_matches, in_name_order, special_file, too_many_pixels
 from .jpeg import JPEG_STANDALONE_MARKERS, JPEG_START, jpeg_structure_problem
 from .orientation import as_stored, orientation_note, stored_orientation, video_rotation_note
-from .tiff_stack import frame_interval, stack_pages
+from .tiff_stack import frame_interval, page_orientations, stack_pages
 from .video_container import hdr_note
 from .video_damage import VideoDamage, decoder_words, video_keyframes
 
@@ -210,15 +210,18 @@ def tiff_pages(path: Path) -> list[int]:
 def iter_stack(path: Path, pages: list[int], grey: bool = False) -> Iterator[Frame]:
     """A TIFF stack's frames (`pages`), named STACK#frame (from 0, as a video's frames), each read from the
     file alone (a stack may be far larger than memory) at the depth its values use, timed by ImageJ's frame
-    interval where the stack records one."""
+    interval where the stack records one. Each page is kept in the grid it was stored in, its Orientation tag
+    said where it has one (`orientation`: OpenCV turns a page whatever the flags, as it turns a lone TIFF)."""
     name = shown_name(path)
     interval = frame_interval(path)
+    orientations = page_orientations(path)
     for frame, page in enumerate(pages):
-        notes: list[str] = []
+        orientation = orientations[page] if page < len(orientations) else 1
+        notes: list[str] = [orientation_note(orientation)] if orientation != 1 else []
 
-        def load(flags: int, page: int = page) -> np.ndarray | None:
+        def load(flags: int, page: int = page, orientation: int = orientation) -> np.ndarray | None:
             done, images = cv2.imreadmulti(opencv_path(path), page, 1, None, flags | cv2.IMREAD_ANYDEPTH)
-            return images[0] if done and images else None
+            return as_stored(images[0], orientation) if done and images else None
 
         image, problem = _at_its_depth(load, grey, notes)
         yield Frame(f"{name}#{frame}", image, problem, time_s=None if interval is None else frame * interval,

@@ -1,8 +1,9 @@
 """Which pages of a TIFF file are a stack of frames: the images of its main chain of directories that have the
 first one's size and are not reduced-resolution previews. ImageJ and Fiji save a stack (a timelapse, a burst)
 as one TIFF, a page per frame; cameras and scanners may add a thumbnail page, and pyramid TIFFs (microscopy)
-smaller copies, which are no frames. Read from the directories alone (tags 254, 256, 257), classic TIFF and
-BigTIFF, without decoding a pixel.
+smaller copies, which are no frames. Read from the directories alone (tags 254, 256, 257, and each page's
+Orientation, 274, which OpenCV applies to a page whatever its flags), classic TIFF and BigTIFF, without decoding
+a pixel.
 
 No ROS here.
 """
@@ -12,7 +13,7 @@ from __future__ import annotations
 import os
 import struct
 
-NEW_SUBFILE_TYPE, IMAGE_WIDTH, IMAGE_LENGTH, IMAGE_DESCRIPTION = 254, 256, 257, 270
+NEW_SUBFILE_TYPE, IMAGE_WIDTH, IMAGE_LENGTH, IMAGE_DESCRIPTION, ORIENTATION = 254, 256, 257, 270, 274
 # ImageJ's time units for a stack's frame interval (its Image > Properties), in seconds
 TIME_UNITS = {"sec": 1.0, "s": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, "msec": 1e-3, "min": 60.0,
               "minute": 60.0, "minutes": 60.0, "hour": 3600.0, "hours": 3600.0, "h": 3600.0}
@@ -34,9 +35,20 @@ def stack_pages(path: str | os.PathLike) -> list[int]:
     if not sizes:
         return []
     first = sizes[0][:2]
-    pages = [k for k, (width, height, kind) in enumerate(sizes)
+    pages = [k for k, (width, height, kind, _) in enumerate(sizes)
              if (width, height) == first and not kind & REDUCED_RESOLUTION]
     return pages if len(pages) > 1 else []
+
+
+def page_orientations(path: str | os.PathLike) -> list[int]:
+    """Each page's Orientation tag (1-8; 1 where it has none or an invalid one) in the main chain, as
+    `stack_pages` numbers them; [] where the directories cannot be read."""
+    try:
+        with open(path, "rb") as handle:
+            sizes = _page_sizes(handle)
+    except (OSError, struct.error, ValueError):
+        return []
+    return [orientation if 1 <= orientation <= 8 else 1 for *_, orientation in sizes]
 
 
 def frame_interval(path: str | os.PathLike) -> float | None:
@@ -116,19 +128,20 @@ def _directory(handle, layout: tuple[str, str, str, int], offset: int  # noqa: A
     return entries, following
 
 
-def _page_sizes(handle) -> list[tuple[int, int, int]]:  # noqa: ANN001 (a binary file)
-    """(width, height, NewSubfileType) of each directory in the main chain."""
+def _page_sizes(handle) -> list[tuple[int, int, int, int]]:  # noqa: ANN001 (a binary file)
+    """(width, height, NewSubfileType, Orientation) of each directory in the main chain."""
     layout = _header(handle)
     if layout is None:
         return []
     order, offset = layout[0], layout[3]
-    sizes: list[tuple[int, int, int]] = []
+    sizes: list[tuple[int, int, int, int]] = []
     seen: set[int] = set()
     while offset and offset not in seen and len(sizes) < MAX_PAGES:
         seen.add(offset)
         entries, offset = _directory(handle, layout, offset)
         tags = {tag: struct.unpack_from(order + _TYPE_FORMATS[kind], value)[0]
                 for tag, (kind, _, value) in entries.items()
-                if tag in (NEW_SUBFILE_TYPE, IMAGE_WIDTH, IMAGE_LENGTH) and kind in _TYPE_FORMATS}
-        sizes.append((tags.get(IMAGE_WIDTH, 0), tags.get(IMAGE_LENGTH, 0), tags.get(NEW_SUBFILE_TYPE, 0)))
+                if tag in (NEW_SUBFILE_TYPE, IMAGE_WIDTH, IMAGE_LENGTH, ORIENTATION) and kind in _TYPE_FORMATS}
+        sizes.append((tags.get(IMAGE_WIDTH, 0), tags.get(IMAGE_LENGTH, 0), tags.get(NEW_SUBFILE_TYPE, 0),
+                      tags.get(ORIENTATION, 1)))
     return sizes
