@@ -2,8 +2,10 @@
 CompressedVideo transport (VP9, 640x480, the cube with 3 DN of fresh noise each frame, as OpenCV's FFmpeg
 encodes it; encoding is most of the bench's time), its frames taken with `bags.iter_bag_frames` (packets read
 from the bag, written into numbered stream files, decoded, paired with their messages) beside OpenCV decoding
-the same IVF file in the same run, in both storages. Also the most the frames' temporary folder held while the
-bag was read, against the topic's packets: the stream files are removed a chunk at a time.
+the same IVF file in the same run, in both storages; and the file decoded with one thread, as the bag's packets
+are (FFmpeg's words about a damaged packet are then printed while that packet is decoded: `decoder_messages`).
+Also the most the frames' temporary folder held while the bag was read, against the topic's packets: the stream
+files are removed a chunk at a time.
 
     .venv/bin/python bench/video_bag_speed.py [--frames 600] [--runs 3]
 """
@@ -59,8 +61,9 @@ def write_bag(path: Path, packets: list[bytes], storage: StoragePlugin) -> None:
             writer.write(connection, stamp_ns + 1_000_000, STORE.serialize_cdr(message, FOXGLOVE_VIDEO))
 
 
-def decode_file(path: Path) -> int:
-    capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+def decode_file(path: Path, one_thread: bool = False) -> int:
+    capture = (cv2.VideoCapture(str(path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, 1]) if one_thread
+               else cv2.VideoCapture(str(path), cv2.CAP_FFMPEG))
     count = 0
     while capture.read()[0]:
         count += 1
@@ -106,15 +109,19 @@ def main() -> int:
         keyframes = sum(is_keyframe(VideoPacket(None, "vp9", memoryview(p))) for p in packets)
         print(f"{len(packets)} VP9 packets ({keyframes} keyframes), 640x480, {topic_bytes / 1e6:.1f} MB; each figure "
               f"the median of {args.runs} runs")
-        print(f"{'storage':>8} {'file decode s':>14} {'bag read s':>11} {'ratio':>6}  {'most TMPDIR held':>17}")
+        print(f"{'storage':>8} {'file decode s':>14} {'1 thread s':>11} {'bag read s':>11} {'ratio':>6} "
+              f"{'to 1 thread':>12}  {'most TMPDIR held':>17}")
         for storage in (StoragePlugin.MCAP, StoragePlugin.SQLITE3):
             bag = root / f"bag_{storage.name.lower()}"
             write_bag(bag, packets, storage)
-            file_s, bag_s = [], []
+            file_s, single_s, bag_s = [], [], []
             for _ in range(args.runs):
                 started = time.perf_counter()
                 decoded = decode_file(video)
                 file_s.append(time.perf_counter() - started)
+                started = time.perf_counter()
+                decode_file(video, one_thread=True)
+                single_s.append(time.perf_counter() - started)
                 started = time.perf_counter()
                 count = read_bag(bag)
                 bag_s.append(time.perf_counter() - started)
@@ -122,7 +129,9 @@ def main() -> int:
                     raise SystemExit(f"{storage.name}: {count} frames from the bag, {decoded} from the file")
             most = most_held(bag, scratch)
             file_median, bag_median = statistics.median(file_s), statistics.median(bag_s)
-            print(f"{storage.name.lower():>8} {file_median:14.2f} {bag_median:11.2f} {bag_median / file_median:6.2f}  "
+            single_median = statistics.median(single_s)
+            print(f"{storage.name.lower():>8} {file_median:14.2f} {single_median:11.2f} {bag_median:11.2f} "
+                  f"{bag_median / file_median:6.2f} {bag_median / single_median:12.2f}  "
                   f"{most / 1e6:8.1f} MB ({100 * most / topic_bytes:.0f} % of the topic)")
     return 0
 

@@ -139,7 +139,7 @@ def test_each_packet_gets_the_frame_it_carries_also_with_b_frames(name, codec):
     numbers = [number for number, _ in stored_packets(name)]
     results = decoded(name, codec)
     assert [shown for shown, _, _ in results] == numbers
-    assert all(problem == "" and note == "" for _, problem, note in results)
+    assert all(problem == "" and notes == () for _, problem, notes in results)
 
 
 @pytest.mark.parametrize("name, codec", [("h264_b.bin", "h264"), ("hevc_open_gop.bin", "hevc")])
@@ -209,7 +209,7 @@ def test_a_packet_without_a_picture_costs_its_own_row_alone(name):
     results = decoded(name, "h264", packets=packets)
     assert results[lost][0] is None and "holds no picture" in results[lost][1]
     assert all(shown is not None for k, (shown, _, _) in enumerate(results) if k != lost)
-    assert [note == CONCEALED_NOTE for _, _, note in results] == [lost < k < resumed for k in range(len(packets))]
+    assert [CONCEALED_NOTE in notes for _, _, notes in results] == [lost < k < resumed for k in range(len(packets))]
     exact = [k for k in range(len(packets)) if k < lost or k >= resumed]
     assert [results[k][0] for k in exact] == [packets[k][0] for k in exact]
     if name == "h264_b.bin":  # nothing refers to the lost B-frame: the others are their own, not shifted
@@ -226,11 +226,11 @@ def test_after_a_lost_packet_the_frames_say_so_up_to_a_closed_keyframe_or_the_se
     lost = list(packets)
     lost[1] = (lost[1][0], b"\x00\x00\x00\x01\x09\xf0")
     notes = [note for _, _, note in decoded("", "h264", packets=lost)]
-    assert [note == CONCEALED_NOTE for note in notes] == [1 < k < keyframes[2] for k in range(len(packets))]
+    assert [CONCEALED_NOTE in said for said in notes] == [1 < k < keyframes[2] for k in range(len(packets))]
     twice = packets + [(number + len(packets), data) for number, data in packets]
     twice[keyframes[2] + 1] = (twice[keyframes[2] + 1][0], b"\x00\x00\x00\x01\x09\xf0")
     notes = [note for _, _, note in decoded("", "h264", packets=twice)]
-    assert [note == CONCEALED_NOTE for note in notes] == [keyframes[2] + 1 < k < len(packets)
+    assert [CONCEALED_NOTE in said for said in notes] == [keyframes[2] + 1 < k < len(packets)
                                                           for k in range(len(twice))]
 
 
@@ -251,6 +251,41 @@ def test_a_damaged_packet_that_stops_the_decoder_loses_its_frames_up_to_the_next
     assert [results[k][0] for k in range(len(packets)) if k not in lost] == [
         packets[k][0] for k in range(len(packets)) if k not in lost]
     assert results[resumed][0] == packets[resumed][0]
+
+
+def _scrambled(data: bytes, seed: int = 1) -> bytes:
+    """A packet whose second half is noise: its header and first slices intact, so the decoder decodes it, reports
+    the error and fills the damaged blocks with guesses (zeros instead stop it: the test above)."""
+    rng = np.random.default_rng(seed)
+    cut = len(data) // 2
+    return data[:cut] + rng.integers(0, 256, len(data) - cut).astype(np.uint8).tobytes()
+
+
+@pytest.mark.parametrize("name, codec, damaged", [("h264_no_b.bin", "h264", 2), ("h264_no_b.bin", "h264", 5),
+                                                  ("h264_b.bin", "h264", 3), ("hevc_open_gop.bin", "hevc", 5)])
+def test_damage_the_decoder_conceals_is_said_on_the_frames_that_carry_it_up_to_the_keyframe_that_clears_it(
+        name, codec, damaged):
+    """A packet damaged inside its slices is decoded with guesses and a frame comes out as if nothing happened
+    (before: no row said a word). The decoder's report is now said on the frames from the damaged packet up to
+    the keyframe that clears it (a closed one; an open GOP's second), never before the damage nor on a frame the
+    decoder had already given; without B-frames exactly there, with them from at most the frames it holds back.
+    The same stream undamaged says nothing."""
+    packets = stored_packets(name)
+    assert all(notes == () for _, _, notes in decoded(name, codec, packets=packets))
+    keyframes = [k for k, (_, data) in enumerate(packets) if is_keyframe(VideoPacket(None, codec, memoryview(data)))]
+    open_gops = codec == "hevc"
+    clears = ([key for key in keyframes if key > damaged][1:2] if open_gops
+              else [key for key in keyframes if key > damaged][:1]) or [len(packets)]
+    packets[damaged] = (packets[damaged][0], _scrambled(packets[damaged][1]))
+    results = decoded(name, codec, packets=packets)
+    said = [k for k, (shown, _, notes) in enumerate(results)
+            if any(note.startswith("video damaged: the decoder reported an error") for note in notes)]
+    assert said and said == [k for k in range(said[0], clears[0]) if results[k][0] is not None], (said, clears)
+    assert damaged in said or results[damaged][0] is None
+    reorder = 0 if name == "h264_no_b.bin" else 2
+    assert damaged - reorder <= said[0] <= damaged, said
+    note = next(note for note in results[said[0]][2] if note.startswith("video damaged"))
+    assert f"({codec}: " in note and "look at the overlay" in note
 
 
 @pytest.mark.parametrize("name, codec", [("h264_b.bin", "h264"), ("h264_open_gop.bin", "h264"),
@@ -375,6 +410,24 @@ def test_an_ffmpeg_image_transport_bag_is_read_in_capture_order_with_its_camera_
     assert [f.time_s for f in frames] == [pytest.approx(s + ns / 1e9) for s, ns in (stamp(n) for n, _ in packets)]
     assert all(f.camera_info is not None for f in frames)
     assert not any("reorders its frames (B-frames)" in note for f in frames for note in f.notes)
+
+
+def test_a_bags_concealed_damage_reaches_the_frames_notes(tmp_path):
+    """Read from a bag (`iter_bag`, what `veg-area measure` reads), a damaged packet's concealed frames carry the
+    decoder's report in their notes (the rows' warnings), the frames before it and after the keyframe do not."""
+    from veg_area_ros.frames import iter_bag
+
+    packets = stored_packets("h264_no_b.bin")
+    damaged = 2
+    packets[damaged] = (packets[damaged][0], _scrambled(packets[damaged][1]))
+    write_video_bag(tmp_path / "bag", "/camera/image_raw/foxglove", FOXGLOVE_VIDEO,
+                    [foxglove(number, data, "h264") for number, data in packets])
+    frames = list(iter_bag(tmp_path / "bag"))
+    assert len(frames) == len(packets) and all(f.image is not None for f in frames)
+    keyframes = [k for k, (_, data) in enumerate(packets) if is_keyframe(VideoPacket(None, "h264", memoryview(data)))]
+    clears = next(key for key in keyframes if key > damaged)
+    assert [any(note.startswith("video damaged") for note in f.notes) for f in frames] == [
+        damaged <= k < clears for k in range(len(packets))]
 
 
 def test_a_foxglove_vp9_bag_is_measured_as_the_same_video_file(tmp_path):

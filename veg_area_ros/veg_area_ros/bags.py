@@ -598,8 +598,8 @@ def _video_frames(path: str | Path, topic: str, folder: str, start: int = 0) -> 
         headers: deque[Header] = deque()
 
         def taken(results: Iterator[tuple]) -> Iterator[DecodedVideoFrame]:
-            for frame, problem, note in results:
-                yield DecodedVideoFrame(headers.popleft(), frame, problem, note)
+            for frame, problem, notes in results:
+                yield DecodedVideoFrame(headers.popleft(), frame, problem, notes)
 
         held: list[list] = [[]]  # before `start`: the last two keyframes' packets (or why one cannot be read)
         images = [connection for connection in reader.connections

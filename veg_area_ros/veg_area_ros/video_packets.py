@@ -5,8 +5,10 @@ A frame of such a stream needs the frames before it, so the packets are not deco
 written back to back into stream files that OpenCV's FFmpeg decodes in order, and `VideoPacketStream` pairs each
 decoded frame with its message. The files number the packets (IVF files; H.265 in MPEG transport streams; each
 packet's timestamp its number), and the decoder hands each frame back with its own packet's number: exact with
-B-frames, without stamps, and where the decoder drops or stops at a damaged packet.
-Packets before the stream's first keyframe cannot be decoded and are said so.
+B-frames, without stamps, and where the decoder drops or stops at a damaged packet. Damage the decoder conceals
+(it reports an error and fills the blocks with guesses) is said on the frames from there up to the keyframe that
+clears it (`decoder_messages`, as a video file's). Packets before the stream's first keyframe cannot be decoded
+and are said so.
 
 No ROS here: the messages are read from their CDR bytes.
 """
@@ -23,6 +25,8 @@ import numpy as np
 
 from .bit_depth import StreamDepth
 from .cdr import Buffer, CdrReader, Header, ImageMessageError
+from .decoder_messages import FFMPEG_MESSAGE, with_decoder_messages
+from .video_damage import decoder_words
 
 FOXGLOVE_VIDEO = "foxglove_msgs/msg/CompressedVideo"
 FFMPEG_PACKET = "ffmpeg_image_transport_msgs/msg/FFMPEGPacket"
@@ -199,19 +203,27 @@ class DecodedVideoFrame:
     header: Header
     frame: np.ndarray | None
     problem: str = ""
-    note: str = ""  # what makes the frame less sure (CONCEALED_NOTE)
+    notes: tuple[str, ...] = ()  # what makes the frame less sure (CONCEALED_NOTE, `concealed_damage_note`)
 
     def pixels(self, depth: StreamDepth | None = None, notes: list[str] | None = None) -> np.ndarray:
         if self.frame is None:
             raise ImageMessageError(self.problem)
-        if self.note and notes is not None:
-            notes.append(self.note)
+        if notes is not None:
+            notes.extend(self.notes)
         return self.frame
 
 
 LEADING_SKIPPED = "a leading picture of the CRA keyframe the stream begins at, which the decoder skips"
 CONCEALED_NOTE = ("a packet of the video stream that this frame may refer to has no frame: where it does, the "
                   "decoder filled in what it lacked")
+
+
+def concealed_damage_note(said: str) -> str:
+    """What a frame says that was decoded after the decoder reported damage it concealed, before the keyframe
+    that clears it."""
+    return (f"video damaged: the decoder reported an error ({decoder_words(said)}) in a packet this frame is or "
+            "may refer to, and filled the damaged blocks with guesses from other frames (up to the next keyframe), "
+            "so Af may be off: look at the overlay")
 
 
 class VideoPacketStream:
@@ -300,16 +312,16 @@ class VideoPacketStream:
         keyframe say that they may refer to it."""
         self._add(problem)
 
-    def ready(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
+    def ready(self) -> Iterator[tuple[np.ndarray | None, str, tuple[str, ...]]]:
         """As `frames()`, for the packets added so far whose frames can be decoded now: those before the chunk
         being written (each chunk begins at a keyframe, an open GOP's given the GOP before it). Take them all before
         the next `add`: a long recording is decoded as it is read, a chunk's file removed once its frames are out."""
         return self._frames_by_number(self._chunks[-1].first if self._chunks else len(self.problems))
 
-    def frames(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
+    def frames(self) -> Iterator[tuple[np.ndarray | None, str, tuple[str, ...]]]:
         """Per added packet not yet given by `ready()`, in the order added: (frame, why it has none, what makes
-        it less sure: a packet before it that it may refer to is lost). The frames are decoded one by one as
-        they are taken (those the decoder gives ahead of a reordered packet are held)."""
+        it less sure: a packet before it that it may refer to is lost, damage the decoder concealed). The frames
+        are decoded one by one as they are taken (those the decoder gives ahead of a reordered packet are held)."""
         if self._chunks:
             self._chunks[-1].close()
         return self._frames_by_number(len(self.problems))
@@ -319,23 +331,23 @@ class VideoPacketStream:
                 f"keyframe, or a build with no {self.codec} decoder (then convert the recording, or record "
                 "image_raw/compressed)")
 
-    def _decode_chunks(self) -> Iterator[tuple[np.ndarray | None, str]]:
+    def _decode_chunks(self) -> Iterator[tuple[np.ndarray | None, str, str]]:
         done = 0
         while done < len(self._chunks):  # the list grows as packets are added
             yield from self._chunks[done].decode(self)
             done += 1
 
-    def _frames_by_number(self, until: int) -> Iterator[tuple[np.ndarray | None, str, str]]:
+    def _frames_by_number(self, until: int) -> Iterator[tuple[np.ndarray | None, str, tuple[str, ...]]]:
         while self._taken < until:
             problem, note = self.problems[self._taken], self.notes[self._taken]
             self._taken += 1
             if problem:
-                yield None, problem, ""
+                yield None, problem, ()
                 continue
-            frame, problem = next(self._decoded)
+            frame, problem, damage = next(self._decoded)
             if frame is None and not self.frames_decoded:
                 problem = self._no_decoder()
-            yield frame, problem, note
+            yield frame, problem, tuple(text for text in (note, damage) if text)
 
 
 def ivf_packets(data: bytes) -> list[bytes]:
@@ -379,6 +391,13 @@ def _ts_table(table_id: int, body: bytes) -> bytes:
     length = len(body) + 9  # the five bytes after the length, the body, the CRC
     section = bytes([table_id, 0xB0 | length >> 8, length & 0xFF]) + b"\x00\x01\xc1\x00\x00" + body
     return b"\x00" + section + struct.pack(">I", _mpeg_crc32(section))
+
+
+def _capture(path: Path) -> cv2.VideoCapture:
+    """FFmpeg on a stream file with one decoding thread: its words about a damaged packet are then printed while
+    that packet is decoded (`decoder_messages`)."""
+    capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, 1])
+    return capture if capture.isOpened() else cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
 
 
 class PacketChunk:
@@ -446,6 +465,19 @@ class PacketChunk:
         for path in [self.path, *self._restarts]:
             path.unlink(missing_ok=True)
 
+    def _clearing_keyframe(self, last: int) -> int | None:
+        """The first position past a damaged packet at `last` or before from which no frame refers to it: a
+        closed keyframe, or the second open GOP's keyframe (the first one's leading pictures may refer to the GOP
+        before); None: not in this chunk."""
+        opened = 0
+        for key in self.keyframes:
+            if key <= last:
+                continue
+            opened += key not in self.closed
+            if key in self.closed or opened == 2:
+                return key
+        return None
+
     def _from(self, first: int) -> Path:
         """The chunk from position `first` (a keyframe) on, as a file of its own whose numbers, as the decoder
         gives them, count from there: an IVF file's renumbered from 0 (copied as they were, OpenCV gave no frame
@@ -465,14 +497,18 @@ class PacketChunk:
                 target.write(source.read(size))
         return path
 
-    def decode(self, stream: VideoPacketStream) -> Iterator[tuple[np.ndarray | None, str]]:
-        """Per position in order: its frame, or why it has none; counts the frames in `stream.frames_decoded`
-        (where no capture has given a frame, the decoder is not restarted at every keyframe). The chunk's files
-        are removed as its last frame is given."""
+    def decode(self, stream: VideoPacketStream) -> Iterator[tuple[np.ndarray | None, str, str]]:
+        """Per position in order: its frame, or why it has none, and what the decoder reported of damage it
+        concealed in this frame or one it may refer to ('' where nothing); counts the frames in
+        `stream.frames_decoded` (where no capture has given a frame, the decoder is not restarted at every
+        keyframe). The chunk's files are removed as its last frame is given."""
         held: dict[int, np.ndarray] = {}  # frames the decoder gave ahead of the position asked for
         base, restarted = 0, False
         reached = -1  # the highest number the decoder has given
-        capture: cv2.VideoCapture | None = cv2.VideoCapture(str(self.path), cv2.CAP_FFMPEG)
+        lag = 0  # how far the decoder has given a frame behind the highest number it gave before (B-frames)
+        # what the decoder reported, the first position it may reach and the position that clears it
+        damage: tuple[str, int, int | None] | None = None
+        capture: cv2.VideoCapture | None = _capture(self.path)
         try:
             for position in range(self.skip, len(self.offsets)):
                 problem = self.DROPPED
@@ -482,10 +518,18 @@ class PacketChunk:
                         break
                     if capture is None:
                         break
-                    ok, frame = capture.read() if capture.isOpened() else (False, None)
+                    # a decoder that stops is said by the rows it stops; one that conceals, by its words
+                    (ok, frame), said = (with_decoder_messages(capture.read, FFMPEG_MESSAGE.match)
+                                         if capture.isOpened() else ((False, None), ""))
                     if ok:
                         number = base + round(capture.get(cv2.CAP_PROP_POS_MSEC))
                         stream.frames_decoded += 1
+                        lag = max(lag, reached - number)
+                        if said:
+                            # the packet it decoded in this read follows every number it gave before, and lies
+                            # at most as far ahead of them as the frames it holds back to reorder
+                            first = max(reached, base - 1) + 1
+                            damage = said, first, self._clearing_keyframe(first + lag)
                         reached = max(reached, number)
                         if position <= number < len(self.offsets):
                             held.setdefault(number, frame)
@@ -496,11 +540,15 @@ class PacketChunk:
                     later = [key for key in self.keyframes if key > max(position, reached)]
                     if later and (stream.frames_decoded or not restarted):
                         base, restarted = later[0], True
-                        capture = cv2.VideoCapture(str(self._from(base)), cv2.CAP_FFMPEG)
+                        capture = _capture(self._from(base))
                 if problem == self.DROPPED and base not in self.closed and not any(
                         base < key <= position for key in self.keyframes):
                     problem = self.LEADING
-                result = (held.pop(position), "") if position in held else (None, problem)
+                if damage is not None and damage[2] is not None and position >= damage[2]:
+                    damage = None
+                concealed = damage is not None and position >= damage[1]
+                result = ((held.pop(position), "", concealed_damage_note(damage[0]) if concealed else "")
+                          if position in held else (None, problem, ""))
                 if position == len(self.offsets) - 1:  # its files go before the last frame is given
                     if capture is not None:
                         capture.release()
