@@ -529,7 +529,11 @@ class PacketChunk:
                             # the packet it decoded in this read follows every number it gave before, and lies
                             # at most as far ahead of them as the frames it holds back to reorder
                             first = max(reached, base - 1) + 1
-                            damage = said, first, self._clearing_keyframe(first + lag)
+                            clears = self._clearing_keyframe(first + lag)
+                            if damage is not None:  # one still reaching frames: its words, the later clearing
+                                said, first = damage[0], damage[1]
+                                clears = None if clears is None or damage[2] is None else max(clears, damage[2])
+                            damage = said, first, clears
                         reached = max(reached, number)
                         if position <= number < len(self.offsets):
                             held.setdefault(number, frame)
