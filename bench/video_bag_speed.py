@@ -32,6 +32,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore  # noqa: E
 
 from veg_area_ros.bags import iter_bag_frames  # noqa: E402
 from veg_area_ros.sim.synthetic import ENDOSCOPE, cube_scene, render_scene  # noqa: E402
+from veg_area_ros.video_damage import one_thread_capture  # noqa: E402
 from veg_area_ros.video_packets import FOXGLOVE_VIDEO, VideoPacket, is_keyframe, ivf_packets  # noqa: E402
 
 STORE = get_typestore(Stores.ROS2_KILTED)
@@ -62,7 +63,7 @@ def write_bag(path: Path, packets: list[bytes], storage: StoragePlugin) -> None:
 
 
 def decode_file(path: Path, one_thread: bool = False) -> int:
-    capture = (cv2.VideoCapture(str(path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, 1]) if one_thread
+    capture = (one_thread_capture(str(path), cv2.CAP_FFMPEG) if one_thread
                else cv2.VideoCapture(str(path), cv2.CAP_FFMPEG))
     count = 0
     while capture.read()[0]:

@@ -28,7 +28,7 @@ from .jpeg import JPEG_STANDALONE_MARKERS, JPEG_START, jpeg_structure_problem
 from .orientation import as_stored, orientation_note, stored_orientation, video_rotation_note
 from .tiff_stack import frame_interval, page_orientations, stack_pages
 from .video_container import hdr_note
-from .video_damage import VideoDamage, decoder_words, video_keyframes
+from .video_damage import VideoDamage, decoder_words, one_thread_capture, video_keyframes
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -412,10 +412,7 @@ def iter_video(path: Path, step: int = 1, start: int = 0, stop: int | None = Non
     capture = _motion_jpeg_capture(path) if encoded else None
     packets = capture is not None
     if capture is None:
-        # one decoding thread: FFmpeg's words about a damaged frame are then printed while that frame is read
-        capture = cv2.VideoCapture(opencv_path(path), cv2.CAP_ANY, [cv2.CAP_PROP_N_THREADS, 1])
-        if not capture.isOpened():  # a backend that takes no thread count
-            capture = cv2.VideoCapture(opencv_path(path))
+        capture = one_thread_capture(opencv_path(path))
         capture.set(cv2.CAP_PROP_ORIENTATION_AUTO, 0)  # the sensor's grid, as images are read (`orientation`)
     if not capture.isOpened():
         yield Frame(shown_name(path), None, "is not a video OpenCV can open")

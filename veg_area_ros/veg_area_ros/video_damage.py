@@ -24,6 +24,13 @@ INTRA_ONLY_FOURCCS = {b"MJPG", b"AVDJ", b"DMB1", b"JPEG", b"MJPE", b"APCH", b"AP
                       b"UYVY"}
 
 
+def one_thread_capture(path: str, api: int = cv2.CAP_ANY) -> cv2.VideoCapture:
+    """OpenCV's capture of a video decoding with one thread: FFmpeg's words about a damaged frame are then printed
+    while that frame is read (`decoder_messages`); a plain one where the backend takes no thread count."""
+    capture = cv2.VideoCapture(path, api, [cv2.CAP_PROP_N_THREADS, 1])
+    return capture if capture.isOpened() else cv2.VideoCapture(path, api)
+
+
 def video_keyframes(path: Path, capture: cv2.VideoCapture) -> Keyframes | None:
     """Where a video's keyframes are: every frame for an intra-only codec, else its MP4 or QuickTime sync sample
     table; None where neither tells."""

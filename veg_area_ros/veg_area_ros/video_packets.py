@@ -26,7 +26,7 @@ import numpy as np
 from .bit_depth import StreamDepth
 from .cdr import Buffer, CdrReader, Header, ImageMessageError
 from .decoder_messages import FFMPEG_MESSAGE, with_decoder_messages
-from .video_damage import decoder_words
+from .video_damage import decoder_words, one_thread_capture
 
 FOXGLOVE_VIDEO = "foxglove_msgs/msg/CompressedVideo"
 FFMPEG_PACKET = "ffmpeg_image_transport_msgs/msg/FFMPEGPacket"
@@ -393,13 +393,6 @@ def _ts_table(table_id: int, body: bytes) -> bytes:
     return b"\x00" + section + struct.pack(">I", _mpeg_crc32(section))
 
 
-def _capture(path: Path) -> cv2.VideoCapture:
-    """FFmpeg on a stream file with one decoding thread: its words about a damaged packet are then printed while
-    that packet is decoded (`decoder_messages`)."""
-    capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG, [cv2.CAP_PROP_N_THREADS, 1])
-    return capture if capture.isOpened() else cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
-
-
 class PacketChunk:
     """Packets of one stream from a keyframe on, in a file that numbers them: an IVF file (H.264, VP8, VP9, AV1:
     its position as the frame's timestamp in a 1/1000 s time base) or an MPEG transport stream (H.265: each packet
@@ -508,7 +501,7 @@ class PacketChunk:
         lag = 0  # how far the decoder has given a frame behind the highest number it gave before (B-frames)
         # what the decoder reported, the first position it may reach and the position that clears it
         damage: tuple[str, int, int | None] | None = None
-        capture: cv2.VideoCapture | None = _capture(self.path)
+        capture: cv2.VideoCapture | None = one_thread_capture(str(self.path), cv2.CAP_FFMPEG)
         try:
             for position in range(self.skip, len(self.offsets)):
                 problem = self.DROPPED
@@ -544,7 +537,7 @@ class PacketChunk:
                     later = [key for key in self.keyframes if key > max(position, reached)]
                     if later and (stream.frames_decoded or not restarted):
                         base, restarted = later[0], True
-                        capture = _capture(self._from(base))
+                        capture = one_thread_capture(str(self._from(base)), cv2.CAP_FFMPEG)
                 if problem == self.DROPPED and base not in self.closed and not any(
                         base < key <= position for key in self.keyframes):
                     problem = self.LEADING
